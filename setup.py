@@ -1,0 +1,62 @@
+"""Build script for maglev_ros (ament_python; also a plain pip package)."""
+
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = 'maglev_ros'
+
+# Command-line tools: installed as ``maglev-<verb>`` (pip) and as ``<verb>``
+# so that ``ros2 run maglev_ros <verb>`` finds them after ``colcon build``.
+CLI_TOOLS = {
+    'model': 'maglev_ros.cli.model:main',
+}
+# ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.
+NODES: dict[str, str] = {}
+
+console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]
+console_scripts += [f'{verb}={target}' for verb, target in CLI_TOOLS.items()]
+console_scripts += [f'{name}={target}' for name, target in NODES.items()]
+
+setup(
+    name=PACKAGE,
+    version='0.1.0',
+    description='ROS 2 tools for the Maggy magnetic-levitation lab',
+    license='Apache-2.0',
+    python_requires='>=3.10',
+    packages=find_packages(exclude=['test', 'test.*', 'benchmarks']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
+        (f'share/{PACKAGE}', ['package.xml']),
+        (f'share/{PACKAGE}/config', glob('config/*.yaml')),
+        (f'share/{PACKAGE}/launch', glob('launch/*')),
+    ],
+    install_requires=[
+        'setuptools',
+        'numpy>=1.24',
+        'scipy>=1.11',
+        'numba>=0.59',
+        'PyYAML>=6',
+        'control>=0.10',
+        'filterpy>=1.4.5',
+        'pyserial>=3.5',
+        'rosbags>=0.10',
+        'matplotlib>=3.7',
+    ],
+    extras_require={
+        # The PyPI build of ROS 2 Jazzy's Python side, for machines without ROS.
+        # A real ROS 2 install keeps its own rclpy: do not install this extra there.
+        'ros': [
+            'ros-jazzy-rclpy[fastrtps]',
+            'ros-jazzy-common-interfaces',
+        ],
+        'test': [
+            'pytest>=7',
+            'magpylib>=5',
+            'colcon-common-extensions',
+            'ruff',
+        ],
+    },
+    zip_safe=True,
+    entry_points={'console_scripts': console_scripts},
+)
