@@ -10,6 +10,7 @@ PACKAGE = 'maglev_ros'
 # so that ``ros2 run maglev_ros <verb>`` finds them after ``colcon build``.
 CLI_TOOLS = {
     'model': 'maglev_ros.cli.model:main',
+    'sysid': 'maglev_ros.cli.sysid:main',
 }
 # ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.
 NODES: dict[str, str] = {}

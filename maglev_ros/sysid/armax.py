@@ -1,0 +1,139 @@
+"""ARMAX estimation by the prediction-error method (the toolbox's ``armax``).
+
+Model ``A(q) y(t) = B(q) u(t - nk) + C(q) e(t)`` with a diagonal ``C`` for MIMO
+data (``nc`` has one order per output).  Output rows share no parameters, so
+each row is a separate minimization of ``sum e_i(t)^2``:
+
+* prediction error ``e_i = (A_i y - B_i u) / C_i`` (``lfilter``, zero initial
+  state at the first sample where all regressors exist);
+* gradient ``psi = [phi_AB, e(t-1) .. e(t-nc)] / C_i`` (one ``lfilter`` call on
+  the whole regressor matrix);
+* start: a high-order ARX row gives innovation estimates, then a linear
+  regression on ``[phi_AB, e_hat lags]`` (Hannan-Rissanen), ``C`` reflected to
+  minimum phase;
+* Levenberg-Marquardt iterations (:mod:`maglev_ros.sysid.pem`) with ``C`` kept
+  minimum phase by root reflection.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+import scipy.linalg as sla
+from scipy.signal import lfilter
+
+from .arx import least_squares
+from .dataset import IdData, as_experiments
+from .model import PolyModel
+from .orders import Orders, make_orders
+from .pem import levenberg_marquardt, shift, stabilize
+from .regression import arx_regressors, check_data, finish_model
+
+__all__ = ['armax']
+
+
+def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
+                         extra: int) -> list[np.ndarray]:
+    """Residuals of a high-order ARX row (zeros where undefined), one array per experiment."""
+    na = orders.na.copy()
+    nb = orders.nb.copy()
+    na[i] = np.where(na[i] > 0, na[i] + extra, 0)
+    na[i, i] = orders.na[i, i] + extra
+    nb[i] = np.where(nb[i] > 0, nb[i] + extra, 0)
+    hi = Orders(na, nb, orders.nk, orders.nc * 0, orders.nd * 0, orders.nf * 0)
+    start = hi.row_start(i)
+    Phi = np.vstack([arx_regressors(d.y, d.u, hi, i, start) for d in experiments])
+    Y = np.concatenate([d.y[start:, i] for d in experiments])
+    theta, _, _ = least_squares(Phi, Y)
+    out, pos = [], 0
+    for d in experiments:
+        e = np.zeros(d.N)
+        n = d.N - start
+        e[start:] = Y[pos:pos + n] - Phi[pos:pos + n] @ theta
+        pos += n
+        out.append(e)
+    return out
+
+
+def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: int,
+               tol: float) -> tuple[np.ndarray, np.ndarray, int]:
+    nc = int(orders.nc[i])
+    start = orders.row_start(i)
+    Phis = [arx_regressors(d.y, d.u, orders, i, start) for d in experiments]
+    Ys = [d.y[start:, i] for d in experiments]
+    n_ab = Phis[0].shape[1]
+    if nc == 0:
+        Phi, Y = np.vstack(Phis), np.concatenate(Ys)
+        theta, Rinv, _ = least_squares(Phi, Y)
+        r = Y - Phi @ theta
+        return theta, float(r @ r) / max(1, len(Y) - len(theta)) * Rinv, 0
+    usable = min(d.N for d in experiments) - start
+    extra = int(min(max(10, 3 * nc), max(1, usable // (8 * (orders.ny + orders.nu)))))
+    ehat = _initial_innovations(experiments, orders, i, extra)
+    lagged_e = [np.column_stack([shift(e, k)[start:] for k in range(1, nc + 1)]) for e in ehat]
+    theta0, _, _ = least_squares(np.vstack([np.hstack([P, E]) for P, E in
+                                            zip(Phis, lagged_e, strict=True)]),
+                                 np.concatenate(Ys))
+
+    def project(theta: np.ndarray) -> np.ndarray:
+        out = theta.copy()
+        out[n_ab:] = stabilize(np.concatenate([[1.0], theta[n_ab:]]))[1:]
+        return out
+
+    def errors(theta: np.ndarray) -> np.ndarray:
+        C = np.concatenate([[1.0], theta[n_ab:]])
+        return np.concatenate([lfilter([1.0], C, Y - P @ theta[:n_ab])
+                               for P, Y in zip(Phis, Ys, strict=True)])
+
+    def gradient(theta: np.ndarray, e: np.ndarray) -> np.ndarray:
+        C = np.concatenate([[1.0], theta[n_ab:]])
+        blocks, pos = [], 0
+        for P in Phis:
+            seg = e[pos:pos + P.shape[0]]
+            pos += P.shape[0]
+            E = np.column_stack([shift(seg, k) for k in range(1, nc + 1)])
+            blocks.append(lfilter([1.0], C, np.hstack([P, E]), axis=0))
+        return np.vstack(blocks)
+
+    result = levenberg_marquardt(theta0, errors, gradient, project, max_iter, tol)
+    return result.theta, result.covariance, result.iterations
+
+
+def armax(data: IdData | Sequence[IdData], na: object, nb: object, nc: object,
+          nk: object = 1, max_iter: int = 50, tol: float = 1e-9) -> PolyModel:
+    """Estimate an ARMAX model ``A(q) y(t) = B(q) u(t - nk) + C(q) e(t)``.
+
+    Parameters
+    ----------
+    data : IdData or sequence of IdData
+        Estimation data.
+    na : int or array_like (ny, ny)
+        Orders of ``A``.
+    nb, nk : int or array_like (ny, nu)
+        Numbers of ``B`` coefficients and delays in samples.
+    nc : int or array_like (ny,)
+        Orders of the diagonal ``C``.
+    max_iter : int
+        Maximum Levenberg-Marquardt steps per output.
+    tol : float
+        Relative loss decrease that ends the iterations.
+
+    Returns
+    -------
+    PolyModel
+        Model with minimum-phase ``C`` and covariance ``lambda (psi^T psi)^-1``.
+    """
+    experiments = as_experiments(data)
+    first = experiments[0]
+    orders = make_orders(first.ny, first.nu, na=na, nb=nb, nk=nk, nc=nc)
+    check_data(experiments, orders)
+    thetas, covs, iters = [], [], 0
+    for i in range(orders.ny):
+        theta, cov, it = _armax_row(experiments, orders, i, max_iter, tol)
+        thetas.append(theta)
+        covs.append(cov)
+        iters = max(iters, it)
+    return finish_model('armax', orders, np.concatenate(thetas), sla.block_diag(*covs),
+                        experiments, 'ARMAX, prediction-error method (Levenberg-Marquardt)',
+                        iters)

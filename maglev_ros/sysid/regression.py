@@ -1,0 +1,154 @@
+"""Lagged regression matrices and the shared tail of every estimator (report, model).
+
+The regressor of output ``i`` at time ``t`` is::
+
+    phi_i(t) = [-y_j(t-1) .. -y_j(t-na_ij) for each output j,
+                u_j(t-nk_ij) .. u_j(t-nk_ij-nb_ij+1) for each input j]
+
+so that ``y_i(t) = phi_i(t)^T theta_i + v_i(t)`` for an ARX row.  Matrices are
+built by slicing (one copy per column, no Python loop over samples).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from .criteria import aic, fit_percent, fpe
+from .dataset import IdData
+from .model import EstimationReport, PolyModel
+from .orders import OrderError, Orders
+
+__all__ = ['arx_regressors', 'check_data', 'finish_model', 'lagged']
+
+
+def lagged(signal: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
+    """Stack ``signal(t - lag)`` for ``t = start .. N-1`` as columns.
+
+    Parameters
+    ----------
+    signal : ndarray, shape (N,)
+        One channel.
+    lags : sequence of int
+        Non-negative lags, each ``<= start``.
+    start : int
+        First time index.
+
+    Returns
+    -------
+    ndarray, shape (N - start, len(lags))
+        Lagged copies.
+    """
+    N = signal.shape[0]
+    out = np.empty((N - start, len(lags)))
+    for c, lag in enumerate(lags):
+        out[:, c] = signal[start - lag:N - lag]
+    return out
+
+
+def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int,
+                   start: int) -> np.ndarray:
+    """Regression matrix of the ``A``/``B`` part of output ``i``.
+
+    Parameters
+    ----------
+    y : ndarray, shape (N, ny)
+        Outputs (or instruments standing in for them).
+    u : ndarray, shape (N, nu)
+        Inputs.
+    orders : Orders
+        Model orders.
+    i : int
+        Output row.
+    start : int
+        First time index (>= ``orders.row_start(i)``).
+
+    Returns
+    -------
+    ndarray, shape (N - start, sum na[i] + sum nb[i])
+        ``[-y lags, u lags]`` in the parameter layout order.
+    """
+    blocks = []
+    for j in range(orders.ny):
+        n = orders.na[i, j]
+        if n:
+            blocks.append(-lagged(y[:, j], range(1, n + 1), start))
+    for j in range(orders.nu):
+        n, k = orders.nb[i, j], orders.nk[i, j]
+        if n:
+            blocks.append(lagged(u[:, j], range(k, k + n), start))
+    if not blocks:
+        return np.zeros((y.shape[0] - start, 0))
+    return np.hstack(blocks)
+
+
+def check_data(experiments: Sequence[IdData], orders: Orders) -> None:
+    """Check that the data match the orders and hold more samples than parameters.
+
+    Raises
+    ------
+    OrderError
+        If channel counts differ from the order matrices.
+    ValueError
+        If there are fewer usable samples than parameters of some output row.
+    """
+    first = experiments[0]
+    if (first.ny, first.nu) != (orders.ny, orders.nu):
+        raise OrderError(f'orders are for ny={orders.ny}, nu={orders.nu} but the data have '
+                         f'ny={first.ny}, nu={first.nu}')
+    sizes = orders.row_sizes()
+    for i in range(orders.ny):
+        start = orders.row_start(i) + int(orders.nc[i] + orders.nd[i] + orders.nf[i].sum())
+        usable = sum(max(0, d.N - start) for d in experiments)
+        if usable <= sizes[i]:
+            raise ValueError(f'output {i + 1} has {sizes[i]} parameters but only {usable} '
+                             f'usable samples: fewer samples than parameters')
+
+
+def finish_model(structure: str, orders: Orders, theta: np.ndarray,
+                 covariance: np.ndarray | None, experiments: Sequence[IdData], method: str,
+                 iterations: int = 0, noise_variance: np.ndarray | None = None) -> PolyModel:
+    """Wrap estimated parameters in a :class:`PolyModel` with its estimation report.
+
+    The report's fit, MSE, FPE and AIC use the one-step prediction errors of
+    the model on the estimation data (zero initial state), as the toolbox does.
+
+    Parameters
+    ----------
+    structure : str
+        Model structure name.
+    orders : Orders
+        Model orders.
+    theta : ndarray, shape (n_params,)
+        Estimated parameters.
+    covariance : ndarray, shape (n_params, n_params) or None
+        Parameter covariance.
+    experiments : sequence of IdData
+        Estimation data.
+    method : str
+        Description of the numerical method.
+    iterations : int
+        Iteration count of an iterative method.
+    noise_variance : ndarray, shape (ny, ny), optional
+        Innovations covariance (default: from the prediction errors).
+
+    Returns
+    -------
+    PolyModel
+        The model.
+    """
+    first = experiments[0]
+    draft = PolyModel(structure, orders, theta, first.Ts, np.eye(orders.ny), None,
+                      first.output_names, first.input_names, first.output_units,
+                      first.input_units)
+    errors = [draft.residuals(d) for d in experiments]
+    e = np.vstack(errors)
+    y = np.vstack([d.y for d in experiments])
+    N = e.shape[0]
+    lam = e.T @ e / N if noise_variance is None else noise_variance
+    report = EstimationReport(method=method, n_samples=N, fit=fit_percent(y, y - e),
+                              mse=np.mean(e ** 2, axis=0), fpe=fpe(e, orders.n_params),
+                              aic=aic(e, orders.n_params), iterations=iterations)
+    return PolyModel(structure, orders, theta, first.Ts, lam, covariance, first.output_names,
+                     first.input_names, first.output_units, first.input_units, report)
