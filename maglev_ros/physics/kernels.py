@@ -1,0 +1,409 @@
+"""Compiled (numba) kernels of the fast model.
+
+Field sums, force and torque, 12-state dynamics, sensor model and the
+fixed-step integrator.
+
+Everything here works on plain arrays so that one compiled call does a whole
+integration step without Python overhead. The public, documented API is in
+:mod:`maglev_ros.physics.model`; these functions are its engine.
+
+Packed arguments (few arrays, so that a call from Python costs little):
+
+``src`` (S, 6)
+    one row per base loop: centre x, y, z (m), radius (m), fixed current (A),
+    coil gain (turns); with ``coil`` (S,) int64, the input feeding the loop
+    (-1: none), the loop current is ``src[j, 4] + src[j, 5] * u[coil[j]]``.
+``rim`` (2, n)
+    cos and sin of the rim angles of the levitating magnet.
+``par`` (9,)
+    rim radius R (m), quadrature weight R l 2 pi / n (m^2), K0 = -J / mu0 (A/m),
+    mass (kg), Ixx, Iyy, Izz (kg m^2), torque mode, kinematics (as floats).
+``sens`` (k, 18)
+    per sensor: position (3, m), mounting rotation (9, row-major, sensor to
+    world), gain (3), offset (3, T); ``mag`` (2,): the magnet's own loop radius (m)
+    and current (A) for the sensor model.
+``work`` (WORK_ROWS, >= n S)
+    scratch space owned by the model.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .loop import FASTMATH, LOOP_WORK_ROWS, loop_batch
+
+__all__ = [
+    'WORK_ROWS',
+    'TORQUE_TRUE',
+    'TORQUE_PUBLISHED',
+    'KINEMATICS_RIGID',
+    'KINEMATICS_PUBLISHED',
+    'COIL_IDEAL',
+    'COIL_CURRENT_COMMAND',
+    'COIL_VOLTAGE',
+    'COIL_DUTY',
+    'STATUS_OK',
+    'STATUS_CRASH_BASE',
+    'STATUS_CRASH_WORKSPACE',
+    'STATUS_NOT_FINITE',
+]
+
+TORQUE_TRUE = 0
+TORQUE_PUBLISHED = 1
+KINEMATICS_RIGID = 0
+KINEMATICS_PUBLISHED = 1
+
+COIL_IDEAL = 0
+COIL_CURRENT_COMMAND = 1
+COIL_VOLTAGE = 2
+COIL_DUTY = 3
+
+STATUS_OK = 0
+STATUS_CRASH_BASE = 1
+STATUS_CRASH_WORKSPACE = 2
+STATUS_NOT_FINITE = 3
+
+GRAVITY = 9.81  # m/s^2, the model's value
+
+_PAIR = LOOP_WORK_ROWS  # first row of the per-pair arrays (z, a, I, Br/rho, Bz, dx, dy)
+_RIM = _PAIR + 7  # first row of the per-point arrays (offset 3, tangent 3, point 3, B 3)
+#: Rows of the scratch array every kernel takes (``work``).
+WORK_ROWS = _RIM + 12
+
+# indices into ``par``
+P_RIM_RADIUS, P_SCALE, P_K0, P_MASS, P_IXX, P_IYY, P_IZZ, P_TORQUE, P_KINEMATICS = range(9)
+
+
+
+@njit(cache=True)
+def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
+    """R = Rz(gamma) Ry(beta) Rx(alpha), body to world, shape (3, 3)."""
+    ca, sa = math.cos(alpha), math.sin(alpha)
+    cb, sb = math.cos(beta), math.sin(beta)
+    cg, sg = math.cos(gamma), math.sin(gamma)
+    r = np.empty((3, 3))
+    r[0, 0] = cg * cb
+    r[0, 1] = cg * sb * sa - sg * ca
+    r[0, 2] = cg * sb * ca + sg * sa
+    r[1, 0] = sg * cb
+    r[1, 1] = sg * sb * sa + cg * ca
+    r[1, 2] = sg * sb * ca - cg * sa
+    r[2, 0] = -sb
+    r[2, 1] = cb * sa
+    r[2, 2] = cb * ca
+    return r
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def base_field_points(px, py, pz, u, src, coil, work, out):
+    """Field of all base loops at the points (px, py, pz) (n,), T.
+
+    Writes Bx, By, Bz to ``out`` rows 0-2 (shape (3, >= n)). Builds the
+    (point, loop) pairs in ``work`` and evaluates them in one vectorised batch.
+    """
+    n = px.shape[0]
+    n_src = src.shape[0]
+    total = n * n_src
+    zz = work[_PAIR, :total]
+    aa = work[_PAIR + 1, :total]
+    cur = work[_PAIR + 2, :total]
+    br = work[_PAIR + 3, :total]
+    bz = work[_PAIR + 4, :total]
+    ddx = work[_PAIR + 5, :total]
+    ddy = work[_PAIR + 6, :total]
+    # pairs in source-major order: inner loops run over points and vectorise
+    for j in range(n_src):
+        current = src[j, 4]
+        if coil[j] >= 0:
+            current += src[j, 5] * u[coil[j]]
+        cx, cy, cz, radius = src[j, 0], src[j, 1], src[j, 2], src[j, 3]
+        base = j * n
+        for i in range(n):
+            ddx[base + i] = px[i] - cx
+            ddy[base + i] = py[i] - cy
+            zz[base + i] = pz[i] - cz
+            aa[base + i] = radius
+            cur[base + i] = current
+    loop_batch(ddx, ddy, zz, aa, cur, br, bz, work)
+    for i in range(n):
+        out[0, i] = 0.0
+        out[1, i] = 0.0
+        out[2, i] = 0.0
+    for j in range(n_src):
+        base = j * n
+        for i in range(n):
+            out[0, i] += br[base + i] * ddx[base + i]
+            out[1, i] += br[base + i] * ddy[base + i]
+            out[2, i] += bz[base + i]
+
+
+@njit(cache=True)
+def loops_field(points, u, src, coil):
+    """Field of the base loops at ``points`` (n, 3), T, shape (n, 3)."""
+    n = points.shape[0]
+    out = np.zeros((3, n))
+    if n > 0 and src.shape[0] > 0:
+        work = np.empty((WORK_ROWS, n * src.shape[0]))
+        base_field_points(points[:, 0].copy(), points[:, 1].copy(), points[:, 2].copy(), u,
+                          src, coil, work, out)
+    return out.T.copy()
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def rim_force_torque(x, u, src, coil, rim, par, work):
+    """Force and torque on the magnet's rim current (fast model), world frame.
+
+    Returns an array of shape (6,): (Fx, Fy, Fz) in N, (tau_x, tau_y, tau_z) in N m
+    about the magnet's centre.
+    """
+    r = rotation_matrix(x[3], x[4], x[5])
+    n = rim.shape[1]
+    rim_radius = par[P_RIM_RADIUS]
+    k0 = par[P_K0]
+    off = work[_RIM:_RIM + 3]
+    tan = work[_RIM + 3:_RIM + 6]
+    pts = work[_RIM + 6:_RIM + 9]
+    field = work[_RIM + 9:_RIM + 12]
+    for i in range(n):
+        c = rim[0, i]
+        s = rim[1, i]
+        for a in range(3):
+            # rim offset d = R [R_rim c, R_rim s, 0], tangent t = R [-s, c, 0]
+            off[a, i] = rim_radius * (r[a, 0] * c + r[a, 1] * s)
+            tan[a, i] = -r[a, 0] * s + r[a, 1] * c
+            pts[a, i] = x[a] + off[a, i]
+    base_field_points(pts[0, :n], pts[1, :n], pts[2, :n], u, src, coil, work, field)
+    out = np.zeros(6)
+    nzx, nzy, nzz = r[0, 2], r[1, 2], r[2, 2]
+    published = par[P_TORQUE] != TORQUE_TRUE
+    for i in range(n):
+        bx, by, bz = field[0, i], field[1, i], field[2, i]
+        tx, ty, tz = tan[0, i], tan[1, i], tan[2, i]
+        fx = k0 * (ty * bz - tz * by)
+        fy = k0 * (tz * bx - tx * bz)
+        fz = k0 * (tx * by - ty * bx)
+        out[0] += fx
+        out[1] += fy
+        out[2] += fz
+        if published:  # the reference code's K0 n_z x B (a force; kept as an option)
+            out[3] += k0 * (nzy * bz - nzz * by)
+            out[4] += k0 * (nzz * bx - nzx * bz)
+            out[5] += k0 * (nzx * by - nzy * bx)
+        else:  # moment of the rim forces
+            dx, dy, dz = off[0, i], off[1, i], off[2, i]
+            out[3] += dy * fz - dz * fy
+            out[4] += dz * fx - dx * fz
+            out[5] += dx * fy - dy * fx
+    scale = par[P_SCALE]
+    for k in range(6):
+        out[k] *= scale
+    return out
+
+
+@njit(cache=True)
+def rigid_body_rates(x, wrench, mass, inertia, kinematics):
+    """Time derivative of the 12-state from the magnetic wrench (world frame).
+
+    State: position (3) m, Euler angles (alpha, beta, gamma) rad, linear
+    velocity (3) m/s (world), angular velocity (3) rad/s (body frame).
+    ``kinematics``: KINEMATICS_RIGID (ZYX Euler kinematics, body-frame torque)
+    or KINEMATICS_PUBLISHED (Euler rates = w, world torque).
+    """
+    dx = np.empty(12)
+    dx[0] = x[6]
+    dx[1] = x[7]
+    dx[2] = x[8]
+    dx[6] = wrench[0] / mass
+    dx[7] = wrench[1] / mass
+    dx[8] = wrench[2] / mass - GRAVITY
+    wx, wy, wz = x[9], x[10], x[11]
+    ixx, iyy, izz = inertia[0], inertia[1], inertia[2]
+    if kinematics == KINEMATICS_RIGID:
+        r = rotation_matrix(x[3], x[4], x[5])
+        # body-frame torque R^T tau
+        tx = r[0, 0] * wrench[3] + r[1, 0] * wrench[4] + r[2, 0] * wrench[5]
+        ty = r[0, 1] * wrench[3] + r[1, 1] * wrench[4] + r[2, 1] * wrench[5]
+        tz = r[0, 2] * wrench[3] + r[1, 2] * wrench[4] + r[2, 2] * wrench[5]
+        ca, sa = math.cos(x[3]), math.sin(x[3])
+        cb = math.cos(x[4])
+        tb = math.tan(x[4])
+        dx[3] = wx + (wy * sa + wz * ca) * tb
+        dx[4] = wy * ca - wz * sa
+        dx[5] = (wy * sa + wz * ca) / cb
+    else:
+        tx, ty, tz = wrench[3], wrench[4], wrench[5]
+        dx[3] = wx
+        dx[4] = wy
+        dx[5] = wz
+    # Euler's equations: I dw/dt = tau - w x (I w)
+    dx[9] = (tx - (wy * izz * wz - wz * iyy * wy)) / ixx
+    dx[10] = (ty - (wz * ixx * wx - wx * izz * wz)) / iyy
+    dx[11] = (tz - (wx * iyy * wy - wy * ixx * wx)) / izz
+    return dx
+
+
+@njit(cache=True)
+def fast_dynamics(x, u, src, coil, rim, par, work):
+    """f(x, u) of the fast model, shape (12,)."""
+    wrench = rim_force_torque(x, u, src, coil, rim, par, work)
+    return rigid_body_rates(x, wrench, par[P_MASS], par[P_IXX:P_IZZ + 1],
+                            int(par[P_KINEMATICS]))
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def fast_measurement(x, u, src, coil, sens, mag, work):
+    """h(x, u) of the fast model: stacked sensor readings, T, shape (3 k,)."""
+    r = rotation_matrix(x[3], x[4], x[5])
+    n = sens.shape[0]
+    base = np.zeros((3, n))
+    if src.shape[0] > 0:
+        base_field_points(sens[:, 0].copy(), sens[:, 1].copy(), sens[:, 2].copy(), u, src,
+                          coil, work, base)
+    # the levitating magnet: a loop in its own frame, evaluated at R^T (s - p)
+    local = np.empty((3, n))
+    for k in range(n):
+        wx = sens[k, 0] - x[0]
+        wy = sens[k, 1] - x[1]
+        wz = sens[k, 2] - x[2]
+        for a in range(3):
+            local[a, k] = r[0, a] * wx + r[1, a] * wy + r[2, a] * wz
+    own_src = np.zeros((1, 6))
+    own_src[0, 3] = mag[0]
+    own_src[0, 4] = mag[1]
+    own = np.empty((3, n))
+    base_field_points(local[0], local[1], local[2], u, own_src, np.full(1, -1), work, own)
+    y = np.empty(3 * n)
+    total = np.empty(3)
+    for k in range(n):
+        for a in range(3):
+            total[a] = base[a, k] + r[a, 0] * own[0, k] + r[a, 1] * own[1, k] + r[a, 2] * own[2, k]
+        for a in range(3):
+            # reading = gain * (R_mount^T B) + offset
+            reading = (sens[k, 3 + a] * total[0] + sens[k, 6 + a] * total[1]
+                       + sens[k, 9 + a] * total[2])
+            y[3 * k + a] = sens[k, 12 + a] * reading + sens[k, 15 + a]
+    return y
+
+
+@njit(cache=True)
+def crash_status(x, base_top, magnet_radius, half_thickness, lower, upper):
+    """Crash check of a state: STATUS_OK, _CRASH_BASE, _CRASH_WORKSPACE or _NOT_FINITE.
+
+    The lowest point of the (tilted) disc must stay above ``base_top`` (m) and
+    the centre inside the box [lower, upper] (m).
+    """
+    for k in range(x.shape[0]):
+        if not math.isfinite(x[k]):
+            return STATUS_NOT_FINITE
+    for k in range(3):
+        if x[k] < lower[k] or x[k] > upper[k]:
+            return STATUS_CRASH_WORKSPACE
+    nz = math.cos(x[4]) * math.cos(x[3])  # R[2, 2]: vertical part of the disc axis
+    lowest = x[2] - magnet_radius * math.sqrt(max(0.0, 1.0 - nz * nz)) - half_thickness * abs(nz)
+    if lowest <= base_top:
+        return STATUS_CRASH_BASE
+    return STATUS_OK
+
+
+@njit(cache=True)
+def coil_voltages(drive, coil_mode, coil_r, v_supply):
+    """Coil voltages, V, for the drive signal (see :func:`rk4_sample`), clipped at the supply."""
+    v = np.empty(drive.shape[0])
+    for j in range(drive.shape[0]):
+        if coil_mode == COIL_CURRENT_COMMAND:
+            volts = coil_r * drive[j]
+        elif coil_mode == COIL_VOLTAGE:
+            volts = drive[j]
+        else:
+            volts = drive[j] * v_supply
+        v[j] = min(max(volts, -v_supply), v_supply)
+    return v
+
+
+@njit(cache=True)
+def extended_rates(xe, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work):
+    """Rates of the state; with coil dynamics, of [12-state, coil currents]."""
+    if coil_mode == COIL_IDEAL:
+        return fast_dynamics(xe, drive, src, coil, rim, par, work)
+    n_coils = v.shape[0]
+    out = np.empty(xe.shape[0])
+    i_coil = xe[12:12 + n_coils].copy()
+    out[:12] = fast_dynamics(xe[:12].copy(), i_coil, src, coil, rim, par, work)
+    for j in range(n_coils):
+        out[12 + j] = (v[j] - coil_r * i_coil[j]) / coil_l
+    return out
+
+
+@njit(cache=True)
+def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work):
+    """Advance the state by one sample of length ``dt`` (s) with RK4 sub-steps.
+
+    ``coil_mode`` COIL_IDEAL: ``drive`` are the coil currents, A (ideal current
+    source; the state has 12 entries). COIL_CURRENT_COMMAND: ``drive`` are
+    commanded currents, A, applied as the voltage ``R i_cmd`` clipped at the
+    supply (what the board does); COIL_VOLTAGE: volts (clipped); COIL_DUTY: PWM
+    duties in [-1, 1] (voltage = duty * supply). With coil dynamics the state
+    carries the coil currents after the 12 mechanical states, integrated with
+    ``L di/dt = V - R i``. ``electrical`` = (R ohm, L H, supply V). The drive
+    is held constant over the sample (zero-order hold).
+    """
+    h = dt / substeps
+    coil_r = electrical[0]
+    coil_l = electrical[1]
+    v = coil_voltages(drive, coil_mode, coil_r, electrical[2])
+    n_x = xe.shape[0]
+    x = xe.copy()
+    stage = np.empty(n_x)
+    acc = np.empty(n_x)
+    for _ in range(substeps):
+        k = extended_rates(x, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work)
+        for i in range(n_x):
+            acc[i] = k[i]
+            stage[i] = x[i] + 0.5 * h * k[i]
+        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
+                           work)
+        for i in range(n_x):
+            acc[i] += 2.0 * k[i]
+            stage[i] = x[i] + 0.5 * h * k[i]
+        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
+                           work)
+        for i in range(n_x):
+            acc[i] += 2.0 * k[i]
+            stage[i] = x[i] + h * k[i]
+        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
+                           work)
+        for i in range(n_x):
+            x[i] += (h / 6.0) * (acc[i] + k[i])
+    return x
+
+
+@njit(cache=True)
+def rk4_run(x0, drives, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
+            crash, check):
+    """Integrate over ``drives.shape[0]`` samples; stop at the first crash.
+
+    ``crash`` = (base top m, magnet radius m, half thickness m, lower xyz, upper xyz)
+    as a (9,) array. Returns (states (N + 1, n_x), number of samples done, status).
+    """
+    n = drives.shape[0]
+    states = np.empty((n + 1, x0.shape[0]))
+    states[0] = x0
+    lower = crash[3:6]
+    upper = crash[6:9]
+    x = x0.copy()
+    for k in range(n):
+        x_new = rk4_sample(x, drives[k], dt, substeps, coil_mode, electrical, src, coil, rim,
+                           par, work)
+        status = STATUS_OK
+        if check:
+            status = crash_status(x_new[:12], crash[0], crash[1], crash[2], lower, upper)
+        elif not np.all(np.isfinite(x_new)):
+            status = STATUS_NOT_FINITE
+        if status != STATUS_OK:
+            return states[:k + 1], k, status, x_new
+        x = x_new
+        states[k + 1] = x
+    return states, n, STATUS_OK, x
