@@ -1,0 +1,106 @@
+import json
+
+import numpy as np
+import pytest
+from scipy.io import savemat
+
+from maglev_ros.cli.sysid import main
+
+from .systems import simulate_mimo_arx, simulate_siso
+
+
+@pytest.fixture
+def lab_mat(tmp_path):
+    """A data.mat like the lab's: DATA with one channel per row (y1, y2, spare, u1, u2)."""
+    d = simulate_mimo_arx(6000, 1)
+    DATA = np.vstack([d.y.T, np.zeros(d.N), d.u.T])
+    path = tmp_path / 'data.mat'
+    savemat(path, {'DATA': DATA})
+    return path
+
+
+def run(argv, capsys):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_siso_models_text(lab_mat, capsys):
+    code, out, err = run([lab_mat, '--rows', '2', '5', '--ts', '2e-4', '--detrend',
+                          '--arx', 4, 2, 1, '--iv', 4, 2, 1, '--armax', 4, 2, 1, 1,
+                          '--oe', 2, 4, 1, '--bj', 2, 1, 1, 4, 1], capsys)
+    assert code == 0, err
+    assert out.count('Discrete-time') == 5
+    assert 'estimation 3000, validation 3000' in out
+    assert 'Fit to estimation data' in out and 'validation data' in out
+    assert 'FPE:' in out and 'residual analysis' in out
+
+
+def test_mimo_spec_json_plot_save(lab_mat, tmp_path, capsys):
+    spec = tmp_path / 'spec.yaml'
+    spec.write_text('models:\n'
+                    '  - {structure: arx, na: [[4, 4], [0, 4]], nb: [[2, 2], [0, 2]],'
+                    ' nk: [[1, 1], [1, 1]]}\n'
+                    '  - {structure: armax, na: [[2, 2], [0, 2]], nb: [[1, 1], [0, 1]],'
+                    ' nc: [1, 1]}\n')
+    code, out, err = run([lab_mat, '--rows', '1,2', '4,5', '--ts', '2e-4', '--spec', spec,
+                          '--json', '--plot', tmp_path / 'png', '--save', tmp_path / 'models',
+                          '--split', '4000'], capsys)
+    assert code == 0, err
+    result = json.loads(out)
+    assert result['data']['n_estimation'] == 4000
+    arx_entry, armax_entry = result['models']
+    assert arx_entry['structure'] == 'arx' and armax_entry['structure'] == 'armax'
+    assert arx_entry['orders']['na'] == [[4, 4], [0, 4]]
+    assert min(arx_entry['fit_validation']) > 80
+    assert len(arx_entry['polynomials']['A'][0][1]) == 5
+    assert {'fpe', 'mse', 'fit_estimation', 'theta', 'std'} <= set(arx_entry)
+    pngs = sorted(p.name for p in (tmp_path / 'png').iterdir())
+    assert pngs == ['bode.png', 'compare.png', 'resid_1_arx.png', 'resid_2_armax.png']
+    assert len(list((tmp_path / 'models').iterdir())) == 2
+
+
+def test_select_and_csv(tmp_path, capsys):
+    d = simulate_siso(3000, 2)
+    path = tmp_path / 'd.csv'
+    np.savetxt(path, np.column_stack([d.time, d.y, d.u]), delimiter=',', header='t,y,u',
+               comments='')
+    code, out, err = run([path, '--select', 'mdl', '--select-max', 4, 4, 1, '--horizon', 5],
+                         capsys)
+    assert code == 0, err
+    assert 'Order search (mdl, 16 candidates): na=2 nb=2 nk=1' in out
+    assert '5-step prediction' in out
+
+
+@pytest.mark.parametrize(('args', 'match'), [
+    (['missing.mat', '--arx', 1, 1, 1, '--ts', 1], 'does not exist'),
+    (['{mat}', '--rows', '1', '4', '--arx', 1, 1, 1], 'stores no sample time'),
+    (['{mat}', '--rows', '1', '4', '--ts', '0', '--arx', 1, 1, 1], '--ts must be a positive'),
+    (['{mat}', '--rows', '1', '4', '--ts', '-2', '--arx', 1, 1, 1], '--ts must be a positive'),
+    (['{mat}', '--matrix', 'X', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1],
+     "no variable 'X'"),
+    (['{nan}', '--rows', '1', '2', '--ts', '1', '--arx', 1, 1, 1], 'NaN or infinite'),
+    (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 40, 40, 1, '--split', '50'],
+     'fewer samples than parameters'),
+    (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--spec', '{badspec}'],
+     'na must be a scalar or have shape'),
+    (['{mat}', '--rows', '1', '4', '--ts', '1'], 'no model requested'),
+    (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
+])
+def test_bad_input_exits_2_with_one_line(lab_mat, tmp_path, capsys, args, match):
+    nan = tmp_path / 'nan.mat'
+    savemat(nan, {'DATA': np.array([[1.0, np.nan, 2.0], [0.0, 1.0, 2.0]])})
+    badspec = tmp_path / 'bad.yaml'
+    badspec.write_text('models:\n  - {structure: arx, na: [1, 2, 3], nb: 1, nk: 1}\n')
+    argv = [str(a).format(mat=lab_mat, nan=nan, badspec=badspec) for a in args]
+    code, out, err = run(argv, capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('maglev-sysid: error:')
+    assert match in lines[0]
+    assert 'Traceback' not in err
+
+
+def test_help_exits_zero(capsys):
+    assert main(['--help']) == 0
+    assert 'usage: maglev-sysid' in capsys.readouterr().out
