@@ -1,0 +1,259 @@
+"""Build the package with colcon and check what lands in the install tree.
+
+The module copies the package source into a temporary workspace, runs
+``colcon build --packages-select maglev_ros`` once (a plain copy install, which
+is what ``ros2 run`` users get by default; a few seconds) and checks the console
+scripts, the ament index marker, ``package.xml``, the config and launch files,
+and that an installed console script runs.
+"""
+
+from __future__ import annotations
+
+import ast
+import filecmp
+import importlib.metadata
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+PACKAGE = 'maglev_ros'
+PKG_DIR = Path(__file__).resolve().parents[1]
+COLCON = Path(sys.executable).parent / 'colcon'
+
+BUILD_TIMEOUT = 300  # seconds; the build itself takes a few
+RUN_TIMEOUT = 120
+
+# Excluded wherever they occur in the source tree.
+_IGNORED_ANYWHERE = {'__pycache__', '.pytest_cache', '.ruff_cache', '.mypy_cache'}
+# Excluded only at the top of the package (a subpackage may well be called ``build``).
+_IGNORED_AT_TOP = {'.git', '.venv', 'venv', 'build', 'install', 'log'}
+
+
+def _ignore(directory: str, names: list[str]) -> set[str]:
+    ignored = {n for n in names if n in _IGNORED_ANYWHERE or n.endswith('.egg-info')}
+    if Path(directory).resolve() == PKG_DIR:
+        ignored |= _IGNORED_AT_TOP.intersection(names)
+    return ignored
+
+
+def _tail(text: str, limit: int = 12000) -> str:
+    return text if len(text) <= limit else '[...]\n' + text[-limit:]
+
+
+@dataclass
+class ColconBuild:
+    """Result of one ``colcon build`` in a temporary workspace."""
+
+    workspace: Path
+    returncode: int | None
+    stdout: str
+    stderr: str
+
+    @property
+    def prefix(self) -> Path:
+        return self.workspace / 'install' / PACKAGE
+
+    @property
+    def lib_dir(self) -> Path:
+        return self.prefix / 'lib' / PACKAGE
+
+    @property
+    def share_dir(self) -> Path:
+        return self.prefix / 'share' / PACKAGE
+
+    def report(self) -> str:
+        log = self.workspace / 'log' / 'latest_build' / PACKAGE / 'stdout_stderr.log'
+        log_text = log.read_text(errors='replace') if log.is_file() else f'({log} missing)'
+        return (
+            f'colcon build in {self.workspace} exited with {self.returncode}\n'
+            f'--- colcon stdout ---\n{_tail(self.stdout)}\n'
+            f'--- colcon stderr ---\n{_tail(self.stderr)}\n'
+            f'--- {log.relative_to(self.workspace)} ---\n{_tail(log_text)}'
+        )
+
+    def require(self) -> None:
+        if self.returncode != 0:
+            pytest.fail('colcon build failed (details in test_colcon_build_succeeds)')
+
+    def site_packages(self) -> Path:
+        found = sorted(self.prefix.glob('lib/python3*/site-packages'))
+        assert len(found) == 1, f'expected one site-packages dir under {self.prefix}: {found}'
+        return found[0]
+
+    def run_env(self) -> dict[str, str]:
+        """Environment roughly as ``source install/setup.bash`` would leave it."""
+        env = os.environ.copy()
+        site = str(self.site_packages())
+        env['PYTHONPATH'] = os.pathsep.join(filter(None, [site, env.get('PYTHONPATH')]))
+        env['AMENT_PREFIX_PATH'] = os.pathsep.join(
+            filter(None, [str(self.prefix), env.get('AMENT_PREFIX_PATH')])
+        )
+        env['PYTHONNOUSERSITE'] = '1'
+        return env
+
+
+@pytest.fixture(scope='module')
+def colcon_build(tmp_path_factory: pytest.TempPathFactory) -> ColconBuild:
+    if not COLCON.is_file():
+        pytest.skip(
+            f'colcon is not installed next to {sys.executable} '
+            "(pip install 'colcon-common-extensions')"
+        )
+    workspace = tmp_path_factory.mktemp('colcon') / 'ws'
+    shutil.copytree(PKG_DIR, workspace / 'src' / PACKAGE, ignore=_ignore)
+
+    env = os.environ.copy()
+    # Keep the user's colcon defaults and mixins out of the build.
+    env['COLCON_HOME'] = str(workspace.parent / 'colcon_home')
+    env.pop('COLCON_DEFAULTS_FILE', None)
+    env['PATH'] = os.pathsep.join(filter(None, [str(COLCON.parent), env.get('PATH')]))
+    cmd = [
+        str(COLCON), 'build',
+        '--base-paths', 'src',
+        '--packages-select', PACKAGE,
+        '--event-handlers', 'console_direct-',
+    ]  # fmt: skip
+    try:
+        proc = subprocess.run(
+            cmd, cwd=workspace, env=env, capture_output=True, text=True,
+            timeout=BUILD_TIMEOUT, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+    except subprocess.TimeoutExpired as exc:
+        out = exc.stdout.decode(errors='replace') if isinstance(exc.stdout, bytes) else ''
+        err = exc.stderr.decode(errors='replace') if isinstance(exc.stderr, bytes) else ''
+        return ColconBuild(workspace, None, out, err + f'\n(timed out after {BUILD_TIMEOUT} s)')
+    return ColconBuild(workspace, proc.returncode, proc.stdout, proc.stderr)
+
+
+def _setup_py_names() -> set[str]:
+    """Keys of the ``CLI_TOOLS`` and ``NODES`` dict literals in ``setup.py``."""
+    tree = ast.parse((PKG_DIR / 'setup.py').read_text(), filename='setup.py')
+    names: set[str] = set()
+    for node in tree.body:
+        if isinstance(node, ast.Assign):
+            targets, value = node.targets, node.value
+        elif isinstance(node, ast.AnnAssign) and node.value is not None:
+            targets, value = [node.target], node.value
+        else:
+            continue
+        if any(isinstance(t, ast.Name) and t.id in ('CLI_TOOLS', 'NODES') for t in targets):
+            names.update(ast.literal_eval(value))
+    return names
+
+
+def _installed_console_scripts(build: ColconBuild) -> set[str]:
+    """Console script names from the metadata of the distribution colcon installed."""
+    dists = [
+        d
+        for d in importlib.metadata.distributions(path=[str(build.site_packages())])
+        if (d.metadata['Name'] or '').replace('-', '_').lower() == PACKAGE
+    ]
+    assert len(dists) == 1, f'expected one {PACKAGE} distribution in {build.site_packages()}'
+    return {ep.name for ep in dists[0].entry_points if ep.group == 'console_scripts'}
+
+
+def test_colcon_build_succeeds(colcon_build: ColconBuild) -> None:
+    assert colcon_build.returncode == 0, colcon_build.report()
+    assert colcon_build.prefix.is_dir(), colcon_build.report()
+
+
+def test_console_scripts_installed(colcon_build: ColconBuild) -> None:
+    colcon_build.require()
+    declared = _installed_console_scripts(colcon_build)
+    assert declared, 'the built distribution declares no console_scripts'
+    # The metadata must cover every tool and node named in setup.py.
+    missing_decl = _setup_py_names() - declared
+    assert not missing_decl, f'setup.py names not in console_scripts: {sorted(missing_decl)}'
+
+    lib_dir = colcon_build.lib_dir
+    present = sorted(p.name for p in lib_dir.iterdir()) if lib_dir.is_dir() else []
+    for name in sorted(declared):
+        script = lib_dir / name
+        assert script.is_file(), f'{name} not installed in {lib_dir} (found: {present})'
+        assert not script.is_symlink(), f'{script} is a symlink in a copy install'
+        assert os.access(script, os.X_OK), f'{script} is not executable'
+        first_line = script.read_text().splitlines()[0]
+        assert first_line.startswith('#!'), f'{script} has no shebang: {first_line!r}'
+        interpreter = Path(first_line[2:].strip().split()[0])
+        assert os.access(interpreter, os.X_OK), f'{script}: interpreter {interpreter} missing'
+
+
+def test_ament_index_marker(colcon_build: ColconBuild) -> None:
+    colcon_build.require()
+    marker = colcon_build.prefix / 'share/ament_index/resource_index/packages' / PACKAGE
+    assert marker.is_file(), f'ament index marker missing: {marker}'
+
+
+def test_package_xml_installed(colcon_build: ColconBuild) -> None:
+    colcon_build.require()
+    installed = colcon_build.share_dir / 'package.xml'
+    assert installed.is_file(), f'{installed} missing'
+    assert filecmp.cmp(installed, PKG_DIR / 'package.xml', shallow=False)
+
+
+def test_config_files_installed(colcon_build: ColconBuild) -> None:
+    colcon_build.require()
+    sources = sorted((PKG_DIR / 'config').glob('*.yaml'))
+    assert sources, f'no config/*.yaml in {PKG_DIR}'
+    dest = colcon_build.share_dir / 'config'
+    for src in sources:
+        installed = dest / src.name
+        assert installed.is_file(), f'config/{src.name} not installed in {dest}'
+        assert filecmp.cmp(installed, src, shallow=False), f'{installed} differs from {src}'
+
+
+def test_launch_files_installed(colcon_build: ColconBuild) -> None:
+    colcon_build.require()
+    launch = PKG_DIR / 'launch'
+    sources = sorted(
+        p
+        for p in (launch.rglob('*') if launch.is_dir() else [])
+        if p.is_file() and '__pycache__' not in p.parts
+    )
+    dest = colcon_build.share_dir / 'launch'
+    for src in sources:
+        installed = dest / src.relative_to(launch)
+        assert installed.is_file(), f'launch/{src.relative_to(launch)} not installed in {dest}'
+        assert filecmp.cmp(installed, src, shallow=False), f'{installed} differs from {src}'
+
+
+def test_installed_package_is_imported(colcon_build: ColconBuild) -> None:
+    """The run environment picks the installed copy, not the editable source."""
+    colcon_build.require()
+    code = (
+        'import importlib.metadata as m, maglev_ros; '
+        "print(maglev_ros.__file__); print(m.distribution('maglev_ros').locate_file(''))"
+    )
+    proc = subprocess.run(
+        [sys.executable, '-c', code], env=colcon_build.run_env(), capture_output=True,
+        text=True, timeout=RUN_TIMEOUT, stdin=subprocess.DEVNULL,
+        cwd=colcon_build.workspace.parent,  # not the source tree: '' leads sys.path
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    site = colcon_build.site_packages().resolve()
+    for line in proc.stdout.splitlines():
+        assert Path(line).resolve().is_relative_to(site), f'{line} is not under {site}'
+
+
+@pytest.mark.parametrize('verb', ['model', 'sysid'])
+def test_installed_cli_runs(colcon_build: ColconBuild, verb: str) -> None:
+    colcon_build.require()
+    if not (PKG_DIR / PACKAGE / 'cli' / f'{verb}.py').is_file():
+        pytest.skip(f'{PACKAGE}/cli/{verb}.py does not exist yet: nothing to run')
+    script = colcon_build.lib_dir / verb
+    assert script.is_file(), f'{script} not installed'
+    proc = subprocess.run(
+        [str(script), '--help'], env=colcon_build.run_env(), capture_output=True,
+        text=True, timeout=RUN_TIMEOUT, stdin=subprocess.DEVNULL,
+        cwd=colcon_build.workspace.parent,
+    )  # fmt: skip
+    assert proc.returncode == 0, (
+        f'{script} --help exited with {proc.returncode}\n'
+        f'--- stdout ---\n{_tail(proc.stdout)}\n--- stderr ---\n{_tail(proc.stderr)}'
+    )
+    assert 'usage' in proc.stdout.lower(), proc.stdout
