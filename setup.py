@@ -1,5 +1,6 @@
 """Build script for maglev_ros (ament_python; also a plain pip package)."""
 
+import os
 from glob import glob
 
 from setuptools import find_packages, setup
@@ -13,7 +14,10 @@ CLI_TOOLS = {
     'sysid': 'maglev_ros.cli.sysid:main',
 }
 # ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.
-NODES: dict[str, str] = {}
+NODES: dict[str, str] = {
+    'virtual_board': 'maglev_ros.cli.virtual_board:main',
+    'maglev-virtual-board': 'maglev_ros.cli.virtual_board:main',
+}
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]
 console_scripts += [f'{verb}={target}' for verb, target in CLI_TOOLS.items()]
@@ -30,7 +34,7 @@ setup(
         ('share/ament_index/resource_index/packages', [f'resource/{PACKAGE}']),
         (f'share/{PACKAGE}', ['package.xml']),
         (f'share/{PACKAGE}/config', glob('config/*.yaml')),
-        (f'share/{PACKAGE}/launch', glob('launch/*')),
+        (f'share/{PACKAGE}/launch', [f for f in glob('launch/*') if os.path.isfile(f)]),
     ],
     install_requires=[
         'setuptools',
@@ -58,6 +62,5 @@ setup(
             'ruff',
         ],
     },
-    zip_safe=True,
     entry_points={'console_scripts': console_scripts},
 )

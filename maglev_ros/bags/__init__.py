@@ -1,0 +1,1 @@
+"""maglev_ros.bags."""
