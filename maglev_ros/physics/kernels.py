@@ -128,16 +128,38 @@ def base_field_points(px, py, pz, u, src, coil, work, out):
             aa[base + i] = radius
             cur[base + i] = current
     loop_batch(ddx, ddy, zz, aa, cur, br, bz, work)
+    for k in range(total):
+        ddx[k] *= br[k]  # Bx contribution
+        ddy[k] *= br[k]  # By contribution
+    # Pairwise (tree) sum over the sources in their listed order. Besides being
+    # accurate, it keeps mirror images of the base (x+/x-, y+/y- neighbours in
+    # the list) in sibling subtrees, so a centred magnet feels exactly zero
+    # horizontal force in floating point and stays centred (an unstable mode
+    # would otherwise amplify round-off into visible drift).
+    width = n_src
+    while width > 1:
+        half = width // 2
+        for j in range(half):
+            dst = j * n
+            a = 2 * j * n
+            b = a + n
+            for i in range(n):
+                ddx[dst + i] = ddx[a + i] + ddx[b + i]
+                ddy[dst + i] = ddy[a + i] + ddy[b + i]
+                bz[dst + i] = bz[a + i] + bz[b + i]
+        if width % 2:
+            dst = half * n
+            src_row = (width - 1) * n
+            for i in range(n):
+                ddx[dst + i] = ddx[src_row + i]
+                ddy[dst + i] = ddy[src_row + i]
+                bz[dst + i] = bz[src_row + i]
+            half += 1
+        width = half
     for i in range(n):
-        out[0, i] = 0.0
-        out[1, i] = 0.0
-        out[2, i] = 0.0
-    for j in range(n_src):
-        base = j * n
-        for i in range(n):
-            out[0, i] += br[base + i] * ddx[base + i]
-            out[1, i] += br[base + i] * ddy[base + i]
-            out[2, i] += bz[base + i]
+        out[0, i] = ddx[i]
+        out[1, i] = ddy[i]
+        out[2, i] = bz[i]
 
 
 @njit(cache=True)
@@ -176,7 +198,7 @@ def rim_force_torque(x, u, src, coil, rim, par, work):
             tan[a, i] = -r[a, 0] * s + r[a, 1] * c
             pts[a, i] = x[a] + off[a, i]
     base_field_points(pts[0, :n], pts[1, :n], pts[2, :n], u, src, coil, work, field)
-    out = np.zeros(6)
+    contrib = work[_PAIR:_PAIR + 6]  # per-point wrench; the pair rows are free again
     nzx, nzy, nzz = r[0, 2], r[1, 2], r[2, 2]
     published = par[P_TORQUE] != TORQUE_TRUE
     for i in range(n):
@@ -185,19 +207,40 @@ def rim_force_torque(x, u, src, coil, rim, par, work):
         fx = k0 * (ty * bz - tz * by)
         fy = k0 * (tz * bx - tx * bz)
         fz = k0 * (tx * by - ty * bx)
-        out[0] += fx
-        out[1] += fy
-        out[2] += fz
+        contrib[0, i] = fx
+        contrib[1, i] = fy
+        contrib[2, i] = fz
         if published:  # the reference code's K0 n_z x B (a force; kept as an option)
-            out[3] += k0 * (nzy * bz - nzz * by)
-            out[4] += k0 * (nzz * bx - nzx * bz)
-            out[5] += k0 * (nzx * by - nzy * bx)
+            contrib[3, i] = k0 * (nzy * bz - nzz * by)
+            contrib[4, i] = k0 * (nzz * bx - nzx * bz)
+            contrib[5, i] = k0 * (nzx * by - nzy * bx)
         else:  # moment of the rim forces
             dx, dy, dz = off[0, i], off[1, i], off[2, i]
-            out[3] += dy * fz - dz * fy
-            out[4] += dz * fx - dx * fz
-            out[5] += dx * fy - dy * fx
-    scale = par[P_SCALE]
+            contrib[3, i] = dy * fz - dz * fy
+            contrib[4, i] = dz * fx - dx * fz
+            contrib[5, i] = dx * fy - dy * fx
+    out = np.zeros(6)
+    if n % 4 == 0:
+        # Sum each component over mirror pairs of rim points: the x-mirror
+        # (theta -> pi - theta) for the x-odd Fx, tau_y, tau_z, the y-mirror
+        # (theta -> -theta) for the y-odd Fy, tau_x. A centred, level magnet's
+        # odd components then cancel exactly (see base_field_points).
+        half = n // 2
+        for i in range(n):
+            mx = (half - i) % n
+            my = (n - i) % n
+            out[0] += contrib[0, i] + contrib[0, mx]
+            out[1] += contrib[1, i] + contrib[1, my]
+            out[2] += contrib[2, i] + contrib[2, mx]
+            out[3] += contrib[3, i] + contrib[3, my]
+            out[4] += contrib[4, i] + contrib[4, mx]
+            out[5] += contrib[5, i] + contrib[5, mx]
+        scale = 0.5 * par[P_SCALE]
+    else:
+        for i in range(n):
+            for k in range(6):
+                out[k] += contrib[k, i]
+        scale = par[P_SCALE]
     for k in range(6):
         out[k] *= scale
     return out

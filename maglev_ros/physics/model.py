@@ -44,6 +44,7 @@ __all__ = [
     'ModelOptions',
     'MaggyModel',
     'make_model',
+    'rim_angles',
 ]
 
 FIELD_MODELS = ('fast', 'accurate', 'filament')
@@ -128,6 +129,34 @@ def _params_key(params: MaggyParameters) -> str:
     return digest.hexdigest()
 
 
+def rim_angles(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Cosines and sines of ``n`` evenly spaced rim angles 2 pi i / n.
+
+    For n divisible by 4 the tables are built from the first quadrant by
+    reflection, so they are exactly mirror-symmetric (cos(pi - t) = -cos t,
+    sin(-t) = -sin t, exact zeros on the axes) and a centred magnet in a
+    symmetric base feels exactly zero horizontal force.
+
+    Returns
+    -------
+    cos, sin : ndarray, shape (n,)
+    """
+    theta = 2.0 * np.pi * np.arange(n) / n
+    cos, sin = np.cos(theta), np.sin(theta)
+    if n % 4 == 0:
+        q = n // 4
+        c1 = cos[:q + 1].copy()
+        s1 = sin[:q + 1].copy()
+        c1[q], s1[q] = 0.0, 1.0
+        s1[0] = 0.0
+        for i in range(q + 1):
+            for j, (c, s) in enumerate(((c1[i], s1[i]), (-c1[i], s1[i]), (-c1[i], -s1[i]),
+                                        (c1[i], -s1[i]))):
+                index = (i, 2 * q - i, 2 * q + i, n - i)[j] % n
+                cos[index], sin[index] = c, s
+    return cos, sin
+
+
 class MaggyModel:
     """A parameter set with modelling options: field, force, f(x, u), h(x, u).
 
@@ -149,9 +178,7 @@ class MaggyModel:
         self.k0 = -magnet.polarization / MU0  # rim surface current density, A/m
         default_n = DEFAULT_RIM_POINTS if opts.field == 'fast' else DEFAULT_SURFACE_RIM_POINTS
         self.rim_points = opts.rim_points or default_n
-        theta = 2.0 * np.pi * np.arange(self.rim_points) / self.rim_points
-        self._cos = np.cos(theta)
-        self._sin = np.sin(theta)
+        self._cos, self._sin = rim_angles(self.rim_points)
         self._torque_mode = (kernels.TORQUE_TRUE if opts.torque == 'true'
                              else kernels.TORQUE_PUBLISHED)
         self._kinematics = (kernels.KINEMATICS_RIGID if opts.kinematics == 'rigid'

@@ -1,0 +1,505 @@
+"""Simulation of the Maggy model: fixed-step sampled simulator and a reference path.
+
+:class:`Simulator` advances the model one sample at a time (zero-order hold
+on the input, RK4 sub-steps), optionally through the coils' electrical
+dynamics and with sensor effects (noise, quantisation, offset, one sample of
+delay), all seeded. Touching the base or leaving the workspace ends the run
+with a "crashed" status and the time and state where it happened; the
+simulator never integrates through a crash and never returns NaNs.
+
+:func:`simulate_reference` integrates the same model with scipy's
+``solve_ivp`` at tight tolerances, for checking the fixed-step path.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.integrate import solve_ivp
+
+from . import kernels
+
+__all__ = [
+    'CoilDynamics',
+    'SensorEffects',
+    'SimulationResult',
+    'SimulationCrashedError',
+    'Simulator',
+    'simulate_reference',
+    'CRASH_REASONS',
+]
+
+CRASH_REASONS = {
+    kernels.STATUS_CRASH_BASE: 'touched the base',
+    kernels.STATUS_CRASH_WORKSPACE: 'left the workspace',
+    kernels.STATUS_NOT_FINITE: 'state not finite',
+}
+_COIL_MODES = {
+    'current': kernels.COIL_CURRENT_COMMAND,
+    'voltage': kernels.COIL_VOLTAGE,
+    'duty': kernels.COIL_DUTY,
+}
+
+
+class SimulationCrashedError(RuntimeError):
+    """The simulation has crashed; reset it before stepping again."""
+
+
+@dataclass(frozen=True)
+class CoilDynamics:
+    """First-order coil electrics ``L di/dt = V - R i`` with a saturating supply.
+
+    Attributes
+    ----------
+    drive : {'current', 'voltage', 'duty'}
+        Meaning of the input: ``current`` - a commanded current, applied as the
+        voltage ``R i_cmd`` (what the board's open-loop driver does);
+        ``voltage`` - volts; ``duty`` - PWM duty in [-1, 1] of the supply.
+        The voltage is clipped at +-supply in every case.
+    resistance : float
+        Coil resistance, ohm.
+    inductance : float
+        Coil inductance, H.
+    supply_voltage : float
+        Supply, V.
+    """
+
+    drive: str = 'current'
+    resistance: float = 3.0
+    inductance: float = 0.004
+    supply_voltage: float = 12.0
+
+    def __post_init__(self):
+        if self.drive not in _COIL_MODES:
+            raise ValueError(f'drive must be one of {", ".join(_COIL_MODES)}, got {self.drive!r}')
+        for name in ('resistance', 'inductance', 'supply_voltage'):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f'{name} must be positive, got {value!r}')
+
+    @classmethod
+    def from_parameters(cls, params, drive: str = 'current') -> CoilDynamics:
+        """Coil electrics of a parameter set's ``coils`` section."""
+        c = params.coils
+        return cls(drive, c.resistance, c.inductance, c.supply_voltage)
+
+
+@dataclass(frozen=True)
+class SensorEffects:
+    """Imperfections of the Hall sensors, applied to h(x, u).
+
+    Attributes
+    ----------
+    noise_rms : float
+        White Gaussian noise per axis, T rms.
+    quantization : float
+        Step of the reading, T per LSB (0: none).
+    offset : float or array_like, shape (3 k,)
+        Added offset, T.
+    delay_samples : int
+        Samples of output delay (0 or more; the board has 1).
+    """
+
+    noise_rms: float = 0.0
+    quantization: float = 0.0
+    offset: float | tuple = 0.0
+    delay_samples: int = 0
+
+    def __post_init__(self):
+        if not (np.isfinite(self.noise_rms) and self.noise_rms >= 0):
+            raise ValueError(f'noise_rms must be >= 0, got {self.noise_rms!r}')
+        if not (np.isfinite(self.quantization) and self.quantization >= 0):
+            raise ValueError(f'quantization must be >= 0, got {self.quantization!r}')
+        if not isinstance(self.delay_samples, (int, np.integer)) or self.delay_samples < 0:
+            raise ValueError(f'delay_samples must be an integer >= 0, got {self.delay_samples!r}')
+
+
+@dataclass
+class SimulationResult:
+    """A simulated run.
+
+    Attributes
+    ----------
+    t : ndarray, shape (N + 1,)
+        Sample times, s.
+    x : ndarray, shape (N + 1, 12)
+        States at the sample times.
+    y : ndarray, shape (N + 1, 3 k)
+        Sensor readings, T.
+    u : ndarray, shape (N, n_s)
+        Inputs applied over each sample (ZOH).
+    currents : ndarray, shape (N + 1, n_s)
+        Coil currents, A (equal to the inputs without coil dynamics).
+    status : str
+        ``ok`` or ``crashed``.
+    reason : str
+        Why it crashed (empty when ok).
+    crash_time : float or None
+        Time of the first sample where the crash was detected, s.
+    crash_state : ndarray or None, shape (12,)
+        State there (finite: the last finite state if the step blew up).
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    y: np.ndarray
+    u: np.ndarray
+    currents: np.ndarray
+    status: str = 'ok'
+    reason: str = ''
+    crash_time: float | None = None
+    crash_state: np.ndarray | None = field(default=None, repr=False)
+
+    @property
+    def crashed(self) -> bool:
+        """True when the run ended in a crash."""
+        return self.status == 'crashed'
+
+
+class Simulator:
+    """Sampled simulation of a :class:`MaggyModel` (ZOH input, RK4 sub-steps).
+
+    Parameters
+    ----------
+    model : MaggyModel
+        The model (``fast`` runs compiled; other models run in Python).
+    sample_rate : float
+        Samples per second, Hz (the board: 5000).
+    substeps : int
+        RK4 steps per sample.
+    coil : CoilDynamics or None
+        Coil electrics; None makes the input the coil current directly.
+    sensor : SensorEffects or None
+        Sensor imperfections; None for ideal sensors.
+    seed : int or None
+        Seed of the sensor noise.
+    check_crash : bool
+        Detect touching the base and leaving the workspace.
+    x0 : array_like, shape (12,), optional
+        Initial state (default: resting at the first equilibrium).
+    """
+
+    def __init__(self, model, sample_rate: float = 5000.0, substeps: int = 1,
+                 coil: CoilDynamics | None = None, sensor: SensorEffects | None = None,
+                 seed: int | None = None, check_crash: bool = True, x0=None):
+        if not (np.isfinite(sample_rate) and sample_rate > 0):
+            raise ValueError(f'sample_rate must be positive, got {sample_rate!r}')
+        if not isinstance(substeps, (int, np.integer)) or substeps < 1:
+            raise ValueError(f'substeps must be an integer >= 1, got {substeps!r}')
+        self.model = model
+        self.sample_rate = float(sample_rate)
+        self.dt = 1.0 / self.sample_rate
+        self.substeps = int(substeps)
+        self.coil = coil
+        self.sensor = sensor or SensorEffects()
+        self.seed = seed
+        self.check_crash = bool(check_crash)
+        p = model.params
+        self._crash = np.concatenate([
+            [p.base_top, p.magnet.radius, p.magnet.thickness / 2],
+            p.workspace.lower, p.workspace.upper,
+        ])
+        if coil is None:
+            self._coil_mode = kernels.COIL_IDEAL
+            self._electrical = np.array([1.0, 1.0, 1.0])
+        else:
+            self._coil_mode = _COIL_MODES[coil.drive]
+            self._electrical = np.array([coil.resistance, coil.inductance,
+                                         coil.supply_voltage])
+        offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float),
+                                 (model.n_outputs,))
+        self._offset = np.array(offset)
+        self._default_x0 = None if x0 is None else self._check_state(x0)
+        self.reset()
+
+    # ------------------------------------------------------------------ state
+    def reset(self, x0=None) -> np.ndarray:
+        """Restart at ``x0`` (default: the constructor's, else the equilibrium).
+
+        Returns
+        -------
+        ndarray, shape (3 k,)
+            The first sensor reading.
+        """
+        if x0 is not None:
+            state = self._check_state(x0)
+        elif self._default_x0 is not None:
+            state = self._default_x0
+        else:
+            state = self._equilibrium_state()
+        n_s = self.model.n_inputs
+        self._xe = np.concatenate([state, np.zeros(n_s)]) if self._coil_mode else state.copy()
+        self.time = 0.0
+        self.samples = 0
+        self.status = 'ok'
+        self.reason = ''
+        self.crash_time: float | None = None
+        self.crash_state: np.ndarray | None = None
+        self._rng = np.random.default_rng(self.seed)
+        self._pending = []
+        self._last_input = np.zeros(n_s)
+        return self._observe(self._true_output())
+
+    @property
+    def state(self) -> np.ndarray:
+        """Current 12-state (copy)."""
+        return self._xe[:12].copy()
+
+    @property
+    def currents(self) -> np.ndarray:
+        """Coil currents now, A, shape (n_s,) (the last input without coil dynamics)."""
+        if self._coil_mode:
+            return self._xe[12:].copy()
+        return self._last_input.copy()
+
+    @property
+    def crashed(self) -> bool:
+        """True after a crash, until :meth:`reset`."""
+        return self.status == 'crashed'
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, u) -> np.ndarray:
+        """Advance one sample with input ``u`` held (ZOH) and return the reading.
+
+        Parameters
+        ----------
+        u : array_like, shape (n_s,)
+            Input over this sample: coil currents (A), or the coil drive
+            (commanded current A, voltage V or duty) with coil dynamics.
+
+        Returns
+        -------
+        ndarray, shape (3 k,)
+            Sensor reading at the end of the sample, T.
+
+        Raises
+        ------
+        SimulationCrashedError
+            When stepping a crashed simulation (reset it first).
+        """
+        if self.crashed:
+            raise SimulationCrashedError(
+                f'simulation crashed at t = {self.crash_time:.6f} s ({self.reason}); '
+                'reset it first')
+        drive = self._check_input(u)
+        new = self._advance(self._xe, drive)
+        status = self._status(new)
+        self.samples += 1
+        self.time = self.samples * self.dt
+        if status != kernels.STATUS_OK:
+            self._mark_crash(status, new)
+            return self._observe(self._true_output())
+        self._xe = new
+        self._last_input = drive
+        return self._observe(self._true_output())
+
+    def run(self, inputs, x0=None) -> SimulationResult:
+        """Simulate a whole input sequence from ``x0`` (resets first).
+
+        Parameters
+        ----------
+        inputs : array_like, shape (N, n_s)
+            Input per sample (ZOH).
+        x0 : array_like, shape (12,), optional
+            Initial state.
+
+        Returns
+        -------
+        SimulationResult
+            Stops at the first crash (arrays then end at the last good sample).
+        """
+        drives = np.ascontiguousarray(np.asarray(inputs, dtype=float))
+        n_s = self.model.n_inputs
+        if drives.ndim != 2 or drives.shape[1] != n_s:
+            raise ValueError(f'inputs must have shape (N, {n_s}), got {drives.shape}')
+        if not np.all(np.isfinite(drives)):
+            raise ValueError('inputs must be finite')
+        y0 = self.reset(x0)
+        if self.model.options.field == 'fast':
+            states, done, status, last = kernels.rk4_run(
+                self._xe, drives, self.dt, self.substeps, self._coil_mode, self._electrical,
+                *self.model.fast_arguments(), self._crash, self.check_crash)
+        else:
+            states, done, status, last = self._python_run(drives)
+        outputs = [y0]
+        for k in range(1, done + 1):
+            self._xe = states[k].copy()
+            self._last_input = drives[k - 1]
+            outputs.append(self._observe(self._true_output()))
+        self.samples = done
+        self.time = done * self.dt
+        if status != kernels.STATUS_OK:
+            self.samples = done + 1
+            self.time = self.samples * self.dt
+            self._mark_crash(status, last)
+        t = np.arange(done + 1) * self.dt
+        currents = (states[:, 12:] if self._coil_mode
+                    else np.vstack([np.zeros((1, n_s)), drives[:done]]))
+        return SimulationResult(
+            t=t, x=states[:, :12].copy(), y=np.array(outputs), u=drives[:done].copy(),
+            currents=np.array(currents), status=self.status, reason=self.reason,
+            crash_time=self.crash_time, crash_state=self.crash_state,
+        )
+
+    # ------------------------------------------------------------------ internals
+    def _advance(self, xe: np.ndarray, drive: np.ndarray) -> np.ndarray:
+        if self.model.options.field == 'fast':
+            return kernels.rk4_sample(xe, drive, self.dt, self.substeps, self._coil_mode,
+                                      self._electrical, *self.model.fast_arguments())
+        return self._python_rk4(xe, drive)
+
+    def _rates(self, xe: np.ndarray, drive: np.ndarray, volts: np.ndarray) -> np.ndarray:
+        if not self._coil_mode:
+            return self.model.dynamics(xe, drive)
+        i_coil = xe[12:]
+        r, inductance = self._electrical[0], self._electrical[1]
+        return np.concatenate([self.model.dynamics(xe[:12], i_coil),
+                               (volts - r * i_coil) / inductance])
+
+    def _python_rk4(self, xe: np.ndarray, drive: np.ndarray) -> np.ndarray:
+        volts = kernels.coil_voltages(drive, self._coil_mode, self._electrical[0],
+                                      self._electrical[2])
+        h = self.dt / self.substeps
+        x = xe.copy()
+        for _ in range(self.substeps):
+            k1 = self._rates(x, drive, volts)
+            k2 = self._rates(x + 0.5 * h * k1, drive, volts)
+            k3 = self._rates(x + 0.5 * h * k2, drive, volts)
+            k4 = self._rates(x + h * k3, drive, volts)
+            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+        return x
+
+    def _python_run(self, drives: np.ndarray):
+        states = [self._xe.copy()]
+        for k, drive in enumerate(drives):
+            new = self._python_rk4(states[-1], drive)
+            status = self._status(new)
+            if status != kernels.STATUS_OK:
+                return np.array(states), k, status, new
+            states.append(new)
+        return np.array(states), len(drives), kernels.STATUS_OK, states[-1]
+
+    def _status(self, xe: np.ndarray) -> int:
+        if self.check_crash:
+            c = self._crash
+            return kernels.crash_status(xe[:12], c[0], c[1], c[2], c[3:6], c[6:9])
+        return kernels.STATUS_OK if np.all(np.isfinite(xe)) else kernels.STATUS_NOT_FINITE
+
+    def _mark_crash(self, status: int, attempted: np.ndarray) -> None:
+        self.status = 'crashed'
+        self.reason = CRASH_REASONS[status]
+        self.crash_time = self.time
+        finite = attempted[:12] if np.all(np.isfinite(attempted[:12])) else self._xe[:12]
+        self.crash_state = finite.copy()
+
+    def _true_output(self) -> np.ndarray:
+        return self.model.measurement(self._xe[:12], self.currents)
+
+    def _observe(self, y: np.ndarray) -> np.ndarray:
+        fx = self.sensor
+        reading = y + self._offset
+        if fx.noise_rms > 0:
+            reading = reading + fx.noise_rms * self._rng.standard_normal(reading.shape)
+        if fx.quantization > 0:
+            reading = np.round(reading / fx.quantization) * fx.quantization
+        if fx.delay_samples:
+            self._pending.append(reading)
+            if len(self._pending) <= fx.delay_samples:
+                return self._pending[0].copy()
+            return self._pending.pop(0)
+        return reading
+
+    def _check_state(self, x0) -> np.ndarray:
+        state = np.asarray(x0, dtype=float)
+        if state.shape != (12,) or not np.all(np.isfinite(state)):
+            raise ValueError(f'x0 must be 12 finite numbers, got {x0!r}')
+        return state.copy()
+
+    def _check_input(self, u) -> np.ndarray:
+        drive = np.ascontiguousarray(np.asarray(u, dtype=float))
+        n_s = self.model.n_inputs
+        if drive.shape != (n_s,):
+            raise ValueError(f'input must have {n_s} values (x+, x-, y+, y-), got shape '
+                             f'{drive.shape}')
+        if not np.all(np.isfinite(drive)):
+            raise ValueError(f'input must be finite, got {drive.tolist()}')
+        return drive
+
+    def _equilibrium_state(self) -> np.ndarray:
+        from .equilibria import find_equilibria
+
+        found = find_equilibria(self.model)
+        if not found:
+            raise ValueError(f'{self.model!r} has no equilibrium; give x0')
+        return self.model.hover_state(found[0].z)
+
+
+def simulate_reference(model, x0, inputs, sample_time: float, rtol: float = 1e-10,
+                       atol: float = 1e-13, check_crash: bool = True) -> SimulationResult:
+    """Integrate the model with ``solve_ivp`` (DOP853) at tight tolerances.
+
+    The input is held constant over each sample (ZOH) and the integration is
+    restarted at every change of input, so the result is the exact solution of
+    the sampled system up to the tolerances. Coil dynamics and sensor effects
+    are not applied (ideal current input, true h(x, u)).
+
+    Parameters
+    ----------
+    model : MaggyModel
+    x0 : array_like, shape (12,)
+        Initial state.
+    inputs : array_like, shape (N, n_s)
+        Coil currents per sample, A.
+    sample_time : float
+        Sample period, s.
+    rtol, atol : float
+        solve_ivp tolerances.
+    check_crash : bool
+        Stop at the first sample whose state has crashed.
+
+    Returns
+    -------
+    SimulationResult
+    """
+    drives = np.asarray(inputs, dtype=float)
+    state = np.asarray(x0, dtype=float).copy()
+    p = model.params
+    crash = (p.base_top, p.magnet.radius, p.magnet.thickness / 2, p.workspace.lower,
+             p.workspace.upper)
+    states = [state]
+    status = kernels.STATUS_OK
+    k = 0
+    n = drives.shape[0]
+    while k < n:
+        # merge consecutive samples with the same input into one segment
+        end = k + 1
+        while end < n and np.array_equal(drives[end], drives[k]):
+            end += 1
+        u = drives[k]
+        t_eval = (np.arange(k + 1, end + 1) - k) * sample_time
+        sol = solve_ivp(lambda _t, x, u=u: model.dynamics(x, u), (0.0, t_eval[-1]), states[-1],
+                        method='DOP853', t_eval=t_eval, rtol=rtol, atol=atol)
+        for column in sol.y.T:
+            status = (kernels.crash_status(column, *crash) if check_crash
+                      else kernels.STATUS_OK)
+            if status != kernels.STATUS_OK:
+                break
+            states.append(column)
+        if status != kernels.STATUS_OK:
+            break
+        k = end
+    x = np.array(states)
+    done = len(states) - 1
+    y = np.array([model.measurement(xi, drives[i - 1] if i else np.zeros(model.n_inputs))
+                  for i, xi in enumerate(x)])
+    result = SimulationResult(
+        t=np.arange(done + 1) * sample_time, x=x, y=y, u=drives[:done].copy(),
+        currents=np.vstack([np.zeros((1, model.n_inputs)), drives[:done]]),
+    )
+    if status != kernels.STATUS_OK:
+        result.status = 'crashed'
+        result.reason = CRASH_REASONS[status]
+        result.crash_time = (done + 1) * sample_time
+        result.crash_state = x[-1].copy()
+    return result
