@@ -1,1 +1,71 @@
-"""maglev_ros.hardware."""
+"""maglev_ros.hardware: the Maggy board protocols and a virtual board (ROS-free).
+
+Re-exports only; see the modules: ``packet`` (V2x command packets),
+``v2x_stream`` (V2x record decoder), ``v4x_telemetry`` (V4x text telemetry),
+``scaling`` (current <-> PWM), ``firmware`` (board emulators) and
+``virtual_board`` (an emulator on a pty).
+"""
+
+from .firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
+from .packet import (
+    CommandParser,
+    PacketError,
+    decode_command,
+    encode_command,
+    is_sendable,
+    sendable_pwm,
+)
+from .scaling import CurrentScaling, ScalingError
+from .v2x_stream import (
+    DecoderStats,
+    PlausibilityBounds,
+    RecordBatch,
+    RecordDecoder,
+    pack_records,
+    record_dtype,
+    record_size,
+)
+from .v4x_telemetry import (
+    InfoMessage,
+    Severity,
+    TelemetryError,
+    TelemetrySample,
+    TelemetryStats,
+    TelemetryStream,
+    format_telemetry_line,
+    parse_telemetry_line,
+)
+from .virtual_board import BoardStatus, VirtualBoard, VirtualBoardError
+
+__all__ = [
+    'BoardStatus',
+    'CommandParser',
+    'CurrentScaling',
+    'DecoderStats',
+    'InfoMessage',
+    'LinearPlant',
+    'PacketError',
+    'Plant',
+    'PlausibilityBounds',
+    'RecordBatch',
+    'RecordDecoder',
+    'ScalingError',
+    'Severity',
+    'TelemetryError',
+    'TelemetrySample',
+    'TelemetryStats',
+    'TelemetryStream',
+    'V2xFirmware',
+    'V4xFirmware',
+    'VirtualBoard',
+    'VirtualBoardError',
+    'decode_command',
+    'encode_command',
+    'format_telemetry_line',
+    'is_sendable',
+    'pack_records',
+    'parse_telemetry_line',
+    'record_dtype',
+    'record_size',
+    'sendable_pwm',
+]

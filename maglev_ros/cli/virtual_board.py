@@ -1,0 +1,182 @@
+"""``maglev-virtual-board``: a virtual Maggy board on a pseudo-terminal.
+
+Prints the stable device path, then emulates the board until SIGINT or
+SIGTERM. Examples::
+
+    maglev-virtual-board                       # V2x, 1 sensor, linear plant
+    maglev-virtual-board --sensors 3 --link /tmp/ttyMAGGY0
+    maglev-virtual-board --firmware v4x --log-period 0.01
+    maglev-virtual-board --plant mypkg.plants:make_plant   # factory(n_sensors)
+
+Exit status: 0 after a signal, 2 for bad arguments (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import threading
+from collections.abc import Callable, Sequence
+from functools import partial
+
+from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
+from maglev_ros.hardware.virtual_board import VirtualBoard, VirtualBoardError
+
+__all__ = ['build_parser', 'load_plant', 'main']
+
+PROG = 'maglev-virtual-board'
+
+
+class UsageError(ValueError):
+    """Invalid command-line input (exit status 2)."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str) -> None:  # one clear line, status 2
+        raise UsageError(message)
+
+
+def _positive_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f'must be >= 1, got {value}')
+    return value
+
+
+def _seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected seconds, got {text!r}') from None
+    if not value >= 0 or value == float('inf'):
+        raise argparse.ArgumentTypeError(f'must be finite and >= 0, got {text!r}')
+    return value
+
+
+def _clock(text: str) -> int:
+    try:
+        value = int(text, 0)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+    if not 0 <= value < 1 << 32:
+        raise argparse.ArgumentTypeError(f'must be in 0 .. 4294967295, got {value}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``maglev-virtual-board``."""
+    parser = _Parser(prog=PROG, description=__doc__.split('\n\n')[0])
+    parser.add_argument('--firmware', choices=('v2x', 'v4x'), default='v2x')
+    parser.add_argument('--sensors', type=_positive_int, default=1, help='number of sensors')
+    parser.add_argument('--link', help='stable device path (symlink); default: a temp dir')
+    parser.add_argument(
+        '--plant',
+        default='linear',
+        help="'linear' or 'module:factory' with factory(n_sensors) -> plant(pwm, t) -> mT",
+    )
+    parser.add_argument(
+        '--clock-start', type=_clock, default=0, help='uint32 us clock at power-up (V2x)'
+    )
+    parser.add_argument('--startup-delay', type=_seconds, default=2.0, help='s after open')
+    parser.add_argument('--watchdog', type=_seconds, default=1.0, help='s (V2x)')
+    parser.add_argument('--log-period', type=_seconds, default=1e-3, help='s per line (V4x)')
+    return parser
+
+
+def load_plant(spec: str, n_sensors: int) -> Plant:
+    """Build the plant named on the command line.
+
+    Parameters
+    ----------
+    spec : str
+        ``'linear'`` (``LinearPlant.default``) or ``'module:factory'``.
+    n_sensors : int
+        Number of sensors passed to the factory.
+
+    Returns
+    -------
+    callable
+        ``plant(pwm_counts (4,), time_s) -> field_mT (n_sensors, 3)``.
+    """
+    if spec == 'linear':
+        return LinearPlant.default(n_sensors)
+    module_name, sep, attr = spec.partition(':')
+    if not sep or not module_name or not attr:
+        raise UsageError(f"--plant must be 'linear' or 'module:factory', got {spec!r}")
+    try:
+        factory = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as err:
+        raise UsageError(f'--plant {spec!r} cannot be loaded: {err}') from None
+    try:
+        plant = factory(n_sensors)
+    except Exception as err:  # a user's factory: report, do not crash
+        raise UsageError(f'--plant {spec!r} failed for {n_sensors} sensors: {err}') from None
+    if not callable(plant):
+        raise UsageError(f'--plant {spec!r} did not return a callable plant')
+    return plant
+
+
+def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], object]:
+    if args.firmware == 'v2x':
+        return partial(
+            V2xFirmware,
+            plant,
+            args.sensors,
+            clock_start_us=args.clock_start,
+            startup_delay=args.startup_delay,
+            watchdog=args.watchdog,
+        )
+    if args.log_period <= 0:
+        raise UsageError('--log-period must be > 0')
+    return partial(
+        V4xFirmware,
+        plant,
+        args.sensors,
+        log_period=args.log_period,
+        startup_delay=args.startup_delay,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the virtual board until SIGINT or SIGTERM.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments without the program name (default: ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status: 0 on a signal, 2 for bad arguments.
+    """
+    try:
+        args = build_parser().parse_args(argv)
+        plant = load_plant(args.plant, args.sensors)
+        factory = _firmware_factory(args, plant)
+        board = VirtualBoard(factory, link=args.link)
+    except (UsageError, VirtualBoardError) as err:
+        print(f'{PROG}: error: {err}', file=sys.stderr)
+        return 2
+    stop = threading.Event()
+    previous = {}
+    for signum in (signal.SIGINT, signal.SIGTERM):
+        previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    try:
+        with board:
+            print(board.path, flush=True)
+            while not stop.wait(0.2):
+                board.check()
+    finally:
+        for signum, handler in previous.items():
+            signal.signal(signum, handler)
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,118 @@
+"""Coil current <-> V2x PWM counts.
+
+The V2x board applies a signed 12-bit PWM duty to an H-bridge across each
+coil. In the quasi-static (resistive) limit the coil current is
+
+    I = duty * V_supply / R_coil,   duty = counts / 4096,
+
+so ``counts = round(4096 * I * R_coil / V_supply)``, clamped to +-4096. The
+same relation can be given directly as counts per ampere (from a
+calibration with the shunt or a clamp meter). The coil inductance only
+delays the current (time constant L / R); the scaling describes the
+steady state.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from .packet import PWM_FULL_SCALE
+
+__all__ = ['CurrentScaling', 'ScalingError']
+
+
+class ScalingError(ValueError):
+    """Invalid scaling parameter or current value."""
+
+
+def _positive(name: str, value: float) -> float:
+    value = float(value)
+    if not math.isfinite(value) or value <= 0.0:
+        raise ScalingError(f'{name} must be a positive finite number, got {value!r}')
+    return value
+
+
+@dataclass(frozen=True)
+class CurrentScaling:
+    """Linear map between coil current (A) and PWM counts.
+
+    Parameters
+    ----------
+    counts_per_ampere : float
+        PWM counts per ampere of steady-state coil current (> 0); equals
+        ``4096 * R_coil / V_supply`` for a resistive coil.
+    """
+
+    counts_per_ampere: float
+
+    def __post_init__(self) -> None:
+        _positive('counts_per_ampere', self.counts_per_ampere)
+
+    @classmethod
+    def from_supply(cls, supply_voltage: float, coil_resistance: float) -> CurrentScaling:
+        """Build the scaling from the H-bridge supply and the coil resistance.
+
+        Parameters
+        ----------
+        supply_voltage : float
+            H-bridge supply voltage in volt (> 0).
+        coil_resistance : float
+            Coil resistance in ohm, wiring and bridge included (> 0).
+
+        Returns
+        -------
+        CurrentScaling
+            ``counts_per_ampere = 4096 * coil_resistance / supply_voltage``.
+        """
+        volts = _positive('supply_voltage', supply_voltage)
+        ohms = _positive('coil_resistance', coil_resistance)
+        return cls(PWM_FULL_SCALE * ohms / volts)
+
+    @property
+    def max_current(self) -> float:
+        """Current at full duty, in ampere (4096 counts)."""
+        return PWM_FULL_SCALE / self.counts_per_ampere
+
+    def to_counts(self, current: ArrayLike) -> NDArray[np.int64]:
+        """Convert coil currents to PWM counts.
+
+        Parameters
+        ----------
+        current : array_like of float, any shape
+            Coil currents in ampere; must be finite.
+
+        Returns
+        -------
+        ndarray of int64, same shape
+            ``rint(counts_per_ampere * current)`` (round half to even),
+            clamped to -4096 .. 4096.
+
+        Raises
+        ------
+        ScalingError
+            If a current is NaN or infinite.
+        """
+        amps = np.asarray(current, dtype=float)
+        if not np.all(np.isfinite(amps)):
+            raise ScalingError(f'current must be finite, got {amps.tolist()}')
+        counts = np.rint(amps * self.counts_per_ampere)
+        return np.clip(counts, -PWM_FULL_SCALE, PWM_FULL_SCALE).astype(np.int64)
+
+    def to_current(self, counts: ArrayLike) -> NDArray[np.float64]:
+        """Convert PWM counts to the steady-state coil currents they imply.
+
+        Parameters
+        ----------
+        counts : array_like of int, any shape
+            PWM counts.
+
+        Returns
+        -------
+        ndarray of float64, same shape
+            Currents in ampere.
+        """
+        return np.asarray(counts, dtype=float) / self.counts_per_ampere

@@ -1,0 +1,335 @@
+"""A virtual Maggy board behind a pseudo-terminal (Linux).
+
+``VirtualBoard`` runs a firmware emulator (``firmware.V2xFirmware`` or
+``V4xFirmware``) paced to the wall clock in a background thread and
+connects it to the master side of a pty. Hosts open the slave side through
+a stable symlink (``path``), exactly like a USB serial device, e.g. with
+``serial.Serial(board.path)``.
+
+* Port open and close by the host are detected on the master side (a read
+  fails with EIO while no process holds the slave open); each open makes the
+  firmware wait its start-up delay, as the real board does. While no host
+  is connected the loop keeps running (watchdog included) and its output is
+  discarded.
+* ``unplug`` closes the pty (the host's reads fail) and removes the
+  symlink; ``plug`` powers up a fresh firmware on a new pty and re-points the
+  symlink, so a host can reconnect with the same path.
+* Output the host does not read fast enough is dropped once the pty buffer
+  is full (counted), like a board whose USB writes time out.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import select
+import shutil
+import tempfile
+import threading
+import time
+import tty
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from .firmware import V2xFirmware, V4xFirmware
+
+__all__ = ['BoardStatus', 'VirtualBoard', 'VirtualBoardError']
+
+Firmware = V2xFirmware | V4xFirmware
+_POLL_S = 0.0005  # s: input poll and pacing granularity (bursts are 1 ms apart)
+_CLOSED_POLL_S = 0.002  # s: how often a closed port is checked for a new open
+
+
+class VirtualBoardError(ValueError):
+    """Invalid virtual-board argument or use of a closed board."""
+
+
+@dataclass(frozen=True)
+class BoardStatus:
+    """Counters of a ``VirtualBoard``.
+
+    Attributes
+    ----------
+    plugged : bool
+        Whether the board is plugged in (a pty exists).
+    port_open : bool
+        Whether a host holds the port open.
+    port_opens : int
+        Host opens seen since the board was created.
+    plugs : int
+        Times the board was plugged in (1 after ``open``).
+    bytes_written, bytes_received, bytes_dropped : int
+        Bytes written to and read from the host, and output dropped because
+        the host did not read it.
+    """
+
+    plugged: bool
+    port_open: bool
+    port_opens: int
+    plugs: int
+    bytes_written: int
+    bytes_received: int
+    bytes_dropped: int
+
+
+class VirtualBoard:
+    """A firmware emulator on a pty, paced to the wall clock.
+
+    Parameters
+    ----------
+    firmware_factory : callable
+        Called with no arguments at every power-up (``open`` and ``plug``);
+        returns a fresh ``V2xFirmware`` or ``V4xFirmware``.
+    link : str or Path, optional
+        Stable device path (a symlink to the current pty). Default: a new
+        temporary directory holding ``ttyMAGGY0``, removed on ``close``.
+    """
+
+    def __init__(
+        self,
+        firmware_factory: Callable[[], Firmware],
+        *,
+        link: str | os.PathLike | None = None,
+    ) -> None:
+        if not callable(firmware_factory):
+            raise VirtualBoardError(
+                f'firmware_factory must be callable, got {type(firmware_factory).__name__}'
+            )
+        self._factory = firmware_factory
+        self._link_arg = Path(link) if link is not None else None
+        if self._link_arg is not None and not self._link_arg.parent.is_dir():
+            raise VirtualBoardError(f'link directory does not exist: {self._link_arg.parent}')
+        if self._link_arg is not None and (
+            self._link_arg.exists() and not self._link_arg.is_symlink()
+        ):
+            raise VirtualBoardError(f'link exists and is not a symlink: {self._link_arg}')
+        self._tmpdir: str | None = None
+        self._link: Path | None = None
+        self._lock = threading.RLock()
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._master: int | None = None
+        self._device: str | None = None
+        self._firmware: Firmware | None = None
+        self._t0 = 0.0
+        self._port_open = False
+        self._port_opens = 0
+        self._plugs = 0
+        self._written = 0
+        self._received = 0
+        self._dropped = 0
+        self._error: BaseException | None = None
+
+    # -- handle -------------------------------------------------------------------
+
+    def open(self) -> VirtualBoard:
+        """Create the pty and the symlink, power up, start the pacing thread.
+
+        Returns
+        -------
+        VirtualBoard
+            ``self``.
+        """
+        if self._thread is not None:
+            raise VirtualBoardError('virtual board is already open')
+        if self._link_arg is None:
+            self._tmpdir = tempfile.mkdtemp(prefix='maglev-board-')
+            self._link = Path(self._tmpdir) / 'ttyMAGGY0'
+        else:
+            self._link = self._link_arg
+        self._stop.clear()
+        self.plug()
+        self._thread = threading.Thread(target=self._run, name='maglev-virtual-board', daemon=True)
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        """Stop the thread, close the pty and remove the symlink (idempotent)."""
+        thread, self._thread = self._thread, None
+        self._stop.set()
+        if thread is not None:
+            thread.join(timeout=5.0)
+        self.unplug()
+        if self._tmpdir is not None:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+
+    def __enter__(self) -> VirtualBoard:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- public state -------------------------------------------------------------
+
+    @property
+    def path(self) -> str:
+        """Stable device path (symlink) for hosts to open."""
+        if self._link is None:
+            raise VirtualBoardError('virtual board is not open')
+        return str(self._link)
+
+    @property
+    def device(self) -> str | None:
+        """Current pty slave device (changes on every plug), or None if unplugged."""
+        return self._device
+
+    @property
+    def lock(self) -> threading.RLock:
+        """Lock held while the thread advances the firmware (hold it to inspect)."""
+        return self._lock
+
+    @property
+    def firmware(self) -> Firmware:
+        """The current firmware emulator (inspect it while holding ``lock``)."""
+        if self._firmware is None:
+            raise VirtualBoardError('virtual board is unplugged')
+        return self._firmware
+
+    @property
+    def status(self) -> BoardStatus:
+        """Snapshot of the counters."""
+        with self._lock:
+            return BoardStatus(
+                self._master is not None,
+                self._port_open,
+                self._port_opens,
+                self._plugs,
+                self._written,
+                self._received,
+                self._dropped,
+            )
+
+    def check(self) -> None:
+        """Re-raise an exception that stopped the pacing thread, if any."""
+        if self._error is not None:
+            raise RuntimeError('virtual board thread failed') from self._error
+
+    # -- faults and plugging ----------------------------------------------------
+
+    def tamper_next_burst(self, edit: Callable[[bytes], bytes]) -> None:
+        """Pass the next burst (V2x) or line (V4x) through ``edit`` before writing."""
+        with self._lock:
+            self.firmware.tamper_next_burst(edit)
+
+    def inject(self, data: bytes) -> None:
+        """Write raw bytes to the host now, between two bursts."""
+        with self._lock:
+            if self._master is not None and self._port_open:
+                self._write(data)
+
+    def unplug(self) -> None:
+        """Simulate pulling the USB cable: close the pty, remove the symlink."""
+        with self._lock:
+            if self._master is not None:
+                os.close(self._master)
+            self._master = None
+            self._device = None
+            self._firmware = None
+            self._port_open = False
+            if self._link is not None and self._link.is_symlink():
+                self._link.unlink()
+
+    def plug(self) -> None:
+        """Simulate plugging in: power up a new firmware on a new pty."""
+        with self._lock:
+            if self._link is None:
+                raise VirtualBoardError('virtual board is not open')
+            self.unplug()
+            master, slave = os.openpty()
+            tty.setraw(slave)  # no echo, no line discipline: bytes pass unchanged
+            device = os.ttyname(slave)
+            os.close(slave)  # a host open is then visible on the master side
+            os.set_blocking(master, False)
+            tmp = self._link.with_name(self._link.name + '.new')
+            if tmp.is_symlink() or tmp.exists():
+                tmp.unlink()
+            os.symlink(device, tmp)
+            os.replace(tmp, self._link)
+            self._firmware = self._factory()
+            self._master = master
+            self._device = device
+            self._t0 = time.monotonic()
+            self._plugs += 1
+
+    def replug(self, downtime: float = 0.0) -> None:
+        """Unplug, wait ``downtime`` seconds, plug in again."""
+        self.unplug()
+        if downtime > 0:
+            time.sleep(downtime)
+        self.plug()
+
+    def wait_until(self, predicate: Callable[[VirtualBoard], bool], timeout: float) -> bool:
+        """Poll ``predicate(self)`` (with ``lock`` held) until true or timeout.
+
+        Returns
+        -------
+        bool
+            Whether the predicate became true.
+        """
+        deadline = time.monotonic() + timeout
+        while True:
+            with self._lock:
+                if predicate(self):
+                    return True
+            if time.monotonic() > deadline:
+                return False
+            self.check()
+            time.sleep(0.005)
+
+    # -- thread -------------------------------------------------------------------
+
+    def _write(self, data: bytes) -> None:
+        try:
+            n = os.write(self._master, data)
+        except BlockingIOError:
+            n = 0
+        except OSError as err:
+            if err.errno != errno.EIO:
+                raise
+            self._port_open = False
+            n = 0
+        self._written += n
+        self._dropped += len(data) - n
+
+    def _poll_input(self) -> None:
+        """Read host bytes; track port open/close through EIO."""
+        try:
+            data = os.read(self._master, 4096)
+        except BlockingIOError:
+            data = b''
+        except OSError as err:
+            if err.errno != errno.EIO:
+                raise
+            self._port_open = False  # no process holds the slave open
+            return
+        if not self._port_open:
+            self._port_open = True
+            self._port_opens += 1
+            self._firmware.port_opened()
+        if data:
+            self._received += len(data)
+            self._firmware.receive(data)
+
+    def _run(self) -> None:
+        try:
+            while not self._stop.is_set():
+                with self._lock:
+                    master = self._master
+                    if master is not None:
+                        now_us = int((time.monotonic() - self._t0) * 1e6)
+                        out = self._firmware.advance_to(now_us)
+                        if out and self._port_open:
+                            self._write(out)
+                        self._poll_input()
+                    port_open = self._port_open
+                if master is None or not port_open:
+                    time.sleep(_CLOSED_POLL_S)
+                    continue
+                try:
+                    select.select([master], [], [], _POLL_S)
+                except (OSError, ValueError):  # closed by unplug meanwhile
+                    continue
+        except BaseException as err:  # surfaced by check()
+            self._error = err

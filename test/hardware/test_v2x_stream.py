@@ -1,0 +1,275 @@
+import numpy as np
+import pytest
+
+from maglev_ros.hardware.v2x_stream import (
+    PlausibilityBounds,
+    RecordBatch,
+    RecordDecoder,
+    pack_records,
+    record_dtype,
+    record_size,
+)
+
+WRAP = 1 << 32
+
+
+def make_records(n, n_sensors=1, start_us=1_000_000, seed=0, step=200):
+    rng = np.random.default_rng(seed)
+    stamps = start_us + step * np.arange(n, dtype=np.int64)
+    field = rng.normal(0.0, 30.0, size=(n, n_sensors, 3)).astype(np.float32)
+    pwm = rng.integers(-4096, 4097, size=(n, 4)).astype(np.int16)
+    return stamps, field, pwm
+
+
+def record_bytes(stamps, field, pwm):
+    return [
+        pack_records(stamps[i : i + 1], field[i : i + 1], pwm[i : i + 1])
+        for i in range(len(stamps))
+    ]
+
+
+def decode_all(decoder, stream, chunk_sizes=None, seed=1):
+    rng = np.random.default_rng(seed)
+    batches = []
+    i = 0
+    while i < len(stream):
+        size = int(rng.integers(1, 300)) if chunk_sizes is None else chunk_sizes
+        batches.append(decoder.feed(stream[i : i + size]))
+        i += size
+    batches.append(decoder.flush())
+    return RecordBatch(
+        np.concatenate([b.time_us for b in batches]),
+        np.concatenate([b.field_mT for b in batches]),
+        np.concatenate([b.pwm for b in batches]),
+    )
+
+
+def assert_records(batch, stamps, field, pwm, index):
+    index = np.asarray(index)
+    assert len(batch) == len(index)
+    np.testing.assert_array_equal(batch.time_us % WRAP, stamps[index] % WRAP)
+    np.testing.assert_array_equal(batch.field_mT, field[index])
+    np.testing.assert_array_equal(batch.pwm, pwm[index])
+
+
+def test_record_layout():
+    assert record_size(1) == 24 and record_size(3) == 48
+    assert record_dtype(3).itemsize == 48
+    data = pack_records([7], np.ones((1, 1, 3)), [[1, 2, 3, 4]])
+    assert data == (
+        np.uint32(7).tobytes()
+        + np.ones(3, '<f4').tobytes()
+        + np.array([1, 2, 3, 4], '<i2').tobytes()
+    )
+
+
+@pytest.mark.parametrize('n_sensors', [1, 3])
+@pytest.mark.parametrize('confirm', [True, False])
+@pytest.mark.parametrize('chunk', [None, 1, 24, 4096])
+def test_clean_stream_round_trips(n_sensors, confirm, chunk):
+    stamps, field, pwm = make_records(400, n_sensors)
+    decoder = RecordDecoder(n_sensors, confirm=confirm)
+    batch = decode_all(decoder, pack_records(stamps, field, pwm), chunk)
+    assert_records(batch, stamps, field, pwm, np.arange(400))
+    np.testing.assert_array_equal(batch.time_us, stamps)
+    stats = decoder.stats
+    assert (stats.records, stats.dropped_bytes, stats.resyncs, stats.wraps) == (400, 0, 0, 0)
+    assert stats.locked
+
+
+def test_confirm_holds_back_the_newest_record():
+    stamps, field, pwm = make_records(10)
+    decoder = RecordDecoder(1)
+    assert len(decoder.feed(pack_records(stamps, field, pwm))) == 9
+    assert decoder.buffered == 24
+    assert len(decoder.flush()) == 1
+    eager = RecordDecoder(1, confirm=False)
+    assert len(eager.feed(pack_records(stamps, field, pwm))) == 10
+
+
+@pytest.mark.parametrize('n_sensors', [1, 3])
+def test_mid_burst_start_costs_only_the_partial_record(n_sensors):
+    stamps, field, pwm = make_records(60, n_sensors)
+    stream = pack_records(stamps, field, pwm)
+    size = record_size(n_sensors)
+    for offset in range(1, size):
+        decoder = RecordDecoder(n_sensors)
+        batch = decode_all(decoder, stream[offset:])
+        assert_records(batch, stamps, field, pwm, np.arange(1, 60))
+        assert decoder.stats.dropped_bytes == size - offset
+        assert decoder.stats.resyncs == 0
+
+
+@pytest.mark.parametrize('n_sensors', [1, 3])
+def test_garbage_between_records_costs_nothing(n_sensors):
+    rng = np.random.default_rng(3)
+    stamps, field, pwm = make_records(300, n_sensors)
+    chunks = record_bytes(stamps, field, pwm)
+    total = 0
+    for at in range(5, 300, 25):
+        garbage = rng.integers(0, 256, size=int(rng.integers(1, 200)), dtype=np.uint8).tobytes()
+        chunks[at] = garbage + chunks[at]
+        total += len(garbage)
+    decoder = RecordDecoder(n_sensors)
+    batch = decode_all(decoder, b''.join(chunks))
+    assert_records(batch, stamps, field, pwm, np.arange(300))
+    assert decoder.stats.dropped_bytes == total
+    assert decoder.stats.resyncs == len(range(5, 300, 25))
+
+
+@pytest.mark.parametrize('n_sensors', [1, 3])
+def test_truncated_records_cost_only_themselves(n_sensors):
+    stamps, field, pwm = make_records(300, n_sensors)
+    chunks = record_bytes(stamps, field, pwm)
+    size = record_size(n_sensors)
+    damaged = list(range(3, 300, 13))
+    kept = 0
+    for j, at in enumerate(damaged):
+        keep = 1 + j % (size - 1)  # every cut length from 1 to size - 1
+        chunks[at] = chunks[at][:keep]
+        kept += keep
+    decoder = RecordDecoder(n_sensors)
+    batch = decode_all(decoder, b''.join(chunks))
+    assert_records(batch, stamps, field, pwm, np.setdiff1d(np.arange(300), damaged))
+    assert decoder.stats.dropped_bytes == kept
+
+
+def test_damaged_record_contents_cost_only_that_record():
+    stamps, field, pwm = make_records(100)
+    field[40, 0, 1] = np.nan
+    pwm[60, 2] = 5000
+    field[80, 0, 0] = 1e6
+    decoder = RecordDecoder(1)
+    batch = decode_all(decoder, pack_records(stamps, field, pwm))
+    assert_records(batch, stamps, field, pwm, np.setdiff1d(np.arange(100), [40, 60, 80]))
+    assert decoder.stats.dropped_bytes == 3 * 24
+
+
+@pytest.mark.parametrize('confirm', [True, False])
+def test_timestamp_wrap_is_unwrapped(confirm):
+    stamps, field, pwm = make_records(200, start_us=WRAP - 200 * 77 - 50)
+    decoder = RecordDecoder(1, confirm=confirm)
+    batch = decode_all(decoder, pack_records(stamps, field, pwm))
+    assert_records(batch, stamps, field, pwm, np.arange(200))
+    np.testing.assert_array_equal(batch.time_us, stamps)  # int64, past 2**32
+    assert batch.time_us[-1] > WRAP
+    assert decoder.stats.wraps == 1
+
+
+def test_wrap_inside_damaged_region():
+    stamps, field, pwm = make_records(100, start_us=WRAP - 200 * 50)
+    chunks = record_bytes(stamps, field, pwm)
+    chunks[49] = chunks[49][:10]
+    chunks[50] = b'\x3e\x00garbage' + chunks[50]
+    decoder = RecordDecoder(1)
+    batch = decode_all(decoder, b''.join(chunks))
+    assert_records(batch, stamps, field, pwm, np.setdiff1d(np.arange(100), [49]))
+    np.testing.assert_array_equal(batch.time_us, np.delete(stamps, 49))
+    assert decoder.stats.wraps == 1
+
+
+def test_stall_relocks_without_loss():
+    stamps, field, pwm = make_records(100)
+    stamps[50:] += 50_000  # the board stalled for 50 ms
+    decoder = RecordDecoder(1)
+    batch = decode_all(decoder, pack_records(stamps, field, pwm))
+    assert_records(batch, stamps, field, pwm, np.arange(100))
+    np.testing.assert_array_equal(batch.time_us, stamps)
+    assert decoder.stats.dropped_bytes == 0
+
+
+def test_clock_restart_keeps_time_monotonic():
+    first = make_records(50, start_us=5_000_000)
+    second = make_records(50, start_us=0, seed=1)
+    stream = pack_records(*first) + pack_records(*second)
+    decoder = RecordDecoder(1)
+    batch = decode_all(decoder, stream)
+    assert len(batch) == 100
+    assert np.all(np.diff(batch.time_us) == 200)
+    assert decoder.stats.clock_restarts == 1
+
+
+def test_garbage_only_is_dropped_and_buffer_bounded():
+    rng = np.random.default_rng(5)
+    decoder = RecordDecoder(3)
+    for _ in range(50):
+        assert len(decoder.feed(rng.integers(0, 256, 1000, dtype=np.uint8).tobytes())) == 0
+        assert decoder.buffered < 5 * 4 * 48
+    assert decoder.stats.records == 0
+    assert decoder.stats.dropped_bytes == 50_000 - decoder.buffered
+    assert not decoder.stats.locked
+
+
+def test_constant_fields_do_not_lock_on_a_shifted_boundary():
+    # constant fields and PWM make shifted views periodic; the step bounds must reject them
+    n = 100
+    stamps = 1_000_000 + 200 * np.arange(n)
+    field = np.full((n, 1, 3), 12.5, np.float32)
+    pwm = np.zeros((n, 4), np.int16)
+    stream = pack_records(stamps, field, pwm)
+    for offset in range(1, 24):
+        batch = decode_all(RecordDecoder(1), stream[offset:])
+        np.testing.assert_array_equal(batch.time_us, stamps[1:])
+
+
+@pytest.mark.parametrize('seed', range(6))
+@pytest.mark.parametrize('n_sensors', [1, 3])
+def test_random_faults_cost_at_most_the_damaged_records(seed, n_sensors):
+    # Faults at least 8 records apart (isolated, as on a real link), any
+    # kind, any size, a mid-record start and a wrap; chunking at random.
+    rng = np.random.default_rng(seed)
+    n = 1500
+    size = record_size(n_sensors)
+    stamps, field, pwm = make_records(n, n_sensors, start_us=WRAP - 200 * 700, seed=seed)
+    chunks = record_bytes(stamps, field, pwm)
+    damaged = set()
+    for at in range(5, n - 10, 8):
+        if rng.random() < 0.5:
+            continue
+        at += int(rng.integers(0, 3))
+        if rng.random() < 0.5:
+            chunks[at] = (
+                rng.integers(0, 256, int(rng.integers(1, 300)), np.uint8).tobytes() + chunks[at]
+            )
+        else:
+            chunks[at] = chunks[at][: int(rng.integers(1, size))]
+            damaged.add(at)
+    start = int(rng.integers(1, size))
+    decoder = RecordDecoder(n_sensors)
+    batch = decode_all(decoder, b''.join(chunks)[start:], seed=seed)
+    expected = np.setdiff1d(np.arange(1, n), sorted(damaged))
+    assert_records(batch, stamps, field, pwm, expected)
+    np.testing.assert_array_equal(batch.time_us, stamps[expected])
+    assert decoder.stats.wraps == 1
+
+
+def test_short_runs_between_faults_are_recovered():
+    # fewer than lock_records good records between faults and at the start
+    stamps, field, pwm = make_records(40, 3)
+    chunks = record_bytes(stamps, field, pwm)
+    rng = np.random.default_rng(0)
+    chunks[2] = chunks[2][:30]  # truncated third record
+    chunks[10] = rng.integers(0, 256, 78, np.uint8).tobytes() + chunks[10]
+    chunks[11] = rng.integers(0, 256, 61, np.uint8).tobytes() + chunks[11]  # 10 alone
+    chunks[13] = chunks[13][:5]  # 11, 12 between faults
+    batch = decode_all(RecordDecoder(3), b''.join(chunks))
+    assert_records(batch, stamps, field, pwm, np.setdiff1d(np.arange(40), [2, 13]))
+
+
+def test_bounds_validation():
+    with pytest.raises(ValueError, match='lock_records must be >= 2, got 1'):
+        PlausibilityBounds(lock_records=1)
+    with pytest.raises(ValueError, match='min_step_us'):
+        PlausibilityBounds(min_step_us=500, max_step_us=100)
+    with pytest.raises(ValueError, match='n_sensors must be >= 1, got 0'):
+        RecordDecoder(0)
+    with pytest.raises(TypeError, match='n_sensors must be an int'):
+        RecordDecoder(1.5)
+
+
+def test_reset_forgets_everything():
+    stamps, field, pwm = make_records(20)
+    decoder = RecordDecoder(1)
+    decoder.feed(pack_records(stamps, field, pwm)[5:])
+    decoder.reset()
+    assert decoder.stats.records == 0 and decoder.buffered == 0 and not decoder.stats.locked
