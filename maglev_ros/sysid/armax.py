@@ -6,8 +6,8 @@ each row is a separate minimization of ``sum e_i(t)^2``:
 
 * prediction error ``e_i = (A_i y - B_i u) / C_i`` (``lfilter``, zero initial
   state at the first sample where all regressors exist);
-* gradient ``psi = [phi_AB, e(t-1) .. e(t-nc)] / C_i`` (one ``lfilter`` call on
-  the whole regressor matrix);
+* gradient ``psi = [phi_AB, e(t-1) .. e(t-nc)] / C_i`` (``y``, ``u`` and ``e`` are
+  filtered by ``1/C_i`` once per iteration and then lagged);
 * start: a high-order ARX row gives innovation estimates, then a linear
   regression on ``[phi_AB, e_hat lags]`` (Hannan-Rissanen), ``C`` reflected to
   minimum phase;
@@ -27,8 +27,15 @@ from .arx import least_squares
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
-from .pem import levenberg_marquardt, shift, stabilize
-from .regression import arx_regressors, check_data, finish_model
+from .pem import levenberg_marquardt, stabilize
+from .regression import (
+    arx_regressors,
+    check_data,
+    finish_model,
+    join,
+    lagged,
+    stack_rows,
+)
 
 __all__ = ['armax']
 
@@ -43,15 +50,12 @@ def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
     nb[i] = np.where(nb[i] > 0, nb[i] + extra, 0)
     hi = Orders(na, nb, orders.nk, orders.nc * 0, orders.nd * 0, orders.nf * 0)
     start = hi.row_start(i)
-    Phi = np.vstack([arx_regressors(d.y, d.u, hi, i, start) for d in experiments])
-    Y = np.concatenate([d.y[start:, i] for d in experiments])
-    theta, _, _ = least_squares(Phi, Y)
-    out, pos = [], 0
-    for d in experiments:
+    Phis = [arx_regressors(d.y, d.u, hi, i, start) for d in experiments]
+    theta, _, _ = least_squares(stack_rows(Phis), join([d.y[start:, i] for d in experiments]))
+    out = []
+    for d, P in zip(experiments, Phis, strict=True):
         e = np.zeros(d.N)
-        n = d.N - start
-        e[start:] = Y[pos:pos + n] - Phi[pos:pos + n] @ theta
-        pos += n
+        e[start:] = d.y[start:, i] - P @ theta
         out.append(e)
     return out
 
@@ -64,17 +68,17 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
     Ys = [d.y[start:, i] for d in experiments]
     n_ab = Phis[0].shape[1]
     if nc == 0:
-        Phi, Y = np.vstack(Phis), np.concatenate(Ys)
+        Phi, Y = stack_rows(Phis), join(Ys)
         theta, Rinv, _ = least_squares(Phi, Y)
         r = Y - Phi @ theta
         return theta, float(r @ r) / max(1, len(Y) - len(theta)) * Rinv, 0
     usable = min(d.N for d in experiments) - start
     extra = int(min(max(10, 3 * nc), max(1, usable // (8 * (orders.ny + orders.nu)))))
-    ehat = _initial_innovations(experiments, orders, i, extra)
-    lagged_e = [np.column_stack([shift(e, k)[start:] for k in range(1, nc + 1)]) for e in ehat]
-    theta0, _, _ = least_squares(np.vstack([np.hstack([P, E]) for P, E in
-                                            zip(Phis, lagged_e, strict=True)]),
-                                 np.concatenate(Ys))
+    ehat = [e[start:] for e in _initial_innovations(experiments, orders, i, extra)]
+    theta0, _, _ = least_squares(
+        stack_rows([np.hstack([P, lagged(np.concatenate([np.zeros(nc), e]), range(1, nc + 1),
+                                         nc)]) for P, e in zip(Phis, ehat, strict=True)]),
+        join(Ys))
 
     def project(theta: np.ndarray) -> np.ndarray:
         out = theta.copy()
@@ -83,18 +87,26 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
 
     def errors(theta: np.ndarray) -> np.ndarray:
         C = np.concatenate([[1.0], theta[n_ab:]])
-        return np.concatenate([lfilter([1.0], C, Y - P @ theta[:n_ab])
-                               for P, Y in zip(Phis, Ys, strict=True)])
+        return join([lfilter([1.0], C, Y - P @ theta[:n_ab])
+                     for P, Y in zip(Phis, Ys, strict=True)])
 
     def gradient(theta: np.ndarray, e: np.ndarray) -> np.ndarray:
+        # psi = [phi_AB, e lags] / C: filter the raw signals once and lag them (the
+        # lagged-then-filtered columns differ only in a start-up transient).
         C = np.concatenate([[1.0], theta[n_ab:]])
         blocks, pos = [], 0
-        for P in Phis:
-            seg = e[pos:pos + P.shape[0]]
-            pos += P.shape[0]
-            E = np.column_stack([shift(seg, k) for k in range(1, nc + 1)])
-            blocks.append(lfilter([1.0], C, np.hstack([P, E]), axis=0))
-        return np.vstack(blocks)
+        for d in experiments:
+            n = d.N - start
+            seg = e[pos:pos + n]
+            pos += n
+            yf = lfilter([1.0], C, d.y, axis=0)
+            uf = lfilter([1.0], C, d.u, axis=0) if d.nu else d.u
+            ef = lfilter([1.0], C, np.concatenate([np.zeros(nc), seg]))
+            psi = np.empty((n, n_ab + nc), order='F')
+            psi[:, :n_ab] = arx_regressors(yf, uf, orders, i, start)
+            psi[:, n_ab:] = lagged(ef, range(1, nc + 1), nc)
+            blocks.append(psi)
+        return stack_rows(blocks)
 
     result = levenberg_marquardt(theta0, errors, gradient, project, max_iter, tol)
     return result.theta, result.covariance, result.iterations

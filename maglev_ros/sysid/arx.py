@@ -3,12 +3,14 @@
 Each output row ``i`` of ``A(q) y = B(q) u + e`` is a linear regression
 ``y_i(t) = phi_i(t)^T theta_i + e_i(t)`` solved independently (rows share no
 parameters).  The default solver forms the normal equations
-``(Phi^T Phi) theta = Phi^T y`` - i.e. the sample correlations of the lagged
-signals, one BLAS call - and solves them by Cholesky.  Normal equations square
-the condition number, so when ``cond(Phi^T Phi)`` exceeds ``1e8`` (relative
-rounding ~1e-8, still far below the statistical error of any practical data
-set) the solver falls back to a Householder QR of ``Phi`` (LAPACK ``gelsy``),
-which is about three times slower but accurate up to ``cond(Phi)`` ~ 1e15.
+``(Phi^T Phi) theta = Phi^T y`` - the sample correlations of the lagged
+signals, one BLAS call on the column-major regression matrix - solves them by
+Cholesky and applies one step of iterative refinement with the true residual
+``Phi^T (y - Phi theta)``.  This is 2-4x faster than QR, and the refined
+solution is as accurate as QR while ``cond(Phi^T Phi) < 1e12`` (``cond(Phi)`` <
+1e6; high-order ARX models of slow, oversampled systems such as the lab's
+5 kHz data reach ~1e9).  Beyond that, or if Cholesky fails, the solver uses a
+Householder QR of ``[Phi, y]`` (LAPACK ``geqrf``, R factor only).
 """
 
 from __future__ import annotations
@@ -21,11 +23,11 @@ import scipy.linalg as sla
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
-from .regression import arx_regressors, check_data, finish_model
+from .regression import arx_regressors, check_data, finish_model, join, stack_rows
 
 __all__ = ['arx', 'least_squares']
 
-COND_LIMIT = 1e8
+COND_LIMIT = 1e12
 
 
 def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
@@ -39,8 +41,9 @@ def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
     Y : ndarray, shape (N,)
         Targets.
     method : {'auto', 'normal', 'qr'}
-        ``'normal'``: Cholesky of the normal equations; ``'qr'``: QR of ``Phi``;
-        ``'auto'``: normal equations unless ``cond(Phi^T Phi) > 1e8``.
+        ``'normal'``: Cholesky of the normal equations plus one refinement
+        step; ``'qr'``: QR of ``[Phi, Y]``; ``'auto'``: normal equations unless
+        ``cond(Phi^T Phi) > 1e12``.
 
     Returns
     -------
@@ -56,19 +59,21 @@ def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
     p = Phi.shape[1]
     if p == 0:
         return np.zeros(0), np.zeros((0, 0)), 'none'
-    R = Phi.T @ Phi
     if method != 'qr':
-        cond = np.linalg.cond(R)
-        if method == 'normal' or cond < COND_LIMIT:
+        R = Phi.T @ Phi
+        if method == 'normal' or np.linalg.cond(R) < COND_LIMIT:
             try:
                 factor = sla.cho_factor(R, check_finite=False)
-                theta = sla.cho_solve(factor, Phi.T @ Y, check_finite=False)
-                Rinv = sla.cho_solve(factor, np.eye(p), check_finite=False)
-                return theta, Rinv, 'normal equations (Cholesky)'
             except np.linalg.LinAlgError:
-                pass
-    Q, Rq = sla.qr(Phi, mode='economic', check_finite=False)
-    theta = sla.solve_triangular(Rq, Q.T @ Y, check_finite=False)
+                factor = None
+            if factor is not None:
+                theta = sla.cho_solve(factor, Phi.T @ Y, check_finite=False)
+                theta += sla.cho_solve(factor, Phi.T @ (Y - Phi @ theta), check_finite=False)
+                Rinv = sla.cho_solve(factor, np.eye(p), check_finite=False)
+                return theta, Rinv, 'normal equations (Cholesky, refined)'
+    Rfull = sla.qr(np.column_stack([Phi, Y]), mode='r', check_finite=False)[0]
+    Rq = Rfull[:p, :p]
+    theta = sla.solve_triangular(Rq, Rfull[:p, p], check_finite=False)
     Rq_inv = sla.solve_triangular(Rq, np.eye(p), check_finite=False)
     return theta, Rq_inv @ Rq_inv.T, 'QR'
 
@@ -134,8 +139,8 @@ def arx_rows(experiments: Sequence[IdData], orders: Orders, method: str = 'auto'
     used = ''
     for i in range(orders.ny):
         start = orders.row_start(i)
-        Phi = np.vstack([arx_regressors(d.y, d.u, orders, i, start) for d in experiments])
-        Y = np.concatenate([d.y[start:, i] for d in experiments])
+        Phi = stack_rows([arx_regressors(d.y, d.u, orders, i, start) for d in experiments])
+        Y = join([d.y[start:, i] for d in experiments])
         theta, Rinv, used = least_squares(Phi, Y, method)
         resid = Y - Phi @ theta
         lam = float(resid @ resid) / max(1, len(Y) - len(theta))

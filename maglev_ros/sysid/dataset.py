@@ -33,6 +33,7 @@ def _as_columns(values: np.ndarray, arg: str) -> np.ndarray:
         array = array[:, None]
     if array.ndim != 2:
         raise ValueError(f'{arg} must be 1-D or 2-D (N, channels), got shape {array.shape}')
+    array = np.array(array, dtype=float, order='C')  # own copy with plain strides
     if not np.all(np.isfinite(array)):
         bad = int(np.count_nonzero(~np.isfinite(array)))
         raise ValueError(f'{arg} contains {bad} NaN or infinite values')

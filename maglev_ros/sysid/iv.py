@@ -27,7 +27,7 @@ from .arx import arx_rows, least_squares
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
-from .regression import arx_regressors, check_data, finish_model, lagged
+from .regression import arx_regressors, check_data, finish_model, join, lagged, stack_rows
 
 __all__ = ['iv4']
 
@@ -53,7 +53,7 @@ def _iv_rows(experiments: Sequence[IdData], instruments: Sequence[np.ndarray], o
             Phi.append(arx_regressors(y, u, orders, i, start))
             Z.append(arx_regressors(xs, u, orders, i, start))
             Y.append(y[start:, i])
-        Phi_m, Z_m, Y_v = np.vstack(Phi), np.vstack(Z), np.concatenate(Y)
+        Phi_m, Z_m, Y_v = stack_rows(Phi), stack_rows(Z), join(Y)
         ZtPhi = Z_m.T @ Phi_m
         theta = np.linalg.solve(ZtPhi, Z_m.T @ Y_v)
         resid = Y_v - Phi_m @ theta
@@ -75,8 +75,8 @@ def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
         w = [d.y[start:, i] - arx_regressors(d.y, d.u, orders, i, start) @ th
              for d in experiments]
         order = max(1, sizes[i])
-        Phi = np.vstack([-lagged(x, range(1, order + 1), order) for x in w])
-        Y = np.concatenate([x[order:] for x in w])
+        Phi = stack_rows([-lagged(x, range(1, order + 1), order) for x in w])
+        Y = join([x[order:] for x in w])
         ar, _, _ = least_squares(Phi, Y)
         filters.append(np.concatenate([[1.0], ar]))
     return filters

@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.signal import lfilter
 
 from .dataset import IdData
 from .orders import Orders
@@ -246,19 +247,53 @@ class PolyModel:
         ndarray, shape (N, ny)
             Simulated outputs.
         """
+        if ic not in ('zero', 'estimate'):
+            raise ValueError(f"ic must be 'zero' or 'estimate', got {ic!r}")
         u = self._inputs(data)
         A, B, C, D, _ = innovations_form(self._polys, noise=False)
-        ysim = simulate_ss(A, B, C, D, np.zeros(A.shape[0]), u)
+        if self._coupled:
+            ysim = simulate_ss(A, B, C, D, np.zeros(A.shape[0]), u)
+        else:  # one rational filter per channel (scipy lfilter)
+            ysim = np.zeros((u.shape[0], self.ny))
+            for i in range(self.ny):
+                a = self.polynomial('A', i, i)
+                for j in range(self.nu):
+                    if self.orders.nb[i, j]:
+                        ysim[:, i] += lfilter(self.polynomial('B', i, j),
+                                              np.convolve(a, self.polynomial('F', i, j)),
+                                              u[:, j])
         if ic == 'zero' or A.shape[0] == 0:
             return ysim
-        if ic != 'estimate':
-            raise ValueError(f"ic must be 'zero' or 'estimate', got {ic!r}")
         if not isinstance(data, IdData):
             raise TypeError("ic='estimate' needs IdData with measured outputs")
         y = self._outputs(data)
         basis = free_response(A, C, y.shape[0]).reshape(-1, A.shape[0])
         x0 = np.linalg.lstsq(basis, (y - ysim).ravel(), rcond=None)[0]
         return ysim + (basis @ x0).reshape(y.shape)
+
+    @property
+    def _coupled(self) -> bool:
+        """True if some ``A_ij`` with ``i != j`` is present (outputs interact)."""
+        return bool(np.any(self.orders.na[~np.eye(self.ny, dtype=bool)]))
+
+    def _filter_residuals(self, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Zero-initial-state ``e_i = D_i/C_i (sum_j A_ij y_j - sum_j B_ij/F_ij u_j)``."""
+        o = self.orders
+        e = np.empty_like(y)
+        for i in range(self.ny):
+            v = y[:, i].copy()
+            for j in range(self.ny):
+                if o.na[i, j]:
+                    a = self.polynomial('A', i, j)
+                    a[0] = 0.0 if i == j else a[0]
+                    v += lfilter(a, [1.0], y[:, j])
+            for j in range(self.nu):
+                if o.nb[i, j]:
+                    v -= lfilter(self.polynomial('B', i, j), self.polynomial('F', i, j), u[:, j])
+            if o.nc[i] or o.nd[i]:
+                v = lfilter(self.polynomial('D', i), self.polynomial('C', i), v)
+            e[:, i] = v
+        return e
 
     def residuals(self, data: IdData, ic: str = 'zero') -> np.ndarray:
         """One-step prediction errors (the innovations) on ``data``, shape (N, ny).
@@ -275,17 +310,29 @@ class PolyModel:
         ndarray, shape (N, ny)
             Prediction errors in output units.
         """
+        if ic not in ('zero', 'estimate'):
+            raise ValueError(f"ic must be 'zero' or 'estimate', got {ic!r}")
         y = self._outputs(data)
         u = self._inputs(data)
-        A, B, C, D, K = self.innovations_form()
-        e = predictor_errors(A, B, C, D, K, np.zeros(A.shape[0]), u, y)
-        if ic == 'zero' or A.shape[0] == 0:
+        e = self._filter_residuals(y, u)
+        if ic == 'zero':
             return e
-        if ic != 'estimate':
-            raise ValueError(f"ic must be 'zero' or 'estimate', got {ic!r}")
+        A, B, C, D, K = self.innovations_form()
+        if A.shape[0] == 0:
+            return e
         basis = free_response(A - K @ C, C, y.shape[0]).reshape(-1, A.shape[0])
         x0 = np.linalg.lstsq(basis, e.ravel(), rcond=None)[0]
         return e - (basis @ x0).reshape(e.shape)
+
+    def residuals_state_space(self, data: IdData) -> np.ndarray:
+        """Prediction errors from the innovations-form Kalman predictor (zero state), (N, ny).
+
+        Equal to :meth:`residuals` with ``ic='zero'``; kept as an independent
+        cross-check of the polynomial filters.
+        """
+        A, B, C, D, K = self.innovations_form()
+        return predictor_errors(A, B, C, D, K, np.zeros(A.shape[0]), self._inputs(data),
+                                self._outputs(data))
 
     def predict(self, data: IdData, k: int = 1, ic: str = 'zero') -> np.ndarray:
         """Predict the outputs ``k`` steps ahead, ``yhat(t | t-k)``.

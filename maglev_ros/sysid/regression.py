@@ -20,7 +20,17 @@ from .dataset import IdData
 from .model import EstimationReport, PolyModel
 from .orders import OrderError, Orders
 
-__all__ = ['arx_regressors', 'check_data', 'finish_model', 'lagged']
+__all__ = ['arx_regressors', 'check_data', 'finish_model', 'join', 'lagged', 'stack_rows']
+
+
+def stack_rows(blocks: Sequence[np.ndarray]) -> np.ndarray:
+    """Stack per-experiment blocks along axis 0 (no copy for a single experiment)."""
+    return blocks[0] if len(blocks) == 1 else np.vstack(blocks)
+
+
+def join(blocks: Sequence[np.ndarray]) -> np.ndarray:
+    """Concatenate per-experiment vectors (no copy for a single experiment)."""
+    return blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
 
 
 def lagged(signal: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
@@ -41,10 +51,10 @@ def lagged(signal: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
         Lagged copies.
     """
     N = signal.shape[0]
-    out = np.empty((N - start, len(lags)))
+    out = np.empty((len(lags), N - start))  # filled row by row, returned transposed
     for c, lag in enumerate(lags):
-        out[:, c] = signal[start - lag:N - lag]
-    return out
+        out[c] = signal[start - lag:N - lag]
+    return out.T
 
 
 def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int,
@@ -69,18 +79,20 @@ def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int,
     ndarray, shape (N - start, sum na[i] + sum nb[i])
         ``[-y lags, u lags]`` in the parameter layout order.
     """
-    blocks = []
+    width = int(orders.na[i].sum() + orders.nb[i].sum())
+    out = np.empty((width, y.shape[0] - start))  # column-major: contiguous row copies
+    N = y.shape[0]
+    c = 0
     for j in range(orders.ny):
-        n = orders.na[i, j]
-        if n:
-            blocks.append(-lagged(y[:, j], range(1, n + 1), start))
+        for lag in range(1, orders.na[i, j] + 1):
+            np.negative(y[start - lag:N - lag, j], out=out[c])
+            c += 1
     for j in range(orders.nu):
-        n, k = orders.nb[i, j], orders.nk[i, j]
-        if n:
-            blocks.append(lagged(u[:, j], range(k, k + n), start))
-    if not blocks:
-        return np.zeros((y.shape[0] - start, 0))
-    return np.hstack(blocks)
+        k = orders.nk[i, j]
+        for lag in range(k, k + orders.nb[i, j]):
+            out[c] = u[start - lag:N - lag, j]
+            c += 1
+    return out.T
 
 
 def check_data(experiments: Sequence[IdData], orders: Orders) -> None:
@@ -143,8 +155,8 @@ def finish_model(structure: str, orders: Orders, theta: np.ndarray,
                       first.output_names, first.input_names, first.output_units,
                       first.input_units)
     errors = [draft.residuals(d) for d in experiments]
-    e = np.vstack(errors)
-    y = np.vstack([d.y for d in experiments])
+    e = stack_rows(errors)
+    y = stack_rows([d.y for d in experiments])
     N = e.shape[0]
     lam = e.T @ e / N if noise_variance is None else noise_variance
     report = EstimationReport(method=method, n_samples=N, fit=fit_percent(y, y - e),

@@ -90,3 +90,17 @@ def test_model_argument_errors():
         model.simulate(np.zeros((10, 2)))
     with pytest.raises(ValueError, match='prediction horizon k must be >= 1'):
         model.predict(simulate_siso(20, 0), k=0)
+
+
+def test_filter_residuals_equal_kalman_predictor_and_simulation_paths_agree():
+    mimo = arx(simulate_mimo_arx(2000, 1), [[4, 4], [0, 4]], [[2, 2], [0, 2]], 1)
+    data = simulate_mimo_arx(500, 2)
+    assert np.allclose(mimo.residuals(data), mimo.residuals_state_space(data), atol=1e-10)
+    siso = bj(simulate_siso(3000, 1, A=np.ones(1), F=F_OE, C=C_BJ, D=D_BJ), 2, 1, 1, 2, 1)
+    d = simulate_siso(400, 3)
+    assert np.allclose(siso.residuals(d), siso.residuals_state_space(d), atol=1e-10)
+    from maglev_ros.sysid.polynomial import innovations_form, simulate_ss
+
+    A, B, C, D, _ = innovations_form(siso._polys, noise=False)
+    ss = simulate_ss(A, B, C, D, np.zeros(A.shape[0]), np.ascontiguousarray(d.u))
+    assert np.allclose(siso.simulate(d), ss, atol=1e-10)
