@@ -23,11 +23,12 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.signal import lfilter
 
-from .arx import arx_rows, least_squares
+from .arx import arx_rows, correlation_solve, row_blocks, signal_matrix
+from .correlation import block_sizes, lag_gram
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
-from .regression import arx_regressors, check_data, finish_model, join, lagged, stack_rows
+from .regression import check_data, finish_model
 
 __all__ = ['iv4']
 
@@ -38,47 +39,54 @@ def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData]
     return [model.simulate(d.u) for d in experiments]
 
 
-def _iv_rows(experiments: Sequence[IdData], instruments: Sequence[np.ndarray], orders: Orders,
-             prefilters: Sequence[np.ndarray] | None = None
-             ) -> tuple[np.ndarray, np.ndarray]:
+def _iv_rows(signals: Sequence[np.ndarray], orders: Orders, start_offset: int = 0,
+             rows: Sequence[int] | None = None, covariance: bool = True
+             ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+    """IV estimate per row from signal matrices ``[y; u; x]`` (x: instruments for y)."""
+    ny = orders.ny
     thetas, covs = [], []
-    for i in range(orders.ny):
-        L = np.ones(1) if prefilters is None else prefilters[i]
-        start = orders.row_start(i) + len(L) - 1
-        Phi, Z, Y = [], [], []
-        for d, x in zip(experiments, instruments, strict=True):
-            y, u, xs = d.y, d.u, x
-            if len(L) > 1:
-                y, u, xs = (lfilter(L, 1.0, s, axis=0) for s in (y, u, x))
-            Phi.append(arx_regressors(y, u, orders, i, start))
-            Z.append(arx_regressors(xs, u, orders, i, start))
-            Y.append(y[start:, i])
-        Phi_m, Z_m, Y_v = stack_rows(Phi), stack_rows(Z), join(Y)
-        ZtPhi = Z_m.T @ Phi_m
-        theta = np.linalg.solve(ZtPhi, Z_m.T @ Y_v)
-        resid = Y_v - Phi_m @ theta
-        lam = float(resid @ resid) / max(1, len(Y_v) - len(theta))
-        M = np.linalg.solve(ZtPhi, np.eye(len(theta)))
+    for i in range(ny) if rows is None else rows:
+        start = orders.row_start(i) + start_offset
+        reg = row_blocks(orders, i)
+        ins = row_blocks(orders, i, out_base=ny + orders.nu)
+        tgt = np.array([[i, 0, 1, 1]], dtype=np.int64)
+        p = block_sizes(reg)
+        ZtPhi, ZtZ, PtP = np.zeros((p, p)), np.zeros((p, p)), np.zeros((p, p))
+        Zty, Pty = np.zeros(p), np.zeros(p)
+        yy, M = 0.0, 0
+        for S in signals:
+            ZtPhi += lag_gram(S, ins, reg, start)
+            Zty += lag_gram(S, ins, tgt, start)[:, 0]
+            if covariance:
+                ZtZ += lag_gram(S, ins, ins, start)
+                PtP += lag_gram(S, reg, reg, start)
+                Pty += lag_gram(S, reg, tgt, start)[:, 0]
+                yy += float(lag_gram(S, tgt, tgt, start)[0, 0])
+            M += S.shape[1] - start
+        theta = np.linalg.solve(ZtPhi, Zty)
         thetas.append(theta)
-        covs.append(lam * M @ (Z_m.T @ Z_m) @ M.T)
-    return np.concatenate(thetas), sla.block_diag(*covs)
+        if covariance:
+            sse = max(yy - 2.0 * theta @ Pty + theta @ PtP @ theta, 0.0)
+            Minv = np.linalg.solve(ZtPhi, np.eye(p))
+            covs.append(sse / max(1, M - p) * Minv @ ZtZ @ Minv.T)
+    return thetas, covs
 
 
 def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
                       theta: np.ndarray) -> list[np.ndarray]:
+    """AR model ``L_i`` (order na_i + nb_i) of the equation error of each row."""
+    model = PolyModel('arx', orders, theta, experiments[0].Ts, np.eye(orders.ny))
+    residuals = [model._filter_residuals(d.y, d.u) for d in experiments]
     filters = []
-    sizes = orders.row_sizes()
-    offsets = np.concatenate([[0], np.cumsum(sizes)])
-    for i in range(orders.ny):
+    for i, size in enumerate(orders.row_sizes()):
         start = orders.row_start(i)
-        th = theta[offsets[i]:offsets[i + 1]]
-        w = [d.y[start:, i] - arx_regressors(d.y, d.u, orders, i, start) @ th
-             for d in experiments]
-        order = max(1, sizes[i])
-        Phi = stack_rows([-lagged(x, range(1, order + 1), order) for x in w])
-        Y = join([x[order:] for x in w])
-        ar, _, _ = least_squares(Phi, Y)
-        filters.append(np.concatenate([[1.0], ar]))
+        order = max(1, size)
+        signals = [np.ascontiguousarray(e[start:, i])[None, :] for e in residuals]
+        solved = correlation_solve(signals, np.array([[0, 1, order, -1]]), 0, order)
+        if solved is None:  # white or vanishing equation error: no prefilter
+            filters.append(np.ones(1))
+        else:
+            filters.append(np.concatenate([[1.0], solved[0]]))
     return filters
 
 
@@ -105,9 +113,18 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1)
     orders = make_orders(first.ny, first.nu, na=na, nb=nb, nk=nk)
     check_data(experiments, orders)
     theta1, _, _ = arx_rows(experiments, orders)
-    theta2, _ = _iv_rows(experiments, _simulate(orders, theta1, experiments), orders)
+    x1 = _simulate(orders, theta1, experiments)
+    thetas2, _ = _iv_rows([signal_matrix(d, x) for d, x in zip(experiments, x1, strict=True)],
+                          orders, covariance=False)
+    theta2 = np.concatenate(thetas2)
     prefilters = _noise_prefilters(experiments, orders, theta2)
-    theta4, cov = _iv_rows(experiments, _simulate(orders, theta2, experiments), orders,
-                           prefilters)
-    return finish_model('iv4', orders, theta4, cov, experiments,
-                        'IV4 (four-stage instrumental variables)')
+    x2 = _simulate(orders, theta2, experiments)
+    thetas4, covs4 = [], []
+    for i, L in enumerate(prefilters):
+        signals = [lfilter(L, 1.0, signal_matrix(d, x), axis=1)
+                   for d, x in zip(experiments, x2, strict=True)]
+        thetas, covs = _iv_rows(signals, orders, len(L) - 1, rows=[i])
+        thetas4.append(thetas[0])
+        covs4.append(covs[0])
+    return finish_model('iv4', orders, np.concatenate(thetas4), sla.block_diag(*covs4),
+                        experiments, 'IV4 (four-stage instrumental variables)')

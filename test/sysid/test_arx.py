@@ -107,3 +107,22 @@ def test_arx_nk_zero_uses_direct_feedthrough():
     y = 0.7 * u + np.concatenate([[0], 0.5 * u[:-1]]) + 0.01 * rng.standard_normal(2000)
     model = arx(IdData(y, u, 1.0), 0, 2, 0)
     assert np.allclose(model.theta, [0.7, 0.5], atol=0.01)
+
+
+def test_correlation_normal_equations_match_qr_siso_and_mimo():
+    data = simulate_siso(5000, 8)
+    auto = arx(data, 7, 9, 1)
+    assert 'correlations' in auto.report.method
+    assert np.allclose(auto.theta, arx(data, 7, 9, 1, method='qr').theta, rtol=1e-6, atol=1e-8)
+    mimo = simulate_mimo_arx(3000, 4)
+    orders = ([[4, 4], [0, 4]], [[2, 2], [0, 2]], [[1, 2], [1, 1]])
+    a, q = arx(mimo, *orders), arx(mimo, *orders, method='qr')
+    assert np.allclose(a.theta, q.theta, rtol=1e-7, atol=1e-9)
+    assert np.allclose(a.covariance, q.covariance, rtol=1e-5, atol=1e-12)
+
+
+def test_noise_free_data_falls_back_to_qr():
+    data = simulate_siso(2000, 1, noise=0.0)
+    model = arx(data, 2, 2, 1)
+    assert 'correlations' not in model.report.method  # formed Phi, refined or QR
+    assert np.allclose(model.theta, TRUTH, atol=1e-9)
