@@ -49,6 +49,7 @@ __all__ = [
     'STATUS_CRASH_BASE',
     'STATUS_CRASH_WORKSPACE',
     'STATUS_NOT_FINITE',
+    'STATUS_BAD_INPUT',
 ]
 
 TORQUE_TRUE = 0
@@ -65,6 +66,7 @@ STATUS_OK = 0
 STATUS_CRASH_BASE = 1
 STATUS_CRASH_WORKSPACE = 2
 STATUS_NOT_FINITE = 3
+STATUS_BAD_INPUT = 4
 
 GRAVITY = 9.81  # m/s^2, the model's value
 
@@ -106,6 +108,12 @@ def base_field_points(px, py, pz, u, src, coil, work, out):
     """
     n = px.shape[0]
     n_src = src.shape[0]
+    if n_src == 0:
+        for i in range(n):
+            out[0, i] = 0.0
+            out[1, i] = 0.0
+            out[2, i] = 0.0
+        return
     total = n * n_src
     zz = work[_PAIR, :total]
     aa = work[_PAIR + 1, :total]
@@ -281,10 +289,11 @@ def rigid_body_rates(x, wrench, mass, inertia, kinematics):
         dx[3] = wx
         dx[4] = wy
         dx[5] = wz
-    # Euler's equations: I dw/dt = tau - w x (I w)
-    dx[9] = (tx - (wy * izz * wz - wz * iyy * wy)) / ixx
-    dx[10] = (ty - (wz * ixx * wx - wx * izz * wz)) / iyy
-    dx[11] = (tz - (wx * iyy * wy - wy * ixx * wx)) / izz
+    # Euler's equations I dw/dt = tau - w x (I w), written with inertia differences
+    # so that an axisymmetric magnet (Ixx == Iyy) keeps its spin rate exactly
+    dx[9] = (tx - (izz - iyy) * wy * wz) / ixx
+    dx[10] = (ty - (ixx - izz) * wz * wx) / iyy
+    dx[11] = (tz - (iyy - ixx) * wx * wy) / izz
     return dx
 
 
@@ -424,29 +433,57 @@ def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, p
 
 
 @njit(cache=True)
+def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
+                crash, check, sens, mag):
+    """One simulator sample: RK4 step, crash check and the true sensor reading.
+
+    Returns (new extended state, status, reading (3 k,)). On a crash the state
+    is the attempted one and the reading is taken at the previous state; a
+    non-finite drive returns STATUS_BAD_INPUT and leaves the state alone.
+    """
+    for j in range(drive.shape[0]):
+        if not math.isfinite(drive[j]):
+            return xe.copy(), STATUS_BAD_INPUT, np.zeros(3 * sens.shape[0])
+    new = rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work)
+    if check:
+        status = crash_status(new[:12], crash[0], crash[1], crash[2], crash[3:6], crash[6:9])
+    else:
+        status = STATUS_OK
+        for k in range(new.shape[0]):
+            if not math.isfinite(new[k]):
+                status = STATUS_NOT_FINITE
+    seen = new if status == STATUS_OK else xe
+    currents = seen[12:] if coil_mode != COIL_IDEAL else drive
+    y = fast_measurement(seen[:12].copy(), currents.copy(), src, coil, sens, mag, work)
+    return new, status, y
+
+
+@njit(cache=True)
 def rk4_run(x0, drives, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
-            crash, check):
+            crash, check, sens, mag):
     """Integrate over ``drives.shape[0]`` samples; stop at the first crash.
 
     ``crash`` = (base top m, magnet radius m, half thickness m, lower xyz, upper xyz)
-    as a (9,) array. Returns (states (N + 1, n_x), number of samples done, status).
+    as a (9,) array. Returns (states (K + 1, n_x), true readings (K + 1, 3 k),
+    samples done K, status, attempted state at the crash).
     """
     n = drives.shape[0]
+    n_y = 3 * sens.shape[0]
     states = np.empty((n + 1, x0.shape[0]))
+    outputs = np.empty((n + 1, n_y))
     states[0] = x0
-    lower = crash[3:6]
-    upper = crash[6:9]
+    if coil_mode == COIL_IDEAL:
+        first = np.zeros(drives.shape[1])
+    else:
+        first = x0[12:].copy()
+    outputs[0] = fast_measurement(x0[:12].copy(), first, src, coil, sens, mag, work)
     x = x0.copy()
     for k in range(n):
-        x_new = rk4_sample(x, drives[k], dt, substeps, coil_mode, electrical, src, coil, rim,
-                           par, work)
-        status = STATUS_OK
-        if check:
-            status = crash_status(x_new[:12], crash[0], crash[1], crash[2], lower, upper)
-        elif not np.all(np.isfinite(x_new)):
-            status = STATUS_NOT_FINITE
+        new, status, y = sample_step(x, drives[k], dt, substeps, coil_mode, electrical, src,
+                                     coil, rim, par, work, crash, check, sens, mag)
         if status != STATUS_OK:
-            return states[:k + 1], k, status, x_new
-        x = x_new
+            return states[:k + 1], outputs[:k + 1], k, status, new
+        x = new
         states[k + 1] = x
-    return states, n, STATUS_OK, x
+        outputs[k + 1] = y
+    return states, outputs, n, STATUS_OK, x

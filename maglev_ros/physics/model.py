@@ -193,6 +193,7 @@ class MaggyModel:
         self._loops = None  # packed loop sources, built on first use
         self._work = None  # kernel scratch space, built on first use
         self._fast_args = None
+        self._measurement_args = None
 
     # ------------------------------------------------------------------ sources
     @property
@@ -206,7 +207,7 @@ class MaggyModel:
 
     def _resolve_correction(self) -> float:
         choice = self.options.correction
-        if choice == 'none':
+        if choice == 'none' or self.params.solenoids.count == 0:
             return 1.0
         if not isinstance(choice, str):
             return float(choice)
@@ -415,13 +416,16 @@ class MaggyModel:
 
     def measurement_arguments(self) -> tuple:
         """Packed arguments (src, coil, sens, mag, work) of :func:`kernels.fast_measurement`."""
-        m = self.params.magnet
-        src, coil = self._loop_sources()
-        k = len(self.params.sensors)
-        sens = np.hstack([self._sensor_pos, self._sensor_rot.reshape(k, 9), self._sensor_gain,
-                          self._sensor_offset]).reshape(k, 18)
-        mag = np.array([m.radius, -m.polarization * m.thickness / (2.0 * MU0)])
-        return src, coil, np.ascontiguousarray(sens), mag, self._workspace()
+        if self._measurement_args is None:
+            m = self.params.magnet
+            src, coil = self._loop_sources()
+            k = len(self.params.sensors)
+            sens = np.hstack([self._sensor_pos, self._sensor_rot.reshape(k, 9),
+                              self._sensor_gain, self._sensor_offset]).reshape(k, 18)
+            mag = np.array([m.radius, -m.polarization * m.thickness / (2.0 * MU0)])
+            self._measurement_args = (src, coil, np.ascontiguousarray(sens), mag,
+                                      self._workspace())
+        return self._measurement_args
 
     def _workspace(self) -> np.ndarray:
         """Scratch array for the compiled kernels (one per model, reused)."""

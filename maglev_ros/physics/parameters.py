@@ -260,7 +260,8 @@ class _Reader:
         self.source = source
 
     def fail(self, key: str, problem: str) -> ParameterError:
-        return ParameterError(f'{self.source}: {key}: {problem}')
+        where = f'{self.source}: {key}' if key else self.source
+        return ParameterError(f'{where}: {problem}')
 
     def mapping(self, value: Any, key: str, allowed: Mapping[str, bool]) -> dict:
         if not isinstance(value, Mapping):
@@ -298,14 +299,17 @@ class _Reader:
 def _cylinders(reader: _Reader, value: Any, key: str, extra: str) -> tuple:
     allowed = {name: True for name in (*_CYLINDER_KEYS, extra)}
     data = reader.mapping(value, key, allowed)
-    count = None
+    first = _CYLINDER_KEYS[0]
+    raw = data[first]
+    if not isinstance(raw, (list, tuple)) or not raw:
+        raise reader.fail(f'{key}.{first}', f'expected a non-empty list, got {raw!r}')
+    count = len(raw)
     columns = {}
     for name in (*_CYLINDER_KEYS, extra):
         raw = data[name]
-        if count is None:
-            if not isinstance(raw, (list, tuple)) or not raw:
-                raise reader.fail(f'{key}.{name}', f'expected a non-empty list, got {raw!r}')
-            count = len(raw)
+        if isinstance(raw, (list, tuple)) and len(raw) != count:
+            raise reader.fail(f'{key}.{name}', f'expected {count} values (as many as '
+                              f'{key}.{first}), got {len(raw)}')
         positive = name in ('radius', 'length', 'turns')
         columns[name] = reader.vector(raw, f'{key}.{name}', count, positive)
     centers = _frozen(np.column_stack([columns['x'], columns['y'], columns['z']]))

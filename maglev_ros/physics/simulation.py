@@ -13,6 +13,7 @@ simulator never integrates through a crash and never returns NaNs.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -210,7 +211,17 @@ class Simulator:
         offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float),
                                  (model.n_outputs,))
         self._offset = np.array(offset)
+        self._ideal_sensor = (self.sensor.noise_rms == 0 and self.sensor.quantization == 0
+                              and not self.sensor.delay_samples and not np.any(self._offset))
         self._default_x0 = None if x0 is None else self._check_state(x0)
+        self._fast = model.options.field == 'fast'
+        self._input_shape = (model.n_inputs,)
+        if self._fast:
+            self._fast_args = model.fast_arguments()
+            self._sens_args = model.measurement_arguments()[2:4]  # sens, mag
+            self._step_args = (self.dt, self.substeps, self._coil_mode, self._electrical,
+                               *self._fast_args, self._crash, self.check_crash,
+                               *self._sens_args)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -278,13 +289,24 @@ class Simulator:
         SimulationCrashedError
             When stepping a crashed simulation (reset it first).
         """
-        if self.crashed:
+        if self.status != 'ok':
             raise SimulationCrashedError(
                 f'simulation crashed at t = {self.crash_time:.6f} s ({self.reason}); '
                 'reset it first')
-        drive = self._check_input(u)
-        new = self._advance(self._xe, drive)
-        status = self._status(new)
+        drive = np.array(u, dtype=float)  # a copy: the caller may reuse its buffer
+        if drive.shape != self._input_shape:
+            raise ValueError(f'input must have {self._input_shape[0]} values (x+, x-, y+, y-), '
+                             f'got shape {drive.shape}')
+        if self._fast:
+            new, status, y = kernels.sample_step(self._xe, drive, *self._step_args)
+            if status == kernels.STATUS_BAD_INPUT:
+                raise ValueError(f'input must be finite, got {drive.tolist()}')
+        else:
+            if not math.isfinite(drive.sum()):
+                raise ValueError(f'input must be finite, got {drive.tolist()}')
+            new = self._python_rk4(self._xe, drive)
+            status = self._status(new)
+            y = None
         self.samples += 1
         self.time = self.samples * self.dt
         if status != kernels.STATUS_OK:
@@ -292,7 +314,7 @@ class Simulator:
             return self._observe(self._true_output())
         self._xe = new
         self._last_input = drive
-        return self._observe(self._true_output())
+        return self._observe(self._true_output() if y is None else y)
 
     def run(self, inputs, x0=None) -> SimulationResult:
         """Simulate a whole input sequence from ``x0`` (resets first).
@@ -315,18 +337,23 @@ class Simulator:
             raise ValueError(f'inputs must have shape (N, {n_s}), got {drives.shape}')
         if not np.all(np.isfinite(drives)):
             raise ValueError('inputs must be finite')
-        y0 = self.reset(x0)
-        if self.model.options.field == 'fast':
-            states, done, status, last = kernels.rk4_run(
-                self._xe, drives, self.dt, self.substeps, self._coil_mode, self._electrical,
-                *self.model.fast_arguments(), self._crash, self.check_crash)
+        self.reset(x0)
+        if self._fast:
+            states, truth, done, status, last = kernels.rk4_run(self._xe, drives,
+                                                                *self._step_args)
         else:
             states, done, status, last = self._python_run(drives)
-        outputs = [y0]
-        for k in range(1, done + 1):
-            self._xe = states[k].copy()
-            self._last_input = drives[k - 1]
-            outputs.append(self._observe(self._true_output()))
+            truth = None
+        currents = (states[:, 12:] if self._coil_mode
+                    else np.vstack([np.zeros((1, n_s)), drives[:done]]))
+        if truth is None:
+            truth = np.array([self.model.measurement(x[:12], i)
+                              for x, i in zip(states, currents, strict=True)])
+        self._rng = np.random.default_rng(self.seed)
+        self._pending = []
+        outputs = self._observe_many(truth)
+        self._xe = states[-1].copy()
+        self._last_input = drives[done - 1].copy() if done else np.zeros(n_s)
         self.samples = done
         self.time = done * self.dt
         if status != kernels.STATUS_OK:
@@ -334,21 +361,13 @@ class Simulator:
             self.time = self.samples * self.dt
             self._mark_crash(status, last)
         t = np.arange(done + 1) * self.dt
-        currents = (states[:, 12:] if self._coil_mode
-                    else np.vstack([np.zeros((1, n_s)), drives[:done]]))
         return SimulationResult(
-            t=t, x=states[:, :12].copy(), y=np.array(outputs), u=drives[:done].copy(),
+            t=t, x=states[:, :12].copy(), y=outputs, u=drives[:done].copy(),
             currents=np.array(currents), status=self.status, reason=self.reason,
             crash_time=self.crash_time, crash_state=self.crash_state,
         )
 
     # ------------------------------------------------------------------ internals
-    def _advance(self, xe: np.ndarray, drive: np.ndarray) -> np.ndarray:
-        if self.model.options.field == 'fast':
-            return kernels.rk4_sample(xe, drive, self.dt, self.substeps, self._coil_mode,
-                                      self._electrical, *self.model.fast_arguments())
-        return self._python_rk4(xe, drive)
-
     def _rates(self, xe: np.ndarray, drive: np.ndarray, volts: np.ndarray) -> np.ndarray:
         if not self._coil_mode:
             return self.model.dynamics(xe, drive)
@@ -398,6 +417,8 @@ class Simulator:
 
     def _observe(self, y: np.ndarray) -> np.ndarray:
         fx = self.sensor
+        if self._ideal_sensor:
+            return y
         reading = y + self._offset
         if fx.noise_rms > 0:
             reading = reading + fx.noise_rms * self._rng.standard_normal(reading.shape)
@@ -410,21 +431,17 @@ class Simulator:
             return self._pending.pop(0)
         return reading
 
+    def _observe_many(self, truth: np.ndarray) -> np.ndarray:
+        """Apply the sensor effects to a whole run's true readings (as :meth:`_observe`)."""
+        if self._ideal_sensor:
+            return truth.copy()
+        return np.array([self._observe(y) for y in truth])
+
     def _check_state(self, x0) -> np.ndarray:
         state = np.asarray(x0, dtype=float)
         if state.shape != (12,) or not np.all(np.isfinite(state)):
             raise ValueError(f'x0 must be 12 finite numbers, got {x0!r}')
         return state.copy()
-
-    def _check_input(self, u) -> np.ndarray:
-        drive = np.ascontiguousarray(np.asarray(u, dtype=float))
-        n_s = self.model.n_inputs
-        if drive.shape != (n_s,):
-            raise ValueError(f'input must have {n_s} values (x+, x-, y+, y-), got shape '
-                             f'{drive.shape}')
-        if not np.all(np.isfinite(drive)):
-            raise ValueError(f'input must be finite, got {drive.tolist()}')
-        return drive
 
     def _equilibrium_state(self) -> np.ndarray:
         from .equilibria import find_equilibria

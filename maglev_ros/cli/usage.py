@@ -1,0 +1,60 @@
+"""Command-line conventions shared by every ``maglev-*`` tool.
+
+Bad input (arguments, files, values) ends the tool with exit status 2 and one
+line on stderr, ``<prog>: error: <what is wrong>``, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+
+__all__ = ['UsageError', 'Parser', 'run_command']
+
+
+class UsageError(ValueError):
+    """Invalid command-line input (exit status 2)."""
+
+
+class Parser(argparse.ArgumentParser):
+    """An ArgumentParser that raises :class:`UsageError` instead of printing usage."""
+
+    def error(self, message: str) -> None:  # noqa: D102 - one-line usage errors
+        raise UsageError(message)
+
+
+def run_command(prog: str, parser: argparse.ArgumentParser,
+                run: Callable[[argparse.Namespace], int],
+                argv: Sequence[str] | None = None) -> int:
+    """Parse ``argv`` and call ``run``; map bad input to one line and status 2.
+
+    Parameters
+    ----------
+    prog : str
+        Program name for the error line.
+    parser : argparse.ArgumentParser
+        The tool's parser (a :class:`Parser`).
+    run : callable
+        Takes the parsed arguments, returns the exit status.
+    argv : sequence of str, optional
+        Arguments (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status: ``run``'s, 0 for ``--help``, 2 for bad input.
+    """
+    try:
+        args = parser.parse_args(None if argv is None else list(argv))
+        return run(args)
+    except SystemExit as exc:  # --help / --version
+        return int(exc.code or 0)
+    except (ValueError, TypeError, KeyError, OSError) as exc:
+        text = str(exc).strip().splitlines()
+        message = text[0] if text else type(exc).__name__
+        print(f'{prog}: error: {message}', file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f'{prog}: interrupted', file=sys.stderr)
+        return 130
