@@ -61,7 +61,7 @@ def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
 
 
 def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: int,
-               tol: float) -> tuple[np.ndarray, np.ndarray, int]:
+               tol: float | None) -> tuple[np.ndarray, np.ndarray, int]:
     nc = int(orders.nc[i])
     start = orders.row_start(i)
     Phis = [arx_regressors(d.y, d.u, orders, i, start) for d in experiments]
@@ -113,7 +113,7 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
 
 
 def armax(data: IdData | Sequence[IdData], na: object, nb: object, nc: object,
-          nk: object = 1, max_iter: int = 50, tol: float = 1e-9) -> PolyModel:
+          nk: object = 1, max_iter: int = 50, tol: float | None = None) -> PolyModel:
     """Estimate an ARMAX model ``A(q) y(t) = B(q) u(t - nk) + C(q) e(t)``.
 
     Parameters
@@ -128,8 +128,9 @@ def armax(data: IdData | Sequence[IdData], na: object, nb: object, nc: object,
         Orders of the diagonal ``C``.
     max_iter : int
         Maximum Levenberg-Marquardt steps per output.
-    tol : float
-        Relative loss decrease that ends the iterations.
+    tol : float, optional
+        Relative loss decrease that ends the iterations (default ``1e-3 / N``,
+        see :func:`~.pem.levenberg_marquardt`).
 
     Returns
     -------

@@ -28,14 +28,33 @@ from .correlation import block_sizes, lag_gram
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
+from .pem import stabilize
+from .polynomial import pack, unpack
 from .regression import check_data, finish_model
 
 __all__ = ['iv4']
 
 
-def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData]
-              ) -> list[np.ndarray]:
+def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
+              fallback: np.ndarray | None = None) -> list[np.ndarray]:
+    """Noise-free outputs ``x = A^-1 B u`` used as instruments.
+
+    An unstable ``A`` would make the instruments blow up: its roots are
+    reflected into the unit disc (uncoupled ``A``), or the ``fallback``
+    parameters are used (cross-coupled ``A``).  Any stable model gives valid
+    instruments; only their efficiency is affected.
+    """
     model = PolyModel('arx', orders, theta, experiments[0].Ts, np.eye(orders.ny))
+    if not model.is_stable:
+        if not model._coupled:
+            A, B, C, D, F = unpack(orders, theta)
+            for i in range(orders.ny):
+                n = orders.na[i, i] + 1
+                A[i, i, :n] = stabilize(A[i, i, :n])
+            model = PolyModel('arx', orders, pack(orders, (A, B, C, D, F)), model.Ts,
+                              np.eye(orders.ny))
+        elif fallback is not None:
+            return _simulate(orders, fallback, experiments)
     return [model.simulate(d.u) for d in experiments]
 
 
@@ -90,7 +109,8 @@ def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
     return filters
 
 
-def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1) -> PolyModel:
+def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
+        refine: int = 0) -> PolyModel:
     """Estimate an ARX model by the four-stage instrumental-variable method.
 
     Parameters
@@ -101,6 +121,11 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1)
         Orders of ``A``.
     nb, nk : int or array_like (ny, nu)
         Numbers of ``B`` coefficients and delays in samples.
+    refine : int
+        Extra passes of stages 3-4 (prefilter and instruments rebuilt from the
+        latest estimate).  0 is exactly the toolbox's four stages; one pass
+        lowers the variance at low signal-to-noise ratios, where the stage-2
+        estimate that builds the final instruments is poor.
 
     Returns
     -------
@@ -117,14 +142,19 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1)
     thetas2, _ = _iv_rows([signal_matrix(d, x) for d, x in zip(experiments, x1, strict=True)],
                           orders, covariance=False)
     theta2 = np.concatenate(thetas2)
-    prefilters = _noise_prefilters(experiments, orders, theta2)
-    x2 = _simulate(orders, theta2, experiments)
-    thetas4, covs4 = [], []
-    for i, L in enumerate(prefilters):
-        signals = [lfilter(L, 1.0, signal_matrix(d, x), axis=1)
-                   for d, x in zip(experiments, x2, strict=True)]
-        thetas, covs = _iv_rows(signals, orders, len(L) - 1, rows=[i])
-        thetas4.append(thetas[0])
-        covs4.append(covs[0])
-    return finish_model('iv4', orders, np.concatenate(thetas4), sla.block_diag(*covs4),
-                        experiments, 'IV4 (four-stage instrumental variables)')
+    theta_prev, cov = theta2, None
+    for _ in range(1 + max(0, int(refine))):
+        prefilters = _noise_prefilters(experiments, orders, theta_prev)
+        x2 = _simulate(orders, theta_prev, experiments, fallback=theta1)
+        thetas4, covs4 = [], []
+        for i, L in enumerate(prefilters):
+            signals = [lfilter(L, 1.0, signal_matrix(d, x), axis=1)
+                       for d, x in zip(experiments, x2, strict=True)]
+            thetas, covs = _iv_rows(signals, orders, len(L) - 1, rows=[i])
+            thetas4.append(thetas[0])
+            covs4.append(covs[0])
+        theta_prev, cov = np.concatenate(thetas4), sla.block_diag(*covs4)
+    method = 'IV4 (four-stage instrumental variables)'
+    if refine:
+        method += f', {int(refine)} refinement pass(es)'
+    return finish_model('iv4', orders, theta_prev, cov, experiments, method)

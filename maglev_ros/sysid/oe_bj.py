@@ -131,7 +131,7 @@ def _box_jenkins(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf:
 
 
 def oe(data: IdData | Sequence[IdData], nb: int, nf: int, nk: int = 1,
-       max_iter: int = 100, tol: float = 1e-9) -> PolyModel:
+       max_iter: int = 100, tol: float | None = None) -> PolyModel:
     """Estimate an output-error model ``y = B/F u(t - nk) + e`` (SISO).
 
     Parameters
@@ -146,8 +146,9 @@ def oe(data: IdData | Sequence[IdData], nb: int, nf: int, nk: int = 1,
         Input delay in samples.
     max_iter : int
         Maximum Levenberg-Marquardt steps.
-    tol : float
-        Relative loss decrease that ends the iterations.
+    tol : float, optional
+        Relative loss decrease that ends the iterations (default ``1e-3 / N``,
+        see :func:`~.pem.levenberg_marquardt`).
 
     Returns
     -------
@@ -158,7 +159,7 @@ def oe(data: IdData | Sequence[IdData], nb: int, nf: int, nk: int = 1,
 
 
 def bj(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf: int, nk: int = 1,
-       max_iter: int = 100, tol: float = 1e-9) -> PolyModel:
+       max_iter: int = 100, tol: float | None = None) -> PolyModel:
     """Estimate a Box-Jenkins model ``y = B/F u(t - nk) + C/D e`` (SISO).
 
     Parameters
@@ -172,8 +173,9 @@ def bj(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf: int, nk: 
         Input delay in samples.
     max_iter : int
         Maximum Levenberg-Marquardt steps.
-    tol : float
-        Relative loss decrease that ends the iterations.
+    tol : float, optional
+        Relative loss decrease that ends the iterations (default ``1e-3 / N``,
+        see :func:`~.pem.levenberg_marquardt`).
 
     Returns
     -------

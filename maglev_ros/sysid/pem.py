@@ -81,7 +81,7 @@ def shift(x: np.ndarray, k: int) -> np.ndarray:
 def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.ndarray],
                         gradient: Callable[[np.ndarray, np.ndarray], np.ndarray],
                         project: Callable[[np.ndarray], np.ndarray] | None = None,
-                        max_iter: int = 50, tol: float = 1e-9) -> PemResult:
+                        max_iter: int = 50, tol: float | None = None) -> PemResult:
     """Minimize ``||e(theta)||^2`` by damped Gauss-Newton steps.
 
     Parameters
@@ -96,8 +96,11 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
         Maps a trial parameter vector into the admissible set.
     max_iter : int
         Maximum number of steps.
-    tol : float
-        Stop when the relative loss decrease is below ``tol``.
+    tol : float, optional
+        Stop when the relative loss decrease (achieved, or predicted by the
+        Gauss-Newton model) is below ``tol``.  Default ``1e-3 / N``: a step
+        that changes the loss by less moves the parameters by less than about
+        0.03 of their standard deviations, i.e. statistically nothing.
 
     Returns
     -------
@@ -110,6 +113,7 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
     e = errors(theta)
     V = float(e @ e)
     psi = gradient(theta, e)
+    tol = 1e-3 / max(e.shape[0], 1) if tol is None else float(tol)
     mu = 1e-4
     iterations = 0
     p = theta.size
@@ -123,6 +127,8 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
             step = np.linalg.solve(H + mu * np.diag(diag), g)
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(H + mu * np.diag(diag), g, rcond=None)[0]
+        if float(g @ step) < tol * V:  # predicted improvement negligible: converged
+            break
         trial = theta + step
         if project is not None:
             trial = project(trial)
