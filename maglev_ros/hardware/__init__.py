@@ -2,10 +2,12 @@
 
 Re-exports only; see the modules: ``packet`` (V2x command packets),
 ``v2x_stream`` (V2x record decoder), ``v4x_telemetry`` (V4x text telemetry),
-``scaling`` (current <-> PWM), ``firmware`` (board emulators) and
+``scaling`` (current <-> PWM), ``board_clock`` (board time to host time),
+``serial_link`` (the port handle), ``firmware`` (board emulators) and
 ``virtual_board`` (an emulator on a pty).
 """
 
+from .board_clock import BoardClock
 from .firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from .packet import (
     CommandParser,
@@ -16,6 +18,7 @@ from .packet import (
     sendable_pwm,
 )
 from .scaling import CurrentScaling, ScalingError
+from .serial_link import Backoff, LinkError, SerialLink
 from .v2x_stream import (
     DecoderStats,
     PlausibilityBounds,
@@ -38,18 +41,22 @@ from .v4x_telemetry import (
 from .virtual_board import BoardStatus, VirtualBoard, VirtualBoardError
 
 __all__ = [
+    'Backoff',
+    'BoardClock',
     'BoardStatus',
     'CommandParser',
     'CurrentScaling',
     'DecoderStats',
     'InfoMessage',
     'LinearPlant',
+    'LinkError',
     'PacketError',
     'Plant',
     'PlausibilityBounds',
     'RecordBatch',
     'RecordDecoder',
     'ScalingError',
+    'SerialLink',
     'Severity',
     'TelemetryError',
     'TelemetrySample',

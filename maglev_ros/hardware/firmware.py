@@ -190,6 +190,8 @@ class V2xFirmware:
         self._burst_field: list[NDArray] = []
         self._burst_pwm: list[NDArray] = []
         self.watchdog_trips = 0
+        self.records_written = 0  # records emitted in bursts (before any tampering)
+        self.records_since_open = 0  # the same, since the host last opened the port
         # (tick in us since power-up, PWM counts) of each accepted packet, newest last
         self.accepted: deque[tuple[int, tuple[int, int, int, int]]] = deque(maxlen=100_000)
 
@@ -224,6 +226,7 @@ class V2xFirmware:
         filled burst is discarded.
         """
         self._loop.suspend()
+        self.records_since_open = 0
         self._burst_t.clear()
         self._burst_field.clear()
         self._burst_pwm.clear()
@@ -262,6 +265,8 @@ class V2xFirmware:
                     np.stack(self._burst_field),
                     np.stack(self._burst_pwm),
                 )
+                self.records_written += BURST_RECORDS
+                self.records_since_open += BURST_RECORDS
                 if loop.tampers:
                     burst = loop.tampers.popleft()(burst)
                 out.append(burst)

@@ -28,6 +28,7 @@ import tempfile
 import threading
 import time
 import tty
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -109,6 +110,8 @@ class VirtualBoard:
         self._lock = threading.RLock()
         self._thread: threading.Thread | None = None
         self._stop = threading.Event()
+        self._paused = threading.Event()
+        self._tampers: deque[Callable[[bytes], bytes]] = deque()
         self._master: int | None = None
         self._device: str | None = None
         self._firmware: Firmware | None = None
@@ -209,9 +212,13 @@ class VirtualBoard:
     # -- faults and plugging ----------------------------------------------------
 
     def tamper_next_burst(self, edit: Callable[[bytes], bytes]) -> None:
-        """Pass the next burst (V2x) or line (V4x) through ``edit`` before writing."""
+        """Pass the next output the host receives through ``edit`` (fault injection).
+
+        The edit applies to the next write to an open port: one burst (V2x)
+        or line (V4x), or several if the loop had to catch up.
+        """
         with self._lock:
-            self.firmware.tamper_next_burst(edit)
+            self._tampers.append(edit)
 
     def inject(self, data: bytes) -> None:
         """Write raw bytes to the host now, between two bursts."""
@@ -252,6 +259,18 @@ class VirtualBoard:
             self._device = device
             self._t0 = time.monotonic()
             self._plugs += 1
+
+    def pause(self) -> None:
+        """Stall the board's loop (no output, no parsing) until ``resume``.
+
+        The clock keeps running: on ``resume`` the loop catches up and writes
+        the samples of the stall at once, like a board whose USB link stalled.
+        """
+        self._paused.set()
+
+    def resume(self) -> None:
+        """End a ``pause``."""
+        self._paused.clear()
 
     def replug(self, downtime: float = 0.0) -> None:
         """Unplug, wait ``downtime`` seconds, plug in again."""
@@ -317,14 +336,16 @@ class VirtualBoard:
             while not self._stop.is_set():
                 with self._lock:
                     master = self._master
-                    if master is not None:
+                    if master is not None and not self._paused.is_set():
                         now_us = int((time.monotonic() - self._t0) * 1e6)
                         out = self._firmware.advance_to(now_us)
                         if out and self._port_open:
+                            if self._tampers:
+                                out = self._tampers.popleft()(out)
                             self._write(out)
                         self._poll_input()
                     port_open = self._port_open
-                if master is None or not port_open:
+                if master is None or not port_open or self._paused.is_set():
                     time.sleep(_CLOSED_POLL_S)
                     continue
                 try:

@@ -1,0 +1,606 @@
+"""Board driver node: ``ros2 run maglev_ros driver``.
+
+Talks to a Maggy board (or ``maglev-virtual-board``) over a serial port and
+publishes on the shared topics (``docs/topics.md``), exactly like the
+simulator node:
+
+* ``maglev/sensor_<k>/field`` (sensor_msgs/MagneticField): the field of
+  sensor k in tesla, frame from ``sensor_frames``, stamped with the board's
+  sample time mapped to ROS time (``hardware.board_clock``: offset and drift
+  estimated, stamps strictly increasing). V2x fields are the raw sensor
+  fields (what the model predicts); V4x fields are after the board's own
+  baseline and feedthrough removal (reported in ``/diagnostics``).
+* ``maglev/currents`` (sensor_msgs/JointState, names x+ x- y+ y-): effort
+  = coil current in A; V2x: the current implied by the applied PWM through
+  the scaling below; V4x: the measured current.
+* subscribes ``maglev/currents/command`` (std_msgs/Float64MultiArray, 4
+  currents in A) and sends each valid command as one packet (V2x only; V4x
+  is read-only and ignores commands);
+* service ``maglev/enable`` (std_srvs/SetBool): disabled means zero
+  currents whatever is commanded; ``start_enabled`` sets the state at
+  start-up;
+* ``/diagnostics``: link state, records/s, resyncs, dropped bytes, command
+  rate, rejected and clamped commands, timeouts, reconnects.
+
+Commands: a command of the wrong length or with a NaN or infinite value is
+rejected (nothing is sent, the command timeout keeps running); values
+beyond +-``current_limit`` are clamped to it. Both cases log a throttled
+warning and are counted. Zero currents are sent when no valid command came
+for ``command_timeout`` s, when disabled, on shutdown (SIGINT, SIGTERM,
+``destroy_node``) and after an error the I/O loop cannot handle. The link
+survives unplugging: the port is reopened with exponential back-off.
+
+Scaling (V2x): ``counts = round(counts_per_ampere * I)``, clamped to +-4096,
+with ``counts_per_ampere = 4096 * coil_resistance / supply_voltage`` unless
+``counts_per_ampere`` is set (> 0).
+
+QoS: sensor fields and currents are RELIABLE, KEEP_LAST 1000 (every sample
+must arrive for identification; 1000 samples = 0.2 s at 5 kHz); the command
+subscription is BEST_EFFORT, KEEP_LAST 10, which matches both reliable and
+best-effort publishers.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState, MagneticField
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
+
+from maglev_ros.hardware.board_clock import BoardClock
+from maglev_ros.hardware.packet import encode_command
+from maglev_ros.hardware.scaling import CurrentScaling
+from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
+from maglev_ros.hardware.v2x_stream import RecordDecoder
+from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
+
+__all__ = ['DriverConfig', 'DriverNode', 'DriverParameterError', 'main']
+
+NODE_NAME = 'maglev_driver'
+COIL_NAMES = ['x+', 'x-', 'y+', 'y-']
+DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
+SENSOR_QOS = QoSProfile(
+    depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
+)
+COMMAND_QOS = QoSProfile(
+    depth=10, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST
+)
+WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
+_ZERO = np.zeros(4)
+
+
+class DriverParameterError(ValueError):
+    """A driver parameter has an invalid value."""
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """Validated driver parameters (see the module docstring for meanings).
+
+    Attributes
+    ----------
+    port : str
+        Serial device path.
+    firmware : str
+        ``'v2x'`` or ``'v4x'``.
+    baudrate : int
+        Baud rate.
+    n_sensors : int
+        Sensors per record or line.
+    sensor_frames : tuple of str
+        Frame id of each sensor's field messages.
+    scaling : CurrentScaling
+        Current to PWM map (V2x).
+    current_limit : float
+        Largest commanded current magnitude in A.
+    command_timeout : float
+        s without a valid command before zero currents are sent.
+    start_enabled : bool
+        Enable state at start-up.
+    reconnect_min_delay, reconnect_max_delay : float
+        Back-off bounds in s for reopening the port.
+    diagnostics_period : float
+        s between diagnostics messages.
+    """
+
+    port: str
+    firmware: str
+    baudrate: int
+    n_sensors: int
+    sensor_frames: tuple[str, ...]
+    scaling: CurrentScaling
+    current_limit: float
+    command_timeout: float
+    start_enabled: bool
+    reconnect_min_delay: float
+    reconnect_max_delay: float
+    diagnostics_period: float
+
+
+def _positive(name: str, value: float) -> float:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise DriverParameterError(f'{name} must be a positive finite number, got {value!r}')
+    return float(value)
+
+
+def build_config(values: dict) -> DriverConfig:
+    """Validate raw parameter values and build a ``DriverConfig``.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name to value, as declared by ``DriverNode``.
+
+    Returns
+    -------
+    DriverConfig
+        The validated configuration.
+
+    Raises
+    ------
+    DriverParameterError
+        Naming the first invalid parameter and its value.
+    """
+    firmware = values['firmware']
+    if firmware not in DEFAULT_BAUD:
+        raise DriverParameterError(f"firmware must be 'v2x' or 'v4x', got {firmware!r}")
+    port = values['port']
+    if not port:
+        raise DriverParameterError('port must be a device path, got an empty string')
+    baudrate = values['baudrate'] or DEFAULT_BAUD[firmware]
+    if baudrate < 0:
+        raise DriverParameterError(f'baudrate must be > 0 (0: default), got {baudrate}')
+    n_sensors = values['n_sensors']
+    if not 1 <= n_sensors <= 64:
+        raise DriverParameterError(f'n_sensors must be in 1 .. 64, got {n_sensors}')
+    frames = tuple(values['sensor_frames'])
+    if not frames:
+        frames = tuple(f'maglev_sensor_{k}' for k in range(n_sensors))
+    if len(frames) != n_sensors:
+        raise DriverParameterError(
+            f'sensor_frames must name {n_sensors} frames (n_sensors), got {list(frames)}'
+        )
+    cpa = values['counts_per_ampere']
+    if cpa:
+        scaling = CurrentScaling(_positive('counts_per_ampere', cpa))
+    else:
+        scaling = CurrentScaling.from_supply(
+            _positive('supply_voltage', values['supply_voltage']),
+            _positive('coil_resistance', values['coil_resistance']),
+        )
+    limit = values['current_limit']
+    limit = scaling.max_current if limit == 0 else _positive('current_limit', limit)
+    min_delay = _positive('reconnect_min_delay', values['reconnect_min_delay'])
+    max_delay = _positive('reconnect_max_delay', values['reconnect_max_delay'])
+    if max_delay < min_delay:
+        raise DriverParameterError(
+            f'reconnect_max_delay must be >= reconnect_min_delay ({min_delay}), got {max_delay}'
+        )
+    return DriverConfig(
+        port=port,
+        firmware=firmware,
+        baudrate=baudrate,
+        n_sensors=n_sensors,
+        sensor_frames=frames,
+        scaling=scaling,
+        current_limit=limit,
+        command_timeout=_positive('command_timeout', values['command_timeout']),
+        start_enabled=bool(values['start_enabled']),
+        reconnect_min_delay=min_delay,
+        reconnect_max_delay=max_delay,
+        diagnostics_period=_positive('diagnostics_period', values['diagnostics_period']),
+    )
+
+
+# name: (default, description); read-only ones need a restart to change
+_PARAMETERS = {
+    'port': ('/dev/ttyACM0', 'serial device path (a udev symlink is best)', True),
+    'firmware': ('v2x', "board firmware family: 'v2x' (binary) or 'v4x' (text)", True),
+    'baudrate': (0, 'baud rate; 0: 9600 for v2x, 115200 for v4x', True),
+    'n_sensors': (1, 'number of sensors per record (not announced by the board)', True),
+    'sensor_frames': ([], 'frame id per sensor; empty: maglev_sensor_<k>', True),
+    'supply_voltage': (12.0, 'H-bridge supply voltage in V (V2x scaling)', True),
+    'coil_resistance': (4.0, 'coil resistance in ohm, wiring included (V2x scaling)', True),
+    'counts_per_ampere': (0.0, 'PWM counts per A; > 0 overrides voltage/resistance', True),
+    'current_limit': (0.0, 'largest commanded |current| in A; 0: full duty (V/R)', False),
+    'command_timeout': (0.1, 's without a valid command before zero currents', False),
+    'start_enabled': (False, 'enable state at start-up (disabled: zero currents)', True),
+    'reconnect_min_delay': (0.2, 's, first delay before reopening the port', True),
+    'reconnect_max_delay': (5.0, 's, longest delay between reopen attempts', True),
+    'diagnostics_period': (1.0, 's between /diagnostics messages', True),
+}
+
+
+class DriverNode(Node):
+    """The board driver (see the module docstring).
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node`` (e.g. ``context``,
+        ``parameter_overrides``).
+
+    Raises
+    ------
+    DriverParameterError
+        If a parameter is invalid.
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for name, (default, text, read_only) in _PARAMETERS.items():
+            descriptor = ParameterDescriptor(description=text, read_only=read_only)
+            if name == 'sensor_frames':  # [''] declares the type; empty strings are dropped
+                self.declare_parameter(name, [''], descriptor)
+            else:
+                self.declare_parameter(name, default, descriptor)
+        values = {name: self.get_parameter(name).value for name in _PARAMETERS}
+        values['sensor_frames'] = [f for f in values['sensor_frames'] if f]
+        self.config = build_config(values)
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        cfg = self.config
+        self._v2x = cfg.firmware == 'v2x'
+        self._link = SerialLink(cfg.port, cfg.baudrate)
+        self._backoff = Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay)
+        self._decoder = RecordDecoder(cfg.n_sensors)
+        self._telemetry = TelemetryStream(cfg.n_sensors)
+        self._board_clock = BoardClock()
+        self._lock = threading.Lock()  # command state
+        self._enabled = cfg.start_enabled
+        self._last_command_ns: int | None = None
+        self._timed_out = False
+        self._applied = np.zeros(4, dtype=np.int64)  # PWM counts last sent
+        self.link_state = 'connecting'
+        self._connections = 0
+        self.counters = dict.fromkeys(
+            (
+                'records',
+                'commands_sent',
+                'commands_rejected',
+                'commands_clamped',
+                'commands_unsent',
+                'timeouts',
+                'reconnects',
+                'io_errors',
+                'info_messages',
+                'resyncs',
+                'dropped_bytes',
+            ),
+            0,
+        )
+        self._base = {'resyncs': 0, 'dropped_bytes': 0}  # of earlier connections
+        self._rate_mark = (time.monotonic(), 0, 0)
+        self.last_info = ''
+        self._field_pubs = [
+            self.create_publisher(MagneticField, f'maglev/sensor_{k}/field', SENSOR_QOS)
+            for k in range(cfg.n_sensors)
+        ]
+        self._field_msgs = [MagneticField() for _ in range(cfg.n_sensors)]
+        for msg, frame in zip(self._field_msgs, cfg.sensor_frames, strict=True):
+            msg.header.frame_id = frame
+        self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
+        self._current_msg = JointState(name=list(COIL_NAMES))
+        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self.create_subscription(
+            Float64MultiArray, 'maglev/currents/command', self._on_command, COMMAND_QOS
+        )
+        self.create_service(SetBool, 'maglev/enable', self._on_enable)
+        self.create_timer(min(0.02, cfg.command_timeout / 4), self._check_timeout)
+        self.create_timer(cfg.diagnostics_period, self._publish_diagnostics)
+        kind = 'raw sensor fields' if self._v2x else 'fields after on-board baseline removal'
+        self.get_logger().info(
+            f'{cfg.firmware} board on {cfg.port}, {cfg.n_sensors} sensor(s), publishing {kind}; '
+            f'{cfg.scaling.counts_per_ampere:.1f} counts/A, limit {cfg.current_limit:.3f} A, '
+            f'{"enabled" if self._enabled else "disabled"}'
+        )
+        self._stop = threading.Event()
+        self._closed = False
+        self._io = threading.Thread(target=self._io_loop, name='maglev-driver-io', daemon=True)
+        self._io.start()
+
+    # -- parameters -------------------------------------------------------------
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        updates = {}
+        for param in params:
+            if param.name == 'current_limit':
+                value = param.value
+                if value == 0:
+                    value = self.config.scaling.max_current
+                elif not (isinstance(value, float) and math.isfinite(value) and value > 0):
+                    return SetParametersResult(
+                        successful=False,
+                        reason=f'current_limit must be a positive finite number, got {value!r}',
+                    )
+                updates['current_limit'] = value
+            elif param.name == 'command_timeout':
+                value = param.value
+                if not (isinstance(value, float) and math.isfinite(value) and value > 0):
+                    return SetParametersResult(
+                        successful=False,
+                        reason=f'command_timeout must be a positive finite number, got {value!r}',
+                    )
+                updates['command_timeout'] = value
+        if updates:
+            self.config = DriverConfig(**{**self.config.__dict__, **updates})
+        return SetParametersResult(successful=True)
+
+    # -- commands ---------------------------------------------------------------
+
+    @property
+    def enabled(self) -> bool:
+        """Whether commands are applied (else zero currents are sent)."""
+        return self._enabled
+
+    def _send(self, currents: np.ndarray) -> None:
+        """Send currents (A, shape (4,)) as one packet (V2x); count failures."""
+        if not self._v2x:
+            return
+        counts = self.config.scaling.to_counts(currents)
+        try:
+            self._link.write(encode_command(counts))
+        except LinkError:
+            self.counters['commands_unsent'] += 1
+            return
+        self._applied = counts
+        self.counters['commands_sent'] += 1
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        values = np.asarray(msg.data, dtype=float)
+        log = self.get_logger()
+        if values.shape != (4,):
+            self.counters['commands_rejected'] += 1
+            log.warning(
+                f'rejected command: need 4 currents (x+, x-, y+, y-), got {values.size}',
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+            return
+        if not np.all(np.isfinite(values)):
+            self.counters['commands_rejected'] += 1
+            log.warning(
+                f'rejected command: currents must be finite, got {values.tolist()}',
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+            return
+        limit = self.config.current_limit
+        if np.any(np.abs(values) > limit):
+            self.counters['commands_clamped'] += 1
+            log.warning(
+                f'clamped command {values.tolist()} A to +-{limit:.3f} A',
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+            values = np.clip(values, -limit, limit)
+        with self._lock:
+            self._last_command_ns = time.monotonic_ns()
+            self._timed_out = False
+            self._send(values if self._enabled else _ZERO)
+
+    def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
+        with self._lock:
+            self._enabled = bool(request.data)
+            if not self._enabled:
+                self._send(_ZERO)
+        response.success = True
+        response.message = 'enabled' if self._enabled else 'disabled: zero currents sent'
+        self.get_logger().info(f'driver {response.message}')
+        return response
+
+    def _check_timeout(self) -> None:
+        with self._lock:
+            if self._last_command_ns is None or self._timed_out:
+                return
+            age = (time.monotonic_ns() - self._last_command_ns) * 1e-9
+            if age > self.config.command_timeout:
+                self._timed_out = True
+                self.counters['timeouts'] += 1
+                self._send(_ZERO)
+                self.get_logger().warning(
+                    f'no valid command for {age:.3f} s > {self.config.command_timeout} s: '
+                    'zero currents sent',
+                    throttle_duration_sec=WARN_THROTTLE_S,
+                )
+
+    # -- board I/O --------------------------------------------------------------
+
+    def _io_loop(self) -> None:
+        log = self.get_logger()
+        while not self._stop.is_set():
+            if not self._link.is_open:
+                try:
+                    self._link.open()
+                except LinkError as err:
+                    self.link_state = 'waiting for board'
+                    delay = self._backoff.next_delay()
+                    log.warning(f'{err}; retrying in {delay:.1f} s', throttle_duration_sec=5.0)
+                    self._stop.wait(delay)
+                    continue
+                self._on_connected()
+            try:
+                data = self._link.read()
+                if data:
+                    self._handle(data)
+            except LinkError as err:
+                self._on_disconnected(f'link lost: {err}')
+            except Exception as err:  # noqa: BLE001 - zero the coils, then reconnect
+                self.counters['io_errors'] += 1
+                log.error(f'unexpected error on the board link: {err!r}; zeroing and reconnecting')
+                with self._lock:
+                    self._send(_ZERO)
+                self._on_disconnected('error')
+                self._stop.wait(self._backoff.next_delay())
+
+    def _on_connected(self) -> None:
+        self._connections += 1
+        self.counters['reconnects'] = self._connections - 1
+        self._backoff.reset()
+        self._decoder = RecordDecoder(self.config.n_sensors)
+        self._telemetry = TelemetryStream(self.config.n_sensors)
+        self._board_clock = BoardClock()  # the board may have been power-cycled
+        self.link_state = 'connected'
+        self.get_logger().info(f'connected to {self.config.port}')
+        with self._lock:
+            self._send(_ZERO)  # a known state; applied once the board's loop runs
+
+    def _on_disconnected(self, reason: str) -> None:
+        self._link.close()
+        self._base['resyncs'] += self._decoder.stats.resyncs
+        self._base['dropped_bytes'] += self._decoder.stats.dropped_bytes
+        self._decoder = RecordDecoder(self.config.n_sensors)
+        self.link_state = 'disconnected'
+        self.get_logger().warning(f'{self.config.port}: {reason}')
+
+    def _handle(self, data: bytes) -> None:
+        host_ns = self.get_clock().now().nanoseconds
+        if self._v2x:
+            batch = self._decoder.feed(data)
+            if len(batch):
+                self._board_clock.observe(int(batch.time_us[-1]), host_ns)
+                stamps = self._board_clock.to_host(batch.time_us)
+                field_t = batch.field_mT.astype(np.float64) * 1e-3  # mT -> T
+                currents = self.config.scaling.to_current(batch.pwm)
+                self._publish(stamps, field_t, currents)
+            return
+        samples = []
+        for item in self._telemetry.feed(data):
+            if isinstance(item, InfoMessage):
+                self.counters['info_messages'] += 1
+                self.last_info = item.text
+                if item.severity >= Severity.WARN:
+                    self.get_logger().warning(f'board: {item.text}')
+                else:
+                    self.get_logger().info(f'board: {item.text}')
+            else:
+                samples.append(item)
+        if samples:
+            board_us = np.array([round(s.time * 1e6) for s in samples], dtype=np.int64)
+            self._board_clock.observe(int(board_us[-1]), host_ns)
+            stamps = self._board_clock.to_host(board_us)
+            field_t = np.stack([s.field_mT for s in samples]) * 1e-3
+            currents = np.stack([s.current for s in samples])
+            self._publish(stamps, field_t, currents)
+
+    def _publish(self, stamps: np.ndarray, field_t: np.ndarray, currents: np.ndarray) -> None:
+        """Publish n samples: stamps (n,) ns, fields (n, N, 3) T, currents (n, 4) A."""
+        secs = (stamps // 1_000_000_000).tolist()
+        nsecs = (stamps % 1_000_000_000).tolist()
+        fields = field_t.tolist()
+        amps = currents.tolist()
+        pubs = self._field_pubs
+        msgs = self._field_msgs
+        joint = self._current_msg
+        for i, (sec, nsec) in enumerate(zip(secs, nsecs, strict=True)):
+            for k, msg in enumerate(msgs):
+                stamp = msg.header.stamp
+                stamp.sec = sec
+                stamp.nanosec = nsec
+                vec = msg.magnetic_field
+                vec.x, vec.y, vec.z = fields[i][k]
+                pubs[k].publish(msg)
+            joint.header.stamp.sec = sec
+            joint.header.stamp.nanosec = nsec
+            joint.effort = amps[i]
+            self._current_pub.publish(joint)
+        self.counters['records'] += len(secs)
+
+    # -- diagnostics ------------------------------------------------------------
+
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        then, records, sent = self._rate_mark
+        span = max(now - then, 1e-9)
+        self._rate_mark = (now, self.counters['records'], self.counters['commands_sent'])
+        stats = self._decoder.stats
+        self.counters['resyncs'] = self._base['resyncs'] + stats.resyncs
+        self.counters['dropped_bytes'] = self._base['dropped_bytes'] + stats.dropped_bytes
+        if self.link_state != 'connected':
+            level, message = DiagnosticStatus.ERROR, f'board link {self.link_state}'
+        elif self._timed_out:
+            level, message = DiagnosticStatus.WARN, 'command timeout: zero currents'
+        else:
+            level, message = DiagnosticStatus.OK, 'connected'
+        values = {
+            'link state': self.link_state,
+            'firmware': self.config.firmware,
+            'field kind': 'raw' if self._v2x else 'baseline and feedthrough removed (V4x)',
+            'enabled': str(self._enabled),
+            'records/s': f'{(self.counters["records"] - records) / span:.1f}',
+            'command rate (1/s)': f'{(self.counters["commands_sent"] - sent) / span:.1f}',
+            'applied PWM (counts)': ' '.join(str(int(c)) for c in self._applied),
+            'last board message': self.last_info,
+        }
+        values.update({name.replace('_', ' '): str(v) for name, v in self.counters.items()})
+        status = DiagnosticStatus(
+            level=level,
+            name=f'{NODE_NAME}: board link',
+            message=message,
+            hardware_id=self.config.port,
+            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        )
+        array = DiagnosticArray(status=[status])
+        array.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(array)
+
+    # -- shutdown ---------------------------------------------------------------
+
+    def close(self) -> None:
+        """Stop the I/O thread, send zero currents (V2x) and close the port (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        self._io.join(timeout=2.0)
+        if self._v2x and self._link.is_open:
+            with self._lock:
+                self._send(_ZERO)
+        self._link.close()
+
+    def destroy_node(self) -> None:
+        """Close the board link (zero currents first), then destroy the node."""
+        self.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the driver until SIGINT or SIGTERM.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS arguments included).
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 2 for invalid parameters.
+    """
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = DriverNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except DriverParameterError as err:
+        rclpy.logging.get_logger(NODE_NAME).error(str(err))
+        return 2
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
