@@ -53,8 +53,9 @@ KINEMATICS = ('rigid', 'published')
 STATE_NAMES = ('x', 'y', 'z', 'alpha', 'beta', 'gamma', 'vx', 'vy', 'vz', 'wx', 'wy', 'wz')
 
 #: Rim points of the fast model. The periodic trapezoidal rule converges
-#: geometrically: 32 points agree with 400 to about 1e-12 relative in force at
-#: the V2 and V4 equilibria and to 1e-9 within 3 mm / 0.1 rad of them (tests).
+#: geometrically: 32 points agree with 400 to about 1e-15 (V2) and 3e-11 (V4)
+#: relative in force at the equilibria and to better than 1e-9 within 3 mm /
+#: 0.1 rad of them (tests and benchmarks/physics.py).
 DEFAULT_RIM_POINTS = 32
 #: Points across the thickness of the accurate/filament rim surface (odd), and
 #: around it: the published reference's 21 x 100 grid.
