@@ -6,11 +6,12 @@ each row is a separate minimization of ``sum e_i(t)^2``:
 
 * prediction error ``e_i = (A_i y - B_i u) / C_i`` (``lfilter``, zero initial
   state at the first sample where all regressors exist);
-* gradient ``psi = [phi_AB, e(t-1) .. e(t-nc)] / C_i`` (``y``, ``u`` and ``e`` are
-  filtered by ``1/C_i`` once per iteration and then lagged);
-* start: a high-order ARX row gives innovation estimates, then a linear
-  regression on ``[phi_AB, e_hat lags]`` (Hannan-Rissanen), ``C`` reflected to
-  minimum phase;
+* gradient ``psi = [phi_AB, e(t-1) .. e(t-nc)] / C_i``: ``y``, ``u`` and ``e`` are
+  filtered by ``1/C_i`` once per iteration and ``psi^T psi``, ``psi^T e`` are
+  formed from their lagged correlations (:mod:`~.correlation`), never ``psi``;
+* start: a high-order ARX row (normal equations from correlations) gives
+  innovation estimates, then a linear regression on ``[phi_AB, e_hat lags]``
+  (Hannan-Rissanen), ``C`` reflected to minimum phase;
 * Levenberg-Marquardt iterations (:mod:`maglev_ros.sysid.pem`) with ``C`` kept
   minimum phase by root reflection.
 """
@@ -23,26 +24,37 @@ import numpy as np
 import scipy.linalg as sla
 from scipy.signal import lfilter
 
-from .arx import least_squares
+from .arx import correlation_solve, least_squares, row_blocks, signal_matrix
+from .correlation import block_sizes, lag_gram
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
 from .pem import levenberg_marquardt, stabilize
-from .regression import (
-    arx_regressors,
-    check_data,
-    finish_model,
-    join,
-    lagged,
-    stack_rows,
-)
+from .regression import arx_regressors, check_data, finish_model, join, stack_rows
 
 __all__ = ['armax']
 
 
+def _row_equation_error(d: IdData, orders: Orders, i: int, theta_ab: np.ndarray) -> np.ndarray:
+    """``A_i y - B_i u`` of one row for all samples (FIR filters, zero past), shape (N,)."""
+    v = d.y[:, i].copy()
+    pos = 0
+    for j in range(orders.ny):
+        n = int(orders.na[i, j])
+        if n:
+            v += np.convolve(d.y[:, j], np.r_[0.0, theta_ab[pos:pos + n]])[:d.N]
+            pos += n
+    for j in range(orders.nu):
+        n, k = int(orders.nb[i, j]), int(orders.nk[i, j])
+        if n:
+            v -= np.convolve(d.u[:, j], np.r_[np.zeros(k), theta_ab[pos:pos + n]])[:d.N]
+            pos += n
+    return v
+
+
 def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
-                         extra: int) -> list[np.ndarray]:
-    """Residuals of a high-order ARX row (zeros where undefined), one array per experiment."""
+                         extra: int) -> list[np.ndarray] | None:
+    """Residuals of a high-order ARX row (zeros before its start), one array per experiment."""
     na = orders.na.copy()
     nb = orders.nb.copy()
     na[i] = np.where(na[i] > 0, na[i] + extra, 0)
@@ -50,12 +62,14 @@ def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
     nb[i] = np.where(nb[i] > 0, nb[i] + extra, 0)
     hi = Orders(na, nb, orders.nk, orders.nc * 0, orders.nd * 0, orders.nf * 0)
     start = hi.row_start(i)
-    Phis = [arx_regressors(d.y, d.u, hi, i, start) for d in experiments]
-    theta, _, _ = least_squares(stack_rows(Phis), join([d.y[start:, i] for d in experiments]))
+    solved = correlation_solve([signal_matrix(d) for d in experiments], row_blocks(hi, i), i,
+                               start)
+    if solved is None:
+        return None
     out = []
-    for d, P in zip(experiments, Phis, strict=True):
-        e = np.zeros(d.N)
-        e[start:] = d.y[start:, i] - P @ theta
+    for d in experiments:
+        e = _row_equation_error(d, hi, i, solved[0])
+        e[:start] = 0.0
         out.append(e)
     return out
 
@@ -63,10 +77,15 @@ def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
 def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: int,
                tol: float | None) -> tuple[np.ndarray, np.ndarray, int]:
     nc = int(orders.nc[i])
-    start = orders.row_start(i)
+    start = max(orders.row_start(i), nc)
+    reg = row_blocks(orders, i)
+    n_ab = block_sizes(reg)
+    if nc == 0:
+        solved = correlation_solve([signal_matrix(d) for d in experiments], reg, i, start)
+        if solved is not None:
+            return solved[0], solved[2] * solved[1], 0
     Phis = [arx_regressors(d.y, d.u, orders, i, start) for d in experiments]
     Ys = [d.y[start:, i] for d in experiments]
-    n_ab = Phis[0].shape[1]
     if nc == 0:
         Phi, Y = stack_rows(Phis), join(Ys)
         theta, Rinv, _ = least_squares(Phi, Y)
@@ -74,11 +93,16 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
         return theta, float(r @ r) / max(1, len(Y) - len(theta)) * Rinv, 0
     usable = min(d.N for d in experiments) - start
     extra = int(min(max(10, 3 * nc), max(1, usable // (8 * (orders.ny + orders.nu)))))
-    ehat = [e[start:] for e in _initial_innovations(experiments, orders, i, extra)]
-    theta0, _, _ = least_squares(
-        stack_rows([np.hstack([P, lagged(np.concatenate([np.zeros(nc), e]), range(1, nc + 1),
-                                         nc)]) for P, e in zip(Phis, ehat, strict=True)]),
-        join(Ys))
+    ehat = _initial_innovations(experiments, orders, i, extra)
+    e_row = orders.ny + orders.nu  # row of the innovation signal in the signal matrices
+    blocks = np.vstack([reg, [[e_row, 1, nc, 1]]]).astype(np.int64)
+    theta0 = None
+    if ehat is not None:
+        first = correlation_solve([signal_matrix(d, e[:, None]) for d, e in
+                                   zip(experiments, ehat, strict=True)], blocks, i, start)
+        theta0 = None if first is None else first[0]
+    if theta0 is None:  # ill-conditioned start: plain ARX with C = 1
+        theta0 = np.r_[least_squares(stack_rows(Phis), join(Ys))[0], np.zeros(nc)]
 
     def project(theta: np.ndarray) -> np.ndarray:
         out = theta.copy()
@@ -90,25 +114,29 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
         return join([lfilter([1.0], C, Y - P @ theta[:n_ab])
                      for P, Y in zip(Phis, Ys, strict=True)])
 
-    def gradient(theta: np.ndarray, e: np.ndarray) -> np.ndarray:
-        # psi = [phi_AB, e lags] / C: filter the raw signals once and lag them (the
-        # lagged-then-filtered columns differ only in a start-up transient).
-        C = np.concatenate([[1.0], theta[n_ab:]])
-        blocks, pos = [], 0
-        for d in experiments:
-            n = d.N - start
-            seg = e[pos:pos + n]
-            pos += n
-            yf = lfilter([1.0], C, d.y, axis=0)
-            uf = lfilter([1.0], C, d.u, axis=0) if d.nu else d.u
-            ef = lfilter([1.0], C, np.concatenate([np.zeros(nc), seg]))
-            psi = np.empty((n, n_ab + nc), order='F')
-            psi[:, :n_ab] = arx_regressors(yf, uf, orders, i, start)
-            psi[:, n_ab:] = lagged(ef, range(1, nc + 1), nc)
-            blocks.append(psi)
-        return stack_rows(blocks)
+    target = np.array([[e_row + 1, 0, 1, 1]], dtype=np.int64)
 
-    result = levenberg_marquardt(theta0, errors, gradient, project, max_iter, tol)
+    def normal(theta: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # psi = [phi_AB, e lags] / C: filter y, u and e by 1/C once, then form
+        # psi^T psi and psi^T e from lagged correlations (psi is never built).
+        C = np.concatenate([[1.0], theta[n_ab:]])
+        H = np.zeros((n_ab + nc, n_ab + nc))
+        g = np.zeros(n_ab + nc)
+        pos = 0
+        for d in experiments:
+            e_full = np.zeros(d.N)
+            e_full[start:] = e[pos:pos + d.N - start]
+            pos += d.N - start
+            S = np.empty((e_row + 2, d.N))
+            S[:orders.ny] = lfilter([1.0], C, d.y.T, axis=1)
+            S[orders.ny:e_row] = lfilter([1.0], C, d.u.T, axis=1)
+            S[e_row] = lfilter([1.0], C, e_full)
+            S[e_row + 1] = e_full
+            H += lag_gram(S, blocks, blocks, start)
+            g += lag_gram(S, blocks, target, start)[:, 0]
+        return H, g
+
+    result = levenberg_marquardt(theta0, errors, normal, project, max_iter, tol)
     return result.theta, result.covariance, result.iterations
 
 

@@ -26,7 +26,7 @@ from .dataset import IdData, as_experiments
 from .iv import iv4
 from .model import PolyModel
 from .orders import OrderError, make_orders
-from .pem import levenberg_marquardt, shift, stabilize
+from .pem import from_jacobian, levenberg_marquardt, shift, stabilize
 from .regression import check_data, finish_model, lagged
 
 __all__ = ['bj', 'oe']
@@ -122,7 +122,7 @@ def _box_jenkins(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf:
             blocks.append(np.column_stack(cols))
         return np.vstack(blocks)
 
-    result = levenberg_marquardt(theta0, errors, gradient, project, max_iter, tol)
+    result = levenberg_marquardt(theta0, errors, from_jacobian(gradient), project, max_iter, tol)
     structure = 'bj' if (nc or nd) else 'oe'
     name = 'BJ' if structure == 'bj' else 'OE'
     return finish_model(structure, orders, result.theta, result.covariance, experiments,

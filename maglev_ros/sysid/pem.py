@@ -1,8 +1,10 @@
 """Prediction-error minimization: Levenberg-Marquardt with analytic gradients.
 
 The structures supply ``errors(theta) -> e`` (prediction errors, stacked over
-experiments) and ``gradient(theta, e) -> psi`` with ``psi = -de/dtheta`` (the
-filtered regressors, computed with ``scipy.signal.lfilter``).  The step solves
+experiments) and ``normal(theta, e) -> (psi^T psi, psi^T e)`` with
+``psi = -de/dtheta`` (the regressors filtered with ``scipy.signal.lfilter``;
+ARMAX forms the products from lagged correlations without building ``psi``,
+see :func:`from_jacobian` for structures that build it).  The step solves
 ``(psi^T psi + mu diag(psi^T psi)) d = psi^T e`` (Gauss-Newton for ``mu -> 0``);
 ``mu`` shrinks after an accepted step and grows after a rejected one.  A
 projection (root reflection) keeps ``C``, ``D`` and ``F`` stable, i.e. the
@@ -16,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['PemResult', 'levenberg_marquardt', 'shift', 'stabilize']
+__all__ = ['PemResult', 'from_jacobian', 'levenberg_marquardt', 'shift', 'stabilize']
 
 
 @dataclass(frozen=True)
@@ -78,8 +80,21 @@ def shift(x: np.ndarray, k: int) -> np.ndarray:
     return out
 
 
+Normal = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
+
+
+def from_jacobian(gradient: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> Normal:
+    """Wrap ``(theta, e) -> psi`` (N, p) as ``(theta, e) -> (psi^T psi, psi^T e)``."""
+
+    def normal(theta: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        psi = gradient(theta, e)
+        return psi.T @ psi, psi.T @ e
+
+    return normal
+
+
 def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.ndarray],
-                        gradient: Callable[[np.ndarray, np.ndarray], np.ndarray],
+                        normal: Normal,
                         project: Callable[[np.ndarray], np.ndarray] | None = None,
                         max_iter: int = 50, tol: float | None = None) -> PemResult:
     """Minimize ``||e(theta)||^2`` by damped Gauss-Newton steps.
@@ -90,8 +105,9 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
         Initial estimate (must give finite errors).
     errors : callable
         ``theta -> e``, shape (N,).
-    gradient : callable
-        ``(theta, e) -> psi``, shape (N, p), ``psi = -de/dtheta``.
+    normal : callable
+        ``(theta, e) -> (H, g)`` with ``H = psi^T psi`` (p, p) and ``g = psi^T e``
+        (p,), ``psi = -de/dtheta``.
     project : callable, optional
         Maps a trial parameter vector into the admissible set.
     max_iter : int
@@ -112,15 +128,13 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
         theta = project(theta)
     e = errors(theta)
     V = float(e @ e)
-    psi = gradient(theta, e)
+    H, g = normal(theta, e)
     tol = 1e-3 / max(e.shape[0], 1) if tol is None else float(tol)
     mu = 1e-4
     iterations = 0
     p = theta.size
     while iterations < max_iter and p:
         iterations += 1
-        H = psi.T @ psi
-        g = psi.T @ e
         diag = np.diag(H).copy()
         diag[diag <= 0] = 1.0
         try:
@@ -137,7 +151,7 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
         if V_new < V:
             decrease = (V - V_new) / max(V, 1e-300)
             theta, e, V = trial, e_new, V_new
-            psi = gradient(theta, e)
+            H, g = normal(theta, e)
             mu = max(mu / 10.0, 1e-12)
             if decrease < tol:
                 break
@@ -146,7 +160,6 @@ def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.nd
             if mu > 1e8:
                 break
     N = e.shape[0]
-    H = psi.T @ psi
     lam = V / max(1, N - p)
     try:
         cov = lam * np.linalg.inv(H)
