@@ -22,11 +22,11 @@ from collections.abc import Sequence
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.signal import lfilter
 
 from .arx import correlation_solve, least_squares, row_blocks, signal_matrix
 from .correlation import block_sizes, lag_gram
 from .dataset import IdData, as_experiments
+from .filters import inverse_filter
 from .model import PolyModel
 from .orders import Orders, make_orders
 from .pem import levenberg_marquardt, stabilize
@@ -111,7 +111,7 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
 
     def errors(theta: np.ndarray) -> np.ndarray:
         C = np.concatenate([[1.0], theta[n_ab:]])
-        return join([lfilter([1.0], C, Y - P @ theta[:n_ab])
+        return join([inverse_filter(C, Y - P @ theta[:n_ab])
                      for P, Y in zip(Phis, Ys, strict=True)])
 
     target = np.array([[e_row + 1, 0, 1, 1]], dtype=np.int64)
@@ -128,9 +128,9 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
             e_full[start:] = e[pos:pos + d.N - start]
             pos += d.N - start
             S = np.empty((e_row + 2, d.N))
-            S[:orders.ny] = lfilter([1.0], C, d.y.T, axis=1)
-            S[orders.ny:e_row] = lfilter([1.0], C, d.u.T, axis=1)
-            S[e_row] = lfilter([1.0], C, e_full)
+            S[:orders.ny] = inverse_filter(C, d.y.T)
+            S[orders.ny:e_row] = inverse_filter(C, d.u.T)
+            S[e_row] = inverse_filter(C, e_full)
             S[e_row + 1] = e_full
             H += lag_gram(S, blocks, blocks, start)
             g += lag_gram(S, blocks, target, start)[:, 0]
