@@ -29,9 +29,9 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
     if y.shape != yhat.shape:
         raise ValueError(f'y has shape {y.shape} but yhat has shape {yhat.shape}')
     r = y - yhat
-    c = y - y.mean(axis=0)
-    num = np.sqrt(np.einsum('ij,ij->j', r, r))  # column norms (fast for C-ordered data)
-    den = np.sqrt(np.einsum('ij,ij->j', c, c))
+    c = y - np.ones(y.shape[0]) @ y / y.shape[0]
+    num = np.sqrt(np.diag(r.T @ r))  # column norms through BLAS, fast in any memory order
+    den = np.sqrt(np.diag(c.T @ c))
     with np.errstate(divide='ignore', invalid='ignore'):
         return 100.0 * (1.0 - num / den)
 

@@ -33,7 +33,8 @@ def _as_columns(values: np.ndarray, arg: str) -> np.ndarray:
         array = array[:, None]
     if array.ndim != 2:
         raise ValueError(f'{arg} must be 1-D or 2-D (N, channels), got shape {array.shape}')
-    array = np.array(array, dtype=float, order='C')  # own copy with plain strides
+    # own copy, channel-major: each channel contiguous, returned as an (N, channels) view
+    array = np.array(array.T, dtype=float, order='C').T
     if not np.all(np.isfinite(array)):
         bad = int(np.count_nonzero(~np.isfinite(array)))
         raise ValueError(f'{arg} contains {bad} NaN or infinite values')
@@ -47,7 +48,8 @@ class IdData:
     Parameters
     ----------
     y : array_like, shape (N, ny) or (N,)
-        Measured outputs, one column per output channel.
+        Measured outputs, one column per output channel (stored channel-major:
+        ``y.T`` is C-contiguous, so each channel is one contiguous block).
     u : array_like, shape (N, nu) or (N,)
         Measured inputs, one column per input channel (``nu`` may be 0).
     Ts : float

@@ -217,7 +217,7 @@ class PolyModel:
             u = u[:, None]
         if u.ndim != 2 or u.shape[1] != self.nu:
             raise ValueError(f'input must have shape (N, {self.nu}), got {u.shape}')
-        return np.ascontiguousarray(u, dtype=float)
+        return np.asarray(u, dtype=float)
 
     def _outputs(self, data: IdData) -> np.ndarray:
         if not isinstance(data, IdData):
@@ -225,7 +225,7 @@ class PolyModel:
         if data.ny != self.ny or data.nu != self.nu:
             raise ValueError(f'data has ny={data.ny}, nu={data.nu}; model has '
                              f'ny={self.ny}, nu={self.nu}')
-        return np.ascontiguousarray(data.y, dtype=float)
+        return np.asarray(data.y, dtype=float)
 
     def innovations_form(self) -> tuple[np.ndarray, ...]:
         """Return ``(A, B, C, D, K)`` of ``x+ = Ax + Bu + Ke``, ``y = Cx + Du + e``."""
@@ -252,7 +252,7 @@ class PolyModel:
         u = self._inputs(data)
         A, B, C, D, _ = innovations_form(self._polys, noise=False)
         if self._coupled:
-            ysim = simulate_ss(A, B, C, D, np.zeros(A.shape[0]), u)
+            ysim = simulate_ss(A, B, C, D, np.zeros(A.shape[0]), np.ascontiguousarray(u))
         else:  # one rational filter per channel (scipy lfilter)
             ysim = np.zeros((u.shape[0], self.ny))
             for i in range(self.ny):
@@ -279,21 +279,28 @@ class PolyModel:
     def _filter_residuals(self, y: np.ndarray, u: np.ndarray) -> np.ndarray:
         """Zero-initial-state ``e_i = D_i/C_i (sum_j A_ij y_j - sum_j B_ij/F_ij u_j)``."""
         o = self.orders
-        e = np.empty_like(y)
+        N = y.shape[0]
+        yr = np.ascontiguousarray(y.T)  # channel rows (free for IdData, which is channel-major)
+        ur = np.ascontiguousarray(u.T)
+        e = np.empty((self.ny, N))
         for i in range(self.ny):
-            v = y[:, i].copy()
+            v = yr[i].copy()
             for j in range(self.ny):
                 if o.na[i, j]:
                     a = self.polynomial('A', i, j)
-                    a[0] = 0.0 if i == j else a[0]
-                    v += lfilter(a, [1.0], y[:, j])
+                    a[0] = 0.0
+                    v += np.convolve(yr[j], a)[:N]
             for j in range(self.nu):
                 if o.nb[i, j]:
-                    v -= lfilter(self.polynomial('B', i, j), self.polynomial('F', i, j), u[:, j])
+                    b = self.polynomial('B', i, j)
+                    if o.nf[i, j]:
+                        v -= lfilter(b, self.polynomial('F', i, j), ur[j])
+                    else:
+                        v -= np.convolve(ur[j], b)[:N]
             if o.nc[i] or o.nd[i]:
                 v = lfilter(self.polynomial('D', i), self.polynomial('C', i), v)
-            e[:, i] = v
-        return e
+            e[i] = v
+        return e.T
 
     def residuals(self, data: IdData, ic: str = 'zero') -> np.ndarray:
         """One-step prediction errors (the innovations) on ``data``, shape (N, ny).
@@ -331,8 +338,9 @@ class PolyModel:
         cross-check of the polynomial filters.
         """
         A, B, C, D, K = self.innovations_form()
-        return predictor_errors(A, B, C, D, K, np.zeros(A.shape[0]), self._inputs(data),
-                                self._outputs(data))
+        return predictor_errors(A, B, C, D, K, np.zeros(A.shape[0]),
+                                np.ascontiguousarray(self._inputs(data)),
+                                np.ascontiguousarray(self._outputs(data)))
 
     def predict(self, data: IdData, k: int = 1, ic: str = 'zero') -> np.ndarray:
         """Predict the outputs ``k`` steps ahead, ``yhat(t | t-k)``.

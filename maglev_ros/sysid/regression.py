@@ -160,7 +160,7 @@ def finish_model(structure: str, orders: Orders, theta: np.ndarray,
     N = e.shape[0]
     lam = e.T @ e / N if noise_variance is None else noise_variance
     report = EstimationReport(method=method, n_samples=N, fit=fit_percent(y, y - e),
-                              mse=np.einsum('ij,ij->j', e, e) / N, fpe=fpe(e, orders.n_params),
+                              mse=np.diag(e.T @ e) / N, fpe=fpe(e, orders.n_params),
                               aic=aic(e, orders.n_params), iterations=iterations)
     return PolyModel(structure, orders, theta, first.Ts, lam, covariance, first.output_names,
                      first.input_names, first.output_units, first.input_units, report)
