@@ -8,14 +8,14 @@ Default solver (``method='auto'``): the normal equations
 ``(Phi^T Phi) theta = Phi^T y`` are built directly from lagged correlations of
 the signals (:mod:`maglev_ros.sysid.correlation`: ~2p dot products, no N x p
 regression matrix) and solved by Cholesky.  Why: for the lab's 25,000-sample
-data this is several times faster than forming ``Phi`` and factoring it, and
-the rounding error of the normal equations, ``~cond(Phi^T Phi) * eps``, stays
-below 1e-6 relative while ``cond(Phi^T Phi) < 1e10`` - orders of magnitude
-below the statistical error of the estimate.  (High-order models of slow,
-oversampled systems, such as na=7 nb=9 at 5 kHz, reach ~1e9.)  Beyond that
-limit, or when the residual is too small for the quadratic-form loss, the
-solver forms ``Phi`` and uses a Householder QR of ``[Phi, y]`` (LAPACK
-``geqrf``, R factor only), accurate up to ``cond(Phi) ~ 1e15``.
+data this is several times faster than forming ``Phi`` and factoring it.  The
+rounding error of normal equations grows like ``cond(Phi^T Phi) * eps``;
+below ``cond = 1e8`` that is < 1e-8 relative, far below any statistical
+error.  Above it (high-order models of slow, oversampled systems such as
+na=7 nb=9 at 5 kHz reach 1e9-1e12) one step of iterative refinement with the
+true residual - obtained by FIR filtering, still without ``Phi`` - restores
+QR-level accuracy up to ``cond = 1e13``.  Beyond that the solver forms ``Phi``
+and uses a Householder QR of ``[Phi, y]`` (LAPACK ``geqrf``, R factor only).
 ``method='normal'`` forms ``Phi`` and solves the normal equations with one
 step of iterative refinement; ``method='qr'`` always uses QR.
 """
@@ -36,7 +36,8 @@ from .regression import arx_regressors, check_data, finish_model, join, stack_ro
 __all__ = ['arx', 'least_squares']
 
 COND_LIMIT = 1e12
-CORRELATION_COND_LIMIT = 1e10
+CORRELATION_COND_LIMIT = 1e13
+REFINE_ABOVE = 1e8
 
 
 def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
@@ -80,7 +81,8 @@ def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
                 theta += sla.cho_solve(factor, Phi.T @ (Y - Phi @ theta), check_finite=False)
                 Rinv = sla.cho_solve(factor, np.eye(p), check_finite=False)
                 return theta, Rinv, 'normal equations (Cholesky, refined)'
-    Rfull = sla.qr(np.column_stack([Phi, Y]), mode='r', check_finite=False)[0]
+    raw = sla.qr(np.column_stack([Phi, Y]), mode='raw', check_finite=False)[0][0]
+    Rfull = np.triu(raw[:p + 1, :p + 1])  # R factor of [Phi, Y] (Householder, no Q)
     Rq = Rfull[:p, :p]
     theta = sla.solve_triangular(Rq, Rfull[:p, p], check_finite=False)
     Rq_inv = sla.solve_triangular(Rq, np.eye(p), check_finite=False)
@@ -219,7 +221,9 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
     -------
     tuple or None
         ``(theta, (Phi^T Phi)^-1, lambda)`` with the unbiased residual variance,
-        or None if ``cond(Phi^T Phi) > 1e10`` (the caller then uses QR).
+        or None if ``cond(Phi^T Phi) > 1e13`` (the caller then uses QR).  Above
+        ``cond = 1e8`` one step of iterative refinement with the true residual
+        (computed by FIR filtering) restores QR-level accuracy.
     """
     tgt = np.array([[target, 0, 1, 1]], dtype=np.int64)
     p = block_sizes(blocks)
@@ -234,15 +238,45 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
         M += S.shape[1] - start
     if p == 0:
         return np.zeros(0), np.zeros((0, 0)), yy / max(M, 1)
-    if not np.linalg.cond(R) < CORRELATION_COND_LIMIT:
+    cond = np.linalg.cond(R)
+    if not cond < CORRELATION_COND_LIMIT:
         return None
     try:
         factor = sla.cho_factor(R, check_finite=False)
     except np.linalg.LinAlgError:
         return None
     theta = sla.cho_solve(factor, r, check_finite=False)
-    sse = yy - 2.0 * theta @ r + theta @ R @ theta
-    if not sse > 1e-12 * yy:  # cancellation: too little residual to trust the quadratic form
-        return None
+    if cond < REFINE_ABOVE:
+        sse = yy - 2.0 * theta @ r + theta @ R @ theta
+    else:
+        sse = -1.0
+    if not sse > 1e-9 * yy:
+        # Ill-conditioned, or too little residual for the quadratic form: one step of
+        # iterative refinement with the true residual (still without forming Phi).
+        residuals = [_residual(S, blocks, target, theta, start) for S in signals]
+        g = np.zeros(p)
+        e_blk = np.array([[0, 0, 1, 1]], dtype=np.int64)
+        for S, res in zip(signals, residuals, strict=True):
+            full = np.zeros(S.shape[1])
+            full[start:] = res
+            g += lag_gram(np.vstack([S, full]), blocks, e_blk + [S.shape[0], 0, 0, 0],
+                          start)[:, 0]
+        theta = theta + sla.cho_solve(factor, g, check_finite=False)
+        sse = float(sum(float(x @ x) for x in (_residual(S, blocks, target, theta, start)
+                                               for S in signals)))
     Rinv = sla.cho_solve(factor, np.eye(p), check_finite=False)
     return theta, Rinv, sse / max(1, M - p)
+
+
+def _residual(S: np.ndarray, blocks: np.ndarray, target: int, theta: np.ndarray,
+              start: int) -> np.ndarray:
+    """``signal[target](t) - phi(t)^T theta`` for ``t >= start`` by FIR filtering, (N - start,)."""
+    N = S.shape[1]
+    out = S[target, start:].copy()
+    pos = 0
+    for sig, first, count, sign in blocks:
+        h = np.zeros(first + count)
+        h[first:] = sign * theta[pos:pos + count]
+        pos += count
+        out -= np.convolve(S[sig], h)[start:N]
+    return out

@@ -121,8 +121,27 @@ def test_correlation_normal_equations_match_qr_siso_and_mimo():
     assert np.allclose(a.covariance, q.covariance, rtol=1e-5, atol=1e-12)
 
 
-def test_noise_free_data_falls_back_to_qr():
+def test_noise_free_data_is_solved_exactly():
     data = simulate_siso(2000, 1, noise=0.0)
     model = arx(data, 2, 2, 1)
-    assert 'correlations' not in model.report.method  # formed Phi, refined or QR
     assert np.allclose(model.theta, TRUTH, atol=1e-9)
+
+
+def test_ill_conditioned_correlation_path_is_refined_to_qr_accuracy():
+    from scipy.signal import lfilter
+
+    rng = np.random.default_rng(5)
+    u = lfilter([1.0], [1, -0.8], rng.standard_normal(20000))  # smooth input
+    A = np.real(np.poly([0.95, 0.9, 0.8, 0.6 + 0.3j, 0.6 - 0.3j, 0.3, -0.2]))
+    y = lfilter(np.r_[0, np.ones(9) / 9], A, u) + 1e-3 * rng.standard_normal(20000)
+    data = IdData(y, u, 1.0)
+    from maglev_ros.sysid import make_orders
+    from maglev_ros.sysid.arx import row_blocks, signal_matrix
+    from maglev_ros.sysid.correlation import lag_gram
+
+    blocks = row_blocks(make_orders(1, 1, na=7, nb=9, nk=1), 0)
+    R = lag_gram(signal_matrix(data), blocks, blocks, 9)
+    assert np.linalg.cond(R) > 1e8  # the refinement branch is exercised
+    auto, qr = arx(data, 7, 9, 1), arx(data, 7, 9, 1, method='qr')
+    assert 'correlations' in auto.report.method
+    assert np.max(np.abs(auto.theta - qr.theta)) < 1e-6 * np.max(np.abs(qr.theta))
