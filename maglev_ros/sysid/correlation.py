@@ -9,9 +9,10 @@ window and removing the one that leaves it::
     S(i+1, j+1) = S(i, j) + x(start-i-1) z(start-j-1) - x(N-1-i) z(N-1-j)
 
 Only the first entry of each diagonal needs a full dot product (BLAS ``ddot``),
-so ``Phi^T Phi`` for ``p`` regressors costs about ``2p`` dot products of length
-``N`` instead of ``N p^2`` multiply-adds plus an ``N x p`` copy - and no
-large temporary array is allocated.  The result is exact (up to rounding),
+so ``Phi^T Phi`` for ``p`` regressors costs about ``p`` dot products of length
+``N`` (upper triangle of a symmetric product, then mirrored) instead of
+``N p^2`` multiply-adds plus an ``N x p`` copy - and no large temporary array
+is allocated.  The result is exact (up to rounding),
 not the biased/windowed correlation estimate.
 
 A *block* is a row ``(signal index, first lag, count, sign)``; a regressor set
@@ -34,9 +35,10 @@ def block_sizes(blocks: np.ndarray) -> int:
 @njit(cache=True)
 def _block_pair(x: np.ndarray, lx: int, nx: int, z: np.ndarray, lz: int, nz: int,
                 start: int, out: np.ndarray, r0: int, c0: int,
-                sign: float) -> None:  # pragma: no cover - numba
+                sign: float, upper_only: bool) -> None:  # pragma: no cover - numba
     N = x.shape[0]
-    for d in range(-(nx - 1), nz):  # diagonal: column index - row index
+    first = 0 if upper_only else -(nx - 1)
+    for d in range(first, nz):  # diagonal: column index - row index
         k = 0 if d >= 0 else -d
         m = k + d
         i = lx + k
@@ -54,17 +56,22 @@ def _block_pair(x: np.ndarray, lx: int, nx: int, z: np.ndarray, lz: int, nz: int
 
 @njit(cache=True)
 def _lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray, start: int,
-              out: np.ndarray) -> None:  # pragma: no cover - numba
+              out: np.ndarray, symmetric: bool) -> None:  # pragma: no cover - numba
     r0 = 0
     for a in range(left.shape[0]):
         c0 = 0
         for b in range(right.shape[0]):
-            if left[a, 2] > 0 and right[b, 2] > 0:
+            if left[a, 2] > 0 and right[b, 2] > 0 and (not symmetric or b >= a):
                 _block_pair(signals[left[a, 0]], left[a, 1], left[a, 2], signals[right[b, 0]],
                             right[b, 1], right[b, 2], start, out, r0, c0,
-                            float(left[a, 3] * right[b, 3]))
+                            float(left[a, 3] * right[b, 3]), symmetric and a == b)
             c0 += right[b, 2]
         r0 += left[a, 2]
+    if symmetric:  # mirror the computed upper triangle
+        n = out.shape[0]
+        for i in range(n):
+            for j in range(i):
+                out[i, j] = out[j, i]
 
 
 def lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray,
@@ -93,5 +100,6 @@ def lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray,
         if len(blocks) and np.any(blocks[:, 1] + np.maximum(blocks[:, 2], 1) - 1 > start):
             raise ValueError(f'start={start} is smaller than a lag in blocks {blocks.tolist()}')
     out = np.zeros((block_sizes(left), block_sizes(right)))
-    _lag_gram(signals, left, right, int(start), out)
+    symmetric = left.shape == right.shape and bool(np.array_equal(left, right))
+    _lag_gram(signals, left, right, int(start), out, symmetric)
     return out

@@ -25,3 +25,13 @@ def test_lag_gram_rejects_lags_beyond_start():
     S = np.zeros((1, 50))
     with pytest.raises(ValueError, match='start=2 is smaller than a lag'):
         lag_gram(S, np.array([[0, 1, 3, 1]]), np.array([[0, 0, 1, 1]]), 2)
+
+
+def test_symmetric_gram_is_mirrored_exactly():
+    rng = np.random.default_rng(1)
+    S = rng.standard_normal((2, 300))
+    blocks = np.array([[0, 1, 3, -1], [1, 2, 4, 1]])
+    G = lag_gram(S, blocks, blocks, 5)
+    X = lagged_matrix(S, blocks, 5)
+    assert np.allclose(G, X.T @ X, rtol=1e-12, atol=1e-10)
+    assert np.array_equal(G, G.T)
