@@ -7,13 +7,24 @@ and builds the same arrays. Both run in this process on the same bytes;
 the outputs are compared. The plain unpack loop without checks is shown
 too, as a floor for any per-record Python decoder.
 
-Run: ``/tmp/venv/bin/python benchmarks/driver.py [--quick]``.
+Driver: the driver node (``python -m maglev_ros.nodes.driver``) and the
+virtual board (``python -m maglev_ros.cli.virtual_board``) run as separate
+processes at 5 kHz; the driver's CPU time (user + system, from
+``/proc/<pid>/stat``) is measured over a window after start-up, and its
+records/s are read from ``/diagnostics`` to check that it kept up. Optionally
+(``--subscriber``) a third process subscribes to every field and current topic.
+
+Run: ``/tmp/venv/bin/python benchmarks/driver.py [--quick] [--part decoder|driver]``.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import struct
+import subprocess
+import sys
+import tempfile
 import time
 
 import numpy as np
@@ -122,12 +133,127 @@ def bench_decoder(n_records: int, repeats: int) -> None:
     print()
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of a process in s."""
+    with open(f'/proc/{pid}/stat') as stat:
+        fields = stat.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+SUBSCRIBER = """
+import sys, rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState, MagneticField
+rclpy.init()
+node = rclpy.create_node('bench_subscriber')
+qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+count = [0]
+def take(msg):
+    count[0] += 1
+for k in range(int(sys.argv[1])):
+    node.create_subscription(MagneticField, f'maglev/sensor_{k}/field', take, qos)
+node.create_subscription(JointState, 'maglev/currents', take, qos)
+try:
+    rclpy.spin(node)
+except BaseException:
+    pass
+"""
+
+
+def measure_driver(n_sensors: int, window: float, subscriber: bool, domain: int) -> dict:
+    """Run board and driver processes; return the driver's CPU share and rates."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    procs = []
+    with tempfile.TemporaryDirectory() as tmp:
+        link = os.path.join(tmp, 'ttyMAGGY0')
+        board_cmd = [sys.executable, '-m', 'maglev_ros.cli.virtual_board']
+        board_cmd += ['--sensors', str(n_sensors), '--startup-delay', '0.5', '--link', link]
+        board = subprocess.Popen(board_cmd, stdout=subprocess.PIPE, text=True, env=env)
+        procs.append(board)
+        try:
+            board.stdout.readline()
+            driver_cmd = [sys.executable, '-m', 'maglev_ros.nodes.driver', '--ros-args']
+            for param in (f'port:={link}', f'n_sensors:={n_sensors}', 'diagnostics_period:=1.0'):
+                driver_cmd += ['-p', param]
+            driver = subprocess.Popen(
+                driver_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+            )
+            procs.append(driver)
+            if subscriber:
+                sub_cmd = [sys.executable, '-c', SUBSCRIBER, str(n_sensors)]
+                procs.append(subprocess.Popen(sub_cmd, env=env))
+            context = rclpy.context.Context()
+            rclpy.init(context=context, domain_id=domain)
+            node = rclpy.create_node('bench_diagnostics', context=context)
+            rates = []
+
+            def on_diag(msg: DiagnosticArray) -> None:
+                values = {kv.key: kv.value for kv in msg.status[0].values}
+                rates.append((float(values['records/s']), values))
+
+            node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
+            executor = SingleThreadedExecutor(context=context)
+            executor.add_node(node)
+            end = time.monotonic() + 4.0  # start-up, discovery, warm-up
+            while time.monotonic() < end:
+                executor.spin_once(timeout_sec=0.1)
+            rates.clear()
+            c0, t0 = cpu_seconds(driver.pid), time.monotonic()
+            b0 = cpu_seconds(board.pid)
+            while time.monotonic() < t0 + window:
+                executor.spin_once(timeout_sec=0.1)
+            c1, t1 = cpu_seconds(driver.pid), time.monotonic()
+            b1 = cpu_seconds(board.pid)
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+        finally:
+            for proc in reversed(procs):
+                proc.terminate()
+            for proc in procs:
+                proc.wait(timeout=10)
+    last = rates[-1][1] if rates else {}
+    return {
+        'cpu': (c1 - c0) / (t1 - t0),
+        'board_cpu': (b1 - b0) / (t1 - t0),
+        'records_per_s': np.mean([r for r, _ in rates]) if rates else float('nan'),
+        'resyncs': last.get('resyncs', '?'),
+        'dropped': last.get('dropped bytes', '?'),
+    }
+
+
+def bench_driver(window: float, subscriber: bool) -> None:
+    print(f'## Driver node CPU at 5 kHz (window {window:.0f} s, one core = 100 %)')
+    print()
+    print('| sensors | subscriber process | driver CPU | records/s | resyncs | dropped bytes |')
+    print('|---|---|---|---|---|---|')
+    domain = 200 + os.getpid() % 20
+    cases = [(1, False), (3, False)] + ([(1, True), (3, True)] if subscriber else [])
+    for n_sensors, with_sub in cases:
+        result = measure_driver(n_sensors, window, with_sub, domain)
+        print(
+            f'| {n_sensors} | {"yes" if with_sub else "no"} | {100 * result["cpu"]:.1f} % | '
+            f'{result["records_per_s"]:.0f} | {result["resyncs"]} | {result["dropped"]} |'
+        )
+        print(f'<!-- board process CPU {100 * result["board_cpu"]:.1f} % -->')
+    print()
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--quick', action='store_true', help='smaller data, fewer repeats')
+    parser.add_argument('--part', choices=('decoder', 'driver', 'all'), default='all')
+    parser.add_argument('--subscriber', action='store_true', help='also with a subscriber')
     args = parser.parse_args()
     n_records, repeats = (30_000, 2) if args.quick else (100_000, 3)
-    bench_decoder(n_records, repeats)
+    if args.part in ('decoder', 'all'):
+        bench_decoder(n_records, repeats)
+    if args.part in ('driver', 'all'):
+        bench_driver(3.0 if args.quick else 6.0, args.subscriber)
 
 
 if __name__ == '__main__':

@@ -49,6 +49,7 @@ class BoardClock:
         self._ref_us = 0
         self._intercept_ns = 0
         self._last_stamp_ns: int | None = None
+        self._ramp = np.arange(1, 65, dtype=np.int64)  # 1, 2, ... (cached)
         self.observations = 0
 
     def reset(self) -> None:
@@ -73,12 +74,14 @@ class BoardClock:
         board_us = int(board_us)
         delta = int(host_ns) - 1000 * board_us
         bucket = board_us // self._bucket_us
+        self.observations += 1
         if bucket != self._current_bucket or not self._minima:
             self._minima.append((board_us, delta))
             self._current_bucket = bucket
         elif delta < self._minima[-1][1]:
             self._minima[-1] = (board_us, delta)
-        self.observations += 1
+        else:
+            return  # the minima did not change: neither does the line
         self._fit()
 
     def _fit(self) -> None:
@@ -120,7 +123,9 @@ class BoardClock:
         rel = (board - self._ref_us).astype(np.float64)
         stamps = 1000 * board + self._intercept_ns + np.rint(self._slope * rel).astype(np.int64)
         # strictly increasing, also across calls: s_i >= s_{i-1} + 1
-        ramp = np.arange(1, board.size + 1, dtype=np.int64)
+        if self._ramp.size < board.size:
+            self._ramp = np.arange(1, 2 * board.size + 1, dtype=np.int64)
+        ramp = self._ramp[: board.size]
         floor = -(1 << 62) if self._last_stamp_ns is None else self._last_stamp_ns
         stamps = np.maximum.accumulate(np.maximum(stamps - ramp, floor)) + ramp
         self._last_stamp_ns = int(stamps[-1])

@@ -343,7 +343,10 @@ class RecordDecoder:
         pwm = np.multiply(
             halves, self._pwm_mask[: 2 * n * width], out=self._half_scratch[: 2 * n * width]
         )
-        return bool(pwm.max() <= PWM_FULL_SCALE and pwm.min() >= -PWM_FULL_SCALE)
+        # -4096 <= p <= 4096 as one unsigned comparison: (p + 4096) mod 2**16 <= 8192
+        shifted = pwm.view(np.uint16)
+        shifted += np.uint16(PWM_FULL_SCALE)
+        return bool(shifted.max() <= 2 * PWM_FULL_SCALE)
 
     def _grow_scratch(self, n: int) -> None:
         """Allocate masks and scratch space for blocks of up to n records."""
@@ -386,9 +389,14 @@ class RecordDecoder:
         if not start:
             step0 = (int(ts[0]) - self._prev_ts) & _CLOCK_MASK
             first_ok = bounds.min_step_us <= step0 <= bounds.max_step_us
+        # min <= step <= max as one unsigned comparison (uint32 arithmetic wraps)
         ok = (
             first_ok
-            and (n == 1 or (step.min() >= bounds.min_step_us and step.max() <= bounds.max_step_us))
+            and (
+                n == 1
+                or (step - np.uint32(bounds.min_step_us)).max()
+                <= bounds.max_step_us - bounds.min_step_us
+            )
             and self._block_plausible(buf, n)
         )
         if ok:
@@ -520,12 +528,17 @@ class RecordDecoder:
                 elif first < self._last_emit_ts:
                     self._wraps += 1
             t0 = self._last_time_us + step0
-            time_us = np.empty(ts.shape[0], np.int64)
-            time_us[0] = t0
-            # Steps inside a run are validated (0 < step < 2**31): a uint32
-            # difference is the true step even across a wrap.
-            (ts[1:] - ts[:-1]).cumsum(dtype=np.int64, out=time_us[1:])
-            time_us[1:] += t0
+            # Steps inside a run are validated (0 < step <= max_step_us); if the
+            # run spans less than 2**31 us, the uint32 difference to the first
+            # record is the true elapsed time, even across a wrap.
+            if ts.shape[0] * self.bounds.max_step_us < _HALF_WRAP:
+                time_us = (ts - ts.dtype.type(first)).astype(np.int64)
+                time_us += t0
+            else:  # a run that may span more than 2**31 us: sum the steps
+                time_us = np.empty(ts.shape[0], np.int64)
+                time_us[0] = t0
+                (ts[1:] - ts[:-1]).cumsum(dtype=np.int64, out=time_us[1:])
+                time_us[1:] += t0
             last_time = int(time_us[-1])
             self._wraps += ((first + last_time - t0) >> 32) - (first >> 32)
             self._last_emit_ts = int(ts[-1])

@@ -55,6 +55,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
@@ -79,6 +80,100 @@ COMMAND_QOS = QoSProfile(
 )
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 _ZERO = np.zeros(4)
+
+
+class RawMessageBatch:
+    """Serialise many messages of one type that differ only in stamp and doubles.
+
+    Publishing a message object costs a Python-to-C conversion per message;
+    publishing serialised bytes (``Publisher.publish(bytes)``) does not. A
+    template is serialised once with sentinel values; the byte offsets of
+    the stamp and of each varying float64 are found from the sentinels, and
+    a batch of messages is then filled in with numpy.
+
+    Parameters
+    ----------
+    template : message
+        A message with the constant parts (frame id, names, array lengths)
+        set; it is modified (sentinels written).
+    set_values : callable
+        ``set_values(msg, values)`` writes a sequence of k floats into the
+        message (the varying float64 fields).
+    n_values : int
+        k, the number of varying float64 fields.
+    """
+
+    def __init__(self, template, set_values, n_values: int) -> None:
+        template.header.stamp.sec = 0x1234_5678
+        template.header.stamp.nanosec = 0x2345_6789
+        sentinels = [1.2345678901234567e-300 * (j + 3) for j in range(n_values)]
+        set_values(template, sentinels)
+        raw = serialize_message(template)
+        if raw[:2] != b'\x00\x01':  # not little-endian CDR: not supported
+            raise ValueError(f'unexpected CDR encapsulation {raw[:4].hex()}')
+
+        def find(pattern: bytes) -> int:
+            offset = raw.find(pattern)
+            if offset < 0 or raw.find(pattern, offset + 1) >= 0:
+                raise ValueError('cannot locate a field in the serialised template')
+            return offset
+
+        doubles = [find(np.float64(v).tobytes()) for v in sentinels]
+        names = ['sec', 'nanosec']
+        formats = ['<i4', '<u4']
+        offsets = [find(np.int32(0x1234_5678).tobytes()), find(np.uint32(0x2345_6789).tobytes())]
+        if doubles == list(range(doubles[0], doubles[0] + 8 * n_values, 8)):
+            names.append('values')  # contiguous (x, y, z; effort): one assignment
+            formats.append(('<f8', (n_values,)))
+            offsets.append(doubles[0])
+        else:
+            names += [f'v{j}' for j in range(n_values)]
+            formats += ['<f8'] * n_values
+            offsets += doubles
+        # A structured view of one serialised message: numpy writes the
+        # (possibly unaligned) stamp and float64 fields in place.
+        self._dtype = np.dtype(
+            {'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': len(raw)}
+        )
+        self._template = np.frombuffer(raw, dtype=np.uint8)
+        self.size = len(raw)
+
+    def serialise(self, sec: np.ndarray, nanosec: np.ndarray, values: np.ndarray) -> list[bytes]:
+        """Serialise n messages.
+
+        Parameters
+        ----------
+        sec, nanosec : ndarray of int, shape (n,)
+            Header stamps.
+        values : ndarray of float, shape (n, k)
+            The varying float64 fields, in the order of ``set_values``.
+
+        Returns
+        -------
+        list of bytes
+            n serialised messages.
+        """
+        n = sec.shape[0]
+        rows = np.empty(n, dtype=self._dtype)
+        rows.view(np.uint8).reshape(n, self.size)[:] = self._template
+        rows['sec'] = sec
+        rows['nanosec'] = nanosec
+        if 'values' in self._dtype.names:
+            rows['values'] = values
+        else:
+            for j in range(values.shape[1]):
+                rows[f'v{j}'] = values[:, j]
+        data = rows.tobytes()
+        size = self.size
+        return [data[i : i + size] for i in range(0, n * size, size)]
+
+
+def _set_field(msg: MagneticField, values) -> None:
+    msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = values
+
+
+def _set_effort(msg: JointState, values) -> None:
+    msg.effort = list(values)
 
 
 class DriverParameterError(ValueError):
@@ -287,11 +382,17 @@ class DriverNode(Node):
             self.create_publisher(MagneticField, f'maglev/sensor_{k}/field', SENSOR_QOS)
             for k in range(cfg.n_sensors)
         ]
-        self._field_msgs = [MagneticField() for _ in range(cfg.n_sensors)]
-        for msg, frame in zip(self._field_msgs, cfg.sensor_frames, strict=True):
-            msg.header.frame_id = frame
+        self._field_raw = []
+        for frame in cfg.sensor_frames:
+            template = MagneticField()
+            template.header.frame_id = frame
+            self._field_raw.append(RawMessageBatch(template, _set_field, 3))
         self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
-        self._current_msg = JointState(name=list(COIL_NAMES))
+        self._current_raw = RawMessageBatch(
+            JointState(name=list(COIL_NAMES), effort=[0.0] * 4), _set_effort, 4
+        )
+        self._field_handles = [pub.handle for pub in self._field_pubs]
+        self._current_handle = self._current_pub.handle
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(
             Float64MultiArray, 'maglev/currents/command', self._on_command, COMMAND_QOS
@@ -462,7 +563,7 @@ class DriverNode(Node):
         self.get_logger().warning(f'{self.config.port}: {reason}')
 
     def _handle(self, data: bytes) -> None:
-        host_ns = self.get_clock().now().nanoseconds
+        host_ns = time.time_ns()  # system time: the ROS time of a node without sim time
         if self._v2x:
             batch = self._decoder.feed(data)
             if len(batch):
@@ -492,27 +593,27 @@ class DriverNode(Node):
             self._publish(stamps, field_t, currents)
 
     def _publish(self, stamps: np.ndarray, field_t: np.ndarray, currents: np.ndarray) -> None:
-        """Publish n samples: stamps (n,) ns, fields (n, N, 3) T, currents (n, 4) A."""
-        secs = (stamps // 1_000_000_000).tolist()
-        nsecs = (stamps % 1_000_000_000).tolist()
-        fields = field_t.tolist()
-        amps = currents.tolist()
-        pubs = self._field_pubs
-        msgs = self._field_msgs
-        joint = self._current_msg
-        for i, (sec, nsec) in enumerate(zip(secs, nsecs, strict=True)):
-            for k, msg in enumerate(msgs):
-                stamp = msg.header.stamp
-                stamp.sec = sec
-                stamp.nanosec = nsec
-                vec = msg.magnetic_field
-                vec.x, vec.y, vec.z = fields[i][k]
-                pubs[k].publish(msg)
-            joint.header.stamp.sec = sec
-            joint.header.stamp.nanosec = nsec
-            joint.effort = amps[i]
-            self._current_pub.publish(joint)
-        self.counters['records'] += len(secs)
+        """Publish n samples: stamps (n,) ns, fields (n, N, 3) T, currents (n, 4) A.
+
+        Messages are serialised in one go (``RawMessageBatch``) and published
+        as bytes; per sample, sensor fields first, then the currents.
+        """
+        sec = stamps // 1_000_000_000
+        nanosec = stamps % 1_000_000_000
+        fields = [
+            raw.serialise(sec, nanosec, field_t[:, k, :]) for k, raw in enumerate(self._field_raw)
+        ]
+        amps = self._current_raw.serialise(sec, nanosec, currents)
+        # Publisher.publish(bytes) checks the type and guards the handle per
+        # message; the raw handles are safe here: the node destroys its
+        # publishers only after close() has joined this thread.
+        handles = self._field_handles
+        current = self._current_handle
+        for i in range(len(amps)):
+            for k, handle in enumerate(handles):
+                handle.publish_raw(fields[k][i])
+            current.publish_raw(amps[i])
+        self.counters['records'] += len(amps)
 
     # -- diagnostics ------------------------------------------------------------
 

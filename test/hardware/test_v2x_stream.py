@@ -273,3 +273,14 @@ def test_reset_forgets_everything():
     decoder.feed(pack_records(stamps, field, pwm)[5:])
     decoder.reset()
     assert decoder.stats.records == 0 and decoder.buffered == 0 and not decoder.stats.locked
+
+
+def test_long_runs_spanning_more_than_2_31_us():
+    # steps of 1 s: one feed covers 3000 s (> 2**31 us) and two wraps
+    bounds = PlausibilityBounds(min_step_us=500_000, max_step_us=2_000_000)
+    stamps, field, pwm = make_records(3000, start_us=WRAP - 10_000_000, step=1_000_000)
+    for confirm in (True, False):
+        decoder = RecordDecoder(1, bounds=bounds, confirm=confirm)
+        batch = decode_all(decoder, pack_records(stamps, field, pwm), chunk_sizes=1 << 20)
+        np.testing.assert_array_equal(batch.time_us, stamps)
+        assert decoder.stats.wraps == 1
