@@ -14,7 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .usage import Parser, UsageError, run_command
+from .usage import Parser, UsageError, non_negative_float, positive_float, run_command
 
 PROG = 'maglev-model'
 __all__ = ['build_parser', 'main']
@@ -37,26 +37,6 @@ def _state_assignments(text: str) -> dict[str, float]:
         if not np.isfinite(out[name]):
             raise argparse.ArgumentTypeError(f'{name}: must be finite, got {value!r}')
     return out
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-    if not (np.isfinite(value) and value > 0):
-        raise argparse.ArgumentTypeError(f'must be positive, got {text!r}')
-    return value
-
-
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-    if not (np.isfinite(value) and value >= 0):
-        raise argparse.ArgumentTypeError(f'must be >= 0, got {text!r}')
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -83,12 +63,12 @@ def build_parser() -> argparse.ArgumentParser:
                          help='A, B, C, D about the first equilibrium')
     lin.add_argument('--reduced', action='store_true',
                      help='print the 10-state model without yaw and yaw rate')
-    lin.add_argument('--step', type=_positive, default=1e-6,
+    lin.add_argument('--step', type=positive_float, default=1e-6,
                      help='finite-difference step (default 1e-6)')
     sim = sub.add_parser('simulate', parents=[common],
                          help='simulate from a perturbed equilibrium')
-    sim.add_argument('--duration', type=_positive, default=1.0, help='simulated time, s')
-    sim.add_argument('--rate', type=_positive, default=5000.0, help='sample rate, Hz')
+    sim.add_argument('--duration', type=positive_float, default=1.0, help='simulated time, s')
+    sim.add_argument('--rate', type=positive_float, default=5000.0, help='sample rate, Hz')
     sim.add_argument('--perturb', type=_state_assignments, default={'z': 0.001},
                      help='offsets from the equilibrium, e.g. "z=0.001,alpha=0.01" '
                           '(default z=0.001)')
@@ -96,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
                      help='constant solenoid currents x+ x- y+ y-, A (default 0)')
     sim.add_argument('--coil', action='store_true',
                      help='coil dynamics (the currents are commands through L/R)')
-    sim.add_argument('--noise', type=_non_negative, default=0.0,
+    sim.add_argument('--noise', type=non_negative_float, default=0.0,
                      help='sensor noise, T rms')
     sim.add_argument('--seed', type=int, default=0, help='noise seed')
     sim.add_argument('--no-crash-check', action='store_true',

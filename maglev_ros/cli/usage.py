@@ -10,7 +10,7 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 
-__all__ = ['UsageError', 'Parser', 'run_command']
+__all__ = ['UsageError', 'Parser', 'run_command', 'positive_float', 'non_negative_float']
 
 
 class UsageError(ValueError):
@@ -22,6 +22,32 @@ class Parser(argparse.ArgumentParser):
 
     def error(self, message: str) -> None:  # noqa: D102 - one-line usage errors
         raise UsageError(message)
+
+
+def _finite_number(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if value != value or value in (float('inf'), float('-inf')):
+        raise argparse.ArgumentTypeError(f'must be finite, got {text!r}')
+    return value
+
+
+def positive_float(text: str) -> float:
+    """Argparse type: a finite number > 0."""
+    value = _finite_number(text)
+    if value <= 0:
+        raise argparse.ArgumentTypeError(f'must be positive, got {text!r}')
+    return value
+
+
+def non_negative_float(text: str) -> float:
+    """Argparse type: a finite number >= 0."""
+    value = _finite_number(text)
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'must be >= 0, got {text!r}')
+    return value
 
 
 def run_command(prog: str, parser: argparse.ArgumentParser,

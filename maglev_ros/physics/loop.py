@@ -33,8 +33,8 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ['MU0', 'AGM_ITERATIONS', 'LOOP_WORK_ROWS', 'loop_batch', 'loop_field_cylindrical',
-           'loop_field']
+__all__ = ['MU0', 'AGM_ITERATIONS', 'LOOP_WORK_ROWS', 'as_points', 'loop_batch',
+           'loop_field_cylindrical', 'loop_field']
 
 MU0 = 4e-7 * math.pi  # vacuum permeability, N/A^2 (the model's value, not CODATA 2019)
 
@@ -132,6 +132,20 @@ def loop_batch(dx, dy, z, a, current, brho_over_rho, bz, work):  # pragma: no co
         bz[i] = pref * (k_minus_e + 2.0 * aa * (aa - rho[i]) * e * inv_d)
 
 
+def as_points(points) -> np.ndarray:
+    """Validate observation points: a C-contiguous float array of shape (n, 3).
+
+    Raises
+    ------
+    ValueError
+        When ``points`` is not of shape (n, 3) (a single point (3,) is accepted).
+    """
+    pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
+    if pts.ndim != 2 or pts.shape[1] != 3:
+        raise ValueError(f'points must have shape (n, 3), got {np.shape(points)}')
+    return pts
+
+
 def loop_field_cylindrical(rho, z, radius: float, current: float):
     """Field of a loop in cylindrical components.
 
@@ -175,9 +189,7 @@ def loop_field(points, radius: float, current: float) -> np.ndarray:
     ndarray, shape (n, 3)
         Flux density (Bx, By, Bz), T.
     """
-    pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f'points must have shape (n, 3), got {np.shape(points)}')
+    pts = as_points(points)
     n = pts.shape[0]
     brho_over_rho = np.empty(n)
     bz = np.empty(n)

@@ -30,7 +30,7 @@ import numpy as np
 
 from . import kernels
 from .filament import filament_loops
-from .loop import MU0
+from .loop import MU0, as_points, loop_field
 from .parameters import MaggyParameters, load_parameters
 from .sheet import sheet_field
 
@@ -267,9 +267,7 @@ class MaggyModel:
         ndarray, shape (n, 3)
             Flux density, T.
         """
-        pts = np.ascontiguousarray(np.atleast_2d(np.asarray(points, dtype=float)))
-        if pts.ndim != 2 or pts.shape[1] != 3:
-            raise ValueError(f'points must have shape (n, 3), got {np.shape(points)}')
+        pts = as_points(points)
         current = self._inputs(u)
         src, coil = self._loop_sources()
         out = kernels.loops_field(pts, current, src, coil)
@@ -294,14 +292,12 @@ class MaggyModel:
         magnet's equivalent current, as published. Accurate/filament: the exact
         current sheet (``-J l / mu0``).
         """
-        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        pts = as_points(points)
         state = self._state(x)
         r = kernels.rotation_matrix(state[3], state[4], state[5])
         local = (pts - state[:3]) @ r  # rows: R^T (s - p)
         m = self.params.magnet
         if self.options.field == 'fast':
-            from .loop import loop_field
-
             b_local = loop_field(local, m.radius, -m.polarization * m.thickness / (2 * MU0))
         else:
             b_local = sheet_field(local, m.radius, m.thickness,

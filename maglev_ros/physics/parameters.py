@@ -22,6 +22,7 @@ import yaml
 
 __all__ = [
     'ParameterError',
+    'Cylinders',
     'Solenoids',
     'PermanentMagnets',
     'LevitatingMagnet',
@@ -49,55 +50,53 @@ def _frozen(array: Any, dtype: type = float) -> np.ndarray:
 
 
 @dataclass(frozen=True)
-class Solenoids:
-    """Solenoids of the base, short cylinders with vertical axes.
+class Cylinders:
+    """Short vertical cylinders of the base (solenoids or permanent magnets).
 
     Attributes
     ----------
-    centers : ndarray, shape (n_s, 3)
+    centers : ndarray, shape (n, 3)
         Centres of the cylinders in the world frame, m.
-    radius : ndarray, shape (n_s,)
-        Radii, m (physical; the fast model may scale them by a correction factor).
-    length : ndarray, shape (n_s,)
+    radius : ndarray, shape (n,)
+        Radii, m.
+    length : ndarray, shape (n,)
         Lengths, m.
-    turns : ndarray, shape (n_s,)
-        Number of turns of each coil.
     """
 
     centers: np.ndarray
     radius: np.ndarray
     length: np.ndarray
-    turns: np.ndarray
 
     @property
     def count(self) -> int:
-        """Number of solenoids."""
+        """Number of cylinders."""
         return int(self.radius.shape[0])
 
 
 @dataclass(frozen=True)
-class PermanentMagnets:
-    """Permanent magnets of the base, uniformly magnetised vertical cylinders.
+class Solenoids(Cylinders):
+    """Solenoids of the base (radius physical; the fast model may scale it).
 
     Attributes
     ----------
-    centers : ndarray, shape (n_m, 3)
-        Centres in the world frame, m.
-    radius, length : ndarray, shape (n_m,)
-        Radius and length, m.
+    turns : ndarray, shape (n_s,)
+        Number of turns of each coil.
+    """
+
+    turns: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(0)))
+
+
+@dataclass(frozen=True)
+class PermanentMagnets(Cylinders):
+    """Permanent magnets of the base, uniformly magnetised along z.
+
+    Attributes
+    ----------
     polarization : ndarray, shape (n_m,)
         Polarisation J along +z, T.
     """
 
-    centers: np.ndarray
-    radius: np.ndarray
-    length: np.ndarray
-    polarization: np.ndarray
-
-    @property
-    def count(self) -> int:
-        """Number of permanent magnets."""
-        return int(self.radius.shape[0])
+    polarization: np.ndarray = field(default_factory=lambda: _frozen(np.zeros(0)))
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.special import elliprd, elliprf, elliprj
 
-from .loop import MU0
+from .loop import MU0, as_points
 
 __all__ = ['sheet_field']
 
@@ -64,9 +64,7 @@ def sheet_field(points, radius: float, length: float, current: float) -> np.ndar
     ndarray, shape (n, 3)
         Flux density (Bx, By, Bz), T.
     """
-    pts = np.atleast_2d(np.asarray(points, dtype=float))
-    if pts.ndim != 2 or pts.shape[1] != 3:
-        raise ValueError(f'points must have shape (n, 3), got {np.shape(points)}')
+    pts = as_points(points)
     x, y, z = pts[:, 0], pts[:, 1], pts[:, 2]
     rho = np.hypot(x, y)
     a = float(radius)
