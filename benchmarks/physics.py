@@ -282,7 +282,7 @@ def bench_params(name, quick, load_rows):
         t_run = best_time(lambda inputs=inputs: sim.run(inputs), sim_reps)
         t_core = best_time(lambda inputs=inputs: kernels.rk4_run(
             x_eq.copy(), inputs, dt, 1, kernels.COIL_IDEAL, np.ones(3), *core_args, crash,
-            True, *sens_args), sim_reps)
+            True, *sens_args, False), sim_reps)
         sim_rows.append((label, len(inputs) * dt, t_step, t_run, t_core, result.x[-1]))
 
     # baseline: the same RK4 (one step per sample) with the reference f(x, u)

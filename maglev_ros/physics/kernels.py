@@ -433,17 +433,42 @@ def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, p
 
 
 @njit(cache=True)
+def coil_step(xe, drive, dt, coil_mode, electrical):
+    """Advance only the coil currents by one sample (exact first-order solution).
+
+    Used when the magnet is held fixed or absent: the mechanical state is frozen.
+    """
+    new = xe.copy()
+    if coil_mode == COIL_IDEAL:
+        return new
+    coil_r = electrical[0]
+    v = coil_voltages(drive, coil_mode, coil_r, electrical[2])
+    decay = math.exp(-dt * coil_r / electrical[1])
+    for j in range(v.shape[0]):
+        target = v[j] / coil_r
+        new[12 + j] = target + (xe[12 + j] - target) * decay
+    return new
+
+
+@njit(cache=True)
 def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
-                crash, check, sens, mag):
+                crash, check, sens, mag, frozen):
     """One simulator sample: RK4 step, crash check and the true sensor reading.
 
     Returns (new extended state, status, reading (3 k,)). On a crash the state
     is the attempted one and the reading is taken at the previous state; a
-    non-finite drive returns STATUS_BAD_INPUT and leaves the state alone.
+    non-finite drive returns STATUS_BAD_INPUT and leaves the state alone. With
+    ``frozen`` the magnet does not move (fixed or absent magnet): only the coil
+    currents evolve.
     """
     for j in range(drive.shape[0]):
         if not math.isfinite(drive[j]):
             return xe.copy(), STATUS_BAD_INPUT, np.zeros(3 * sens.shape[0])
+    if frozen:
+        new = coil_step(xe, drive, dt, coil_mode, electrical)
+        currents = new[12:] if coil_mode != COIL_IDEAL else drive
+        y = fast_measurement(new[:12].copy(), currents.copy(), src, coil, sens, mag, work)
+        return new, STATUS_OK, y
     new = rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work)
     if check:
         status = crash_status(new[:12], crash[0], crash[1], crash[2], crash[3:6], crash[6:9])
@@ -460,7 +485,7 @@ def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, 
 
 @njit(cache=True)
 def rk4_run(x0, drives, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
-            crash, check, sens, mag):
+            crash, check, sens, mag, frozen):
     """Integrate over ``drives.shape[0]`` samples; stop at the first crash.
 
     ``crash`` = (base top m, magnet radius m, half thickness m, lower xyz, upper xyz)
@@ -480,7 +505,7 @@ def rk4_run(x0, drives, dt, substeps, coil_mode, electrical, src, coil, rim, par
     x = x0.copy()
     for k in range(n):
         new, status, y = sample_step(x, drives[k], dt, substeps, coil_mode, electrical, src,
-                                     coil, rim, par, work, crash, check, sens, mag)
+                                     coil, rim, par, work, crash, check, sens, mag, frozen)
         if status != STATUS_OK:
             return states[:k + 1], outputs[:k + 1], k, status, new
         x = new

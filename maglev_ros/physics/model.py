@@ -379,19 +379,33 @@ class MaggyModel:
         return kernels.rigid_body_rates(state, self.wrench(state, u), m.mass, self._inertia,
                                         self._kinematics)
 
-    def measurement(self, x, u=None) -> np.ndarray:
+    def measurement(self, x, u=None, with_magnet: bool = True) -> np.ndarray:
         """h(x, u): sensor readings [Bx_0, By_0, Bz_0, Bx_1, ...], T, shape (3 n_sensors,).
 
         Each sensor reads the base field (including the solenoids' direct
         feedthrough) plus the levitating magnet's field, through its mounting
         rotation, gain and offset.
+
+        Parameters
+        ----------
+        x : array_like, shape (12,)
+            State (the magnet's pose matters).
+        u : array_like, shape (n_s,), optional
+            Solenoid currents, A.
+        with_magnet : bool
+            False leaves the levitating magnet out (a base without a magnet).
         """
         state = self._state(x)
         current = self._inputs(u)
         if self.options.field == 'fast':
-            return kernels.fast_measurement(state, current, *self.measurement_arguments())
+            src, coil, sens, mag, work = self.measurement_arguments()
+            if not with_magnet:
+                mag = np.array([mag[0], 0.0])
+            return kernels.fast_measurement(state, current, src, coil, sens, mag, work)
         pos = self._sensor_pos
-        total = self.field_at(pos, current) + self.magnet_field_at(pos, state)
+        total = self.field_at(pos, current)
+        if with_magnet:
+            total = total + self.magnet_field_at(pos, state)
         local = np.einsum('kji,kj->ki', self._sensor_rot, total)
         return (self._sensor_gain * local + self._sensor_offset).ravel()
 

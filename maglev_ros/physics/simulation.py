@@ -29,8 +29,10 @@ __all__ = [
     'Simulator',
     'simulate_reference',
     'CRASH_REASONS',
+    'MAGNET_MODES',
 ]
 
+MAGNET_MODES = ('free', 'fixed', 'absent')
 CRASH_REASONS = {
     kernels.STATUS_CRASH_BASE: 'touched the base',
     kernels.STATUS_CRASH_WORKSPACE: 'left the workspace',
@@ -179,11 +181,19 @@ class Simulator:
         Detect touching the base and leaving the workspace.
     x0 : array_like, shape (12,), optional
         Initial state (default: resting at the first equilibrium).
+    magnet : {'free', 'fixed', 'absent'}
+        ``free``: the magnet moves (levitation). ``fixed``: held at ``x0``, only
+        the coils evolve (identify the current-to-field path with the magnet in
+        place). ``absent``: no levitating magnet at all (base and coils only).
     """
 
     def __init__(self, model, sample_rate: float = 5000.0, substeps: int = 1,
                  coil: CoilDynamics | None = None, sensor: SensorEffects | None = None,
-                 seed: int | None = None, check_crash: bool = True, x0=None):
+                 seed: int | None = None, check_crash: bool = True, x0=None,
+                 magnet: str = 'free'):
+        if magnet not in MAGNET_MODES:
+            raise ValueError(f'magnet must be one of {", ".join(MAGNET_MODES)}, got {magnet!r}')
+        self.magnet = magnet
         if not (np.isfinite(sample_rate) and sample_rate > 0):
             raise ValueError(f'sample_rate must be positive, got {sample_rate!r}')
         if not isinstance(substeps, (int, np.integer)) or substeps < 1:
@@ -218,10 +228,13 @@ class Simulator:
         self._input_shape = (model.n_inputs,)
         if self._fast:
             self._fast_args = model.fast_arguments()
-            self._sens_args = model.measurement_arguments()[2:4]  # sens, mag
+            sens, mag = model.measurement_arguments()[2:4]
+            if magnet == 'absent':
+                mag = np.array([mag[0], 0.0])  # no levitating magnet: its field is zero
+            self._sens_args = (sens, mag)
             self._step_args = (self.dt, self.substeps, self._coil_mode, self._electrical,
                                *self._fast_args, self._crash, self.check_crash,
-                               *self._sens_args)
+                               *self._sens_args, magnet != 'free')
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -347,7 +360,8 @@ class Simulator:
         currents = (states[:, 12:] if self._coil_mode
                     else np.vstack([np.zeros((1, n_s)), drives[:done]]))
         if truth is None:
-            truth = np.array([self.model.measurement(x[:12], i)
+            truth = np.array([self.model.measurement(x[:12], i,
+                                                     with_magnet=self.magnet != 'absent')
                               for x, i in zip(states, currents, strict=True)])
         self._rng = np.random.default_rng(self.seed)
         self._pending = []
@@ -377,6 +391,8 @@ class Simulator:
                                (volts - r * i_coil) / inductance])
 
     def _python_rk4(self, xe: np.ndarray, drive: np.ndarray) -> np.ndarray:
+        if self.magnet != 'free':
+            return kernels.coil_step(xe, drive, self.dt, self._coil_mode, self._electrical)
         volts = kernels.coil_voltages(drive, self._coil_mode, self._electrical[0],
                                       self._electrical[2])
         h = self.dt / self.substeps
@@ -400,7 +416,7 @@ class Simulator:
         return np.array(states), len(drives), kernels.STATUS_OK, states[-1]
 
     def _status(self, xe: np.ndarray) -> int:
-        if self.check_crash:
+        if self.check_crash and self.magnet == 'free':
             c = self._crash
             return kernels.crash_status(xe[:12], c[0], c[1], c[2], c[3:6], c[6:9])
         return kernels.STATUS_OK if np.all(np.isfinite(xe)) else kernels.STATUS_NOT_FINITE
@@ -413,7 +429,8 @@ class Simulator:
         self.crash_state = finite.copy()
 
     def _true_output(self) -> np.ndarray:
-        return self.model.measurement(self._xe[:12], self.currents)
+        return self.model.measurement(self._xe[:12], self.currents,
+                                      with_magnet=self.magnet != 'absent')
 
     def _observe(self, y: np.ndarray) -> np.ndarray:
         fx = self.sensor

@@ -175,3 +175,28 @@ def test_bad_simulator_arguments(v2, v2_equilibrium):
         sim.step([np.nan, 0, 0, 0])
     with pytest.raises(ValueError, match=r'inputs must have shape \(N, 4\)'):
         sim.run(np.zeros((3, 2)))
+
+
+@pytest.mark.parametrize('field', ['fast', 'accurate'])
+def test_fixed_and_absent_magnet_only_the_coils_move(field):
+    model = make_model('maggy_v2', field=field)
+    x0 = model.hover_state(0.0365)
+    x0[0] = 0.003  # off-centre: a free magnet would fly away
+    coil = CoilDynamics('current', resistance=3.0, inductance=0.004, supply_voltage=12.0)
+    inputs = np.tile([0.5, -0.5, 0.2, -0.2], (50, 1))
+    fixed = Simulator(model, coil=coil, x0=x0, magnet='fixed').run(inputs)
+    absent = Simulator(model, coil=coil, x0=x0, magnet='absent').run(inputs)
+    for result in (fixed, absent):
+        assert not result.crashed
+        np.testing.assert_array_equal(result.x, np.tile(x0, (51, 1)))
+        tau = 0.004 / 3.0
+        t = result.t[1:]
+        np.testing.assert_allclose(result.currents[1:, 0], 0.5 * (1 - np.exp(-t / tau)),
+                                   rtol=1e-12)
+    # the difference of the readings is exactly the levitating magnet's own field
+    positions = np.array([s.position for s in model.params.sensors])
+    np.testing.assert_allclose(fixed.y - absent.y,
+                               np.tile(model.magnet_field_at(positions, x0).ravel(), (51, 1)),
+                               rtol=1e-9, atol=1e-15)
+    with pytest.raises(ValueError, match='magnet must be one of free, fixed, absent'):
+        Simulator(model, magnet='glued')
