@@ -532,3 +532,29 @@ def test_raw_message_batch_matches_rclpy_serialisation():
         joint = deserialize_message(currents[i], JointState)
         assert joint.name == COIL_NAMES and list(joint.effort) == list(values[i])
         assert (joint.header.stamp.sec, joint.header.stamp.nanosec) == (sec[i], nanosec[i])
+
+
+def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypatch):
+    board, _ = v2x_board()
+    with board:
+        h = make_harness(
+            board.path, counts_per_ampere=1000.0, start_enabled=True, command_timeout=60.0
+        )
+        h.command_until([0.9, 0.9, 0.9, 0.9], board, (900, 900, 900, 900))
+        from maglev_ros.hardware.v2x_stream import RecordDecoder
+
+        original = RecordDecoder.feed
+        failed = []
+
+        def feed_once_broken(self, data):
+            if not failed:
+                failed.append(True)
+                raise RuntimeError('simulated decoder bug')
+            return original(self, data)
+
+        monkeypatch.setattr(RecordDecoder, 'feed', feed_once_broken)
+        wait_for(lambda: h.driver.counters['io_errors'] == 1, what='the error')
+        wait_for(lambda: last_accepted(board) == (0, 0, 0, 0), what='zero currents')
+        wait_for(lambda: h.driver.counters['reconnects'] == 1, what='reconnect')
+        before = h.driver.counters['records']
+        wait_for(lambda: h.driver.counters['records'] > before + 100, what='records again')
