@@ -235,8 +235,8 @@ def rim_force_torque(x, u, src, coil, rim, par, work):
         # odd components then cancel exactly (see base_field_points).
         half = n // 2
         for i in range(n):
-            mx = (half - i) % n
-            my = (n - i) % n
+            mx = half - i if i <= half else n + half - i  # (n/2 - i) mod n, no division
+            my = n - i if i > 0 else 0  # (-i) mod n
             out[0] += contrib[0, i] + contrib[0, mx]
             out[1] += contrib[1, i] + contrib[1, my]
             out[2] += contrib[2, i] + contrib[2, mx]
