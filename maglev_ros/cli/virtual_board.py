@@ -6,6 +6,7 @@ SIGTERM. Examples::
     maglev-virtual-board                       # V2x, 1 sensor, linear plant
     maglev-virtual-board --sensors 3 --link /tmp/ttyMAGGY0
     maglev-virtual-board --firmware v4x --log-period 0.01
+    maglev-virtual-board --plant physics --magnet fixed    # the physics core, 3 sensors
     maglev-virtual-board --plant mypkg.plants:make_plant   # factory(n_sensors)
 
 Exit status: 0 after a signal, 2 for bad arguments (one line on stderr).
@@ -22,6 +23,8 @@ from collections.abc import Callable, Sequence
 from functools import partial
 
 from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
+from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
+from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.virtual_board import VirtualBoard, VirtualBoardError
 
 __all__ = ['build_parser', 'load_plant', 'main']
@@ -58,6 +61,16 @@ def _seconds(text: str) -> float:
     return value
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not 0 < value < float('inf'):
+        raise argparse.ArgumentTypeError(f'must be a positive finite number, got {text!r}')
+    return value
+
+
 def _clock(text: str) -> int:
     try:
         value = int(text, 0)
@@ -72,12 +85,24 @@ def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-virtual-board``."""
     parser = _Parser(prog=PROG, description=__doc__.split('\n\n')[0])
     parser.add_argument('--firmware', choices=('v2x', 'v4x'), default='v2x')
-    parser.add_argument('--sensors', type=_positive_int, default=1, help='number of sensors')
+    parser.add_argument(
+        '--sensors', type=_positive_int, help='number of sensors (default 1; physics: the model)'
+    )
     parser.add_argument('--link', help='stable device path (symlink); default: a temp dir')
     parser.add_argument(
         '--plant',
         default='linear',
-        help="'linear' or 'module:factory' with factory(n_sensors) -> plant(pwm, t) -> mT",
+        help="'linear', 'physics' or 'module:factory' with factory(n_sensors) -> plant(pwm, t)",
+    )
+    parser.add_argument(
+        '--magnet', choices=MAGNET_MODES, default='fixed', help='physics plant: magnet mode'
+    )
+    parser.add_argument('--params', default='maggy_v2', help='physics plant: preset or YAML')
+    parser.add_argument(
+        '--supply-voltage', type=_positive_float, default=12.0, help='V, PWM to current (physics)'
+    )
+    parser.add_argument(
+        '--coil-resistance', type=_positive_float, default=4.0, help='ohm (physics)'
     )
     parser.add_argument(
         '--clock-start', type=_clock, default=0, help='uint32 us clock at power-up (V2x)'
@@ -88,13 +113,30 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _physics_plant(args: argparse.Namespace) -> SimulatorPlant:
+    if args.firmware == 'v4x' and args.magnet == 'free':
+        raise UsageError('--magnet free needs --firmware v2x (a V4x host cannot close the loop)')
+    scaling = CurrentScaling.from_supply(args.supply_voltage, args.coil_resistance)
+    try:
+        plant = make_simulator_plant(args.magnet, args.params, scaling)
+    except (ValueError, OSError) as err:
+        raise UsageError(f'--params {args.params!r}: {err}') from None
+    if args.sensors is not None and args.sensors != plant.n_sensors:
+        raise UsageError(
+            f'--sensors must be {plant.n_sensors} for --params {args.params!r}, got {args.sensors}'
+        )
+    args.sensors = plant.n_sensors
+    return plant
+
+
 def load_plant(spec: str, n_sensors: int) -> Plant:
     """Build the plant named on the command line.
 
     Parameters
     ----------
     spec : str
-        ``'linear'`` (``LinearPlant.default``) or ``'module:factory'``.
+        ``'linear'`` (``LinearPlant.default``) or ``'module:factory'``
+        (``'physics'`` is handled by ``main``: it needs more options).
     n_sensors : int
         Number of sensors passed to the factory.
 
@@ -123,7 +165,7 @@ def load_plant(spec: str, n_sensors: int) -> Plant:
 
 def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], object]:
     if args.firmware == 'v2x':
-        return partial(
+        make = partial(
             V2xFirmware,
             plant,
             args.sensors,
@@ -131,15 +173,25 @@ def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], ob
             startup_delay=args.startup_delay,
             watchdog=args.watchdog,
         )
-    if args.log_period <= 0:
-        raise UsageError('--log-period must be > 0')
-    return partial(
-        V4xFirmware,
-        plant,
-        args.sensors,
-        log_period=args.log_period,
-        startup_delay=args.startup_delay,
-    )
+    else:
+        if args.log_period <= 0:
+            raise UsageError('--log-period must be > 0')
+        make = partial(
+            V4xFirmware,
+            plant,
+            args.sensors,
+            log_period=args.log_period,
+            startup_delay=args.startup_delay,
+            scaling=getattr(plant, 'scaling', None),
+        )
+    if not isinstance(plant, SimulatorPlant):
+        return make
+
+    def power_up() -> object:
+        plant.reset()  # a power-up restarts the physics at its start state
+        return make()
+
+    return power_up
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -157,7 +209,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     try:
         args = build_parser().parse_args(argv)
-        plant = load_plant(args.plant, args.sensors)
+        if args.plant == 'physics':
+            plant = _physics_plant(args)
+        else:
+            args.sensors = args.sensors or 1
+            plant = load_plant(args.plant, args.sensors)
         factory = _firmware_factory(args, plant)
         board = VirtualBoard(factory, link=args.link)
     except (UsageError, VirtualBoardError) as err:

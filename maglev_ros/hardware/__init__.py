@@ -3,7 +3,8 @@
 Re-exports only; see the modules: ``packet`` (V2x command packets),
 ``v2x_stream`` (V2x record decoder), ``v4x_telemetry`` (V4x text telemetry),
 ``scaling`` (current <-> PWM), ``board_clock`` (board time to host time),
-``serial_link`` (the port handle), ``firmware`` (board emulators) and
+``serial_link`` (the port handle), ``firmware`` (board emulators),
+``physics_plant`` (the physics simulator as an emulator plant) and
 ``virtual_board`` (an emulator on a pty).
 """
 
@@ -17,6 +18,7 @@ from .packet import (
     is_sendable,
     sendable_pwm,
 )
+from .physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
 from .scaling import CurrentScaling, ScalingError
 from .serial_link import Backoff, LinkError, SerialLink
 from .v2x_stream import (
@@ -41,6 +43,7 @@ from .v4x_telemetry import (
 from .virtual_board import BoardStatus, VirtualBoard, VirtualBoardError
 
 __all__ = [
+    'MAGNET_MODES',
     'Backoff',
     'BoardClock',
     'BoardStatus',
@@ -58,6 +61,7 @@ __all__ = [
     'ScalingError',
     'SerialLink',
     'Severity',
+    'SimulatorPlant',
     'TelemetryError',
     'TelemetrySample',
     'TelemetryStats',
@@ -70,6 +74,7 @@ __all__ = [
     'encode_command',
     'format_telemetry_line',
     'is_sendable',
+    'make_simulator_plant',
     'pack_records',
     'parse_telemetry_line',
     'record_dtype',

@@ -79,3 +79,19 @@ def test_runs_until_signal_and_cleans_up(signum, tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+@pytest.mark.parametrize(
+    'argv, match',
+    [
+        (['--plant', 'physics', '--magnet', 'free', '--firmware', 'v4x'], '--magnet free needs'),
+        (['--plant', 'physics', '--sensors', '2'], '--sensors must be 3'),
+        (['--plant', 'physics', '--params', '/nonexistent/params.yaml'], '--params'),
+        (['--plant', 'physics', '--supply-voltage', '0'], 'must be a positive finite number'),
+    ],
+)
+def test_physics_plant_arguments(argv, match, capsys):
+    pytest.importorskip('maglev_ros.physics')
+    assert main(argv) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and match in lines[0]

@@ -558,3 +558,37 @@ def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypa
         wait_for(lambda: h.driver.counters['reconnects'] == 1, what='reconnect')
         before = h.driver.counters['records']
         wait_for(lambda: h.driver.counters['records'] > before + 100, what='records again')
+
+
+def test_published_fields_equal_the_physics_model_in_tesla(make_harness):
+    pytest.importorskip('maglev_ros.physics')
+    from maglev_ros.hardware.physics_plant import make_simulator_plant
+
+    plant = make_simulator_plant('fixed', scaling=CurrentScaling(1000.0))
+    model, pose = plant.simulator.model, plant.simulator.state
+    with VirtualBoard(partial(V2xFirmware, plant, 3, startup_delay=0.2)) as board:
+        h = make_harness(
+            board.path,
+            n_sensors=3,
+            listen=True,
+            counts_per_ampere=1000.0,
+            start_enabled=True,
+            command_timeout=30.0,
+        )
+        h.command_until([0.5, -0.5, 1.0, -1.0], board, (500, -500, 1000, -1000))
+        wait_for(lambda: sum(any(c.effort) for c in list(h.currents)) > 100, what='samples')
+        currents = {
+            (m.header.stamp.sec, m.header.stamp.nanosec): m.effort for m in list(h.currents)
+        }
+        checked = 0
+        for k in range(3):
+            for msg in list(h.fields[k]):
+                effort = currents.get((msg.header.stamp.sec, msg.header.stamp.nanosec))
+                if effort is None:
+                    continue
+                model_mt = model.measurement(pose, np.array(effort)).reshape(3, 3)[k] * 1e3
+                model_t = model_mt.astype(np.float32).astype(np.float64) * 1e-3  # as sent
+                field = msg.magnetic_field
+                np.testing.assert_array_equal([field.x, field.y, field.z], model_t)
+                checked += 1
+        assert checked > 300

@@ -1,0 +1,57 @@
+import numpy as np
+import pytest
+
+from maglev_ros.hardware.firmware import V2xFirmware
+from maglev_ros.hardware.physics_plant import SimulatorPlant, make_simulator_plant
+from maglev_ros.hardware.scaling import CurrentScaling
+from maglev_ros.hardware.v2x_stream import RecordDecoder
+
+physics = pytest.importorskip('maglev_ros.physics')
+
+SCALING = CurrentScaling(1000.0)  # counts per A
+
+
+@pytest.fixture(scope='module')
+def model():
+    return physics.make_model('maggy_v2')
+
+
+@pytest.mark.parametrize('magnet', ['fixed', 'absent'])
+def test_readings_are_the_model_measurement_in_mt(model, magnet):
+    plant = SimulatorPlant(physics.Simulator(model, magnet=magnet), SCALING)
+    assert plant.n_sensors == model.n_outputs // 3
+    pose = plant.simulator.state
+    for pwm in ([0, 0, 0, 0], [500, -500, 250, -250], [4096, 4096, -4096, -4096]):
+        field = plant(np.array(pwm), 0.0)
+        current = np.array(pwm) / 1000.0
+        expected = model.measurement(pose, current, with_magnet=(magnet == 'fixed')) * 1e3
+        np.testing.assert_allclose(field, expected.reshape(-1, 3), rtol=1e-9, atol=1e-12)
+
+
+def test_free_magnet_falls_and_stays(model):
+    plant = SimulatorPlant(physics.Simulator(model, magnet='free'), SCALING)
+    for _ in range(5000):  # 1 s of a small push without control: it falls or flies off
+        plant(np.array([100, 0, 0, 0]), 0.0)
+    assert plant.crashed
+    rest = plant(np.zeros(4, dtype=int), 0.0)
+    pushed = plant(np.array([2000, 2000, 2000, 2000]), 0.0)
+    assert np.all(np.isfinite(rest)) and not np.allclose(rest, pushed)  # the coils still act
+    plant.reset()
+    assert not plant.crashed
+
+
+def test_sample_rate_must_match_the_board(model):
+    with pytest.raises(ValueError, match='simulator must sample every 200 us, got 1000 us'):
+        SimulatorPlant(physics.Simulator(model, sample_rate=1000.0), SCALING)
+    with pytest.raises(ValueError, match='magnet must be one of free, fixed, absent'):
+        make_simulator_plant('floating')
+
+
+def test_firmware_streams_physics_fields(model):
+    plant = make_simulator_plant('fixed', scaling=SCALING)
+    board = V2xFirmware(plant, plant.n_sensors, startup_delay=0.0)
+    decoder = RecordDecoder(plant.n_sensors, confirm=False)
+    batch = decoder.feed(board.advance_to(10_000))
+    assert len(batch) == 50 and decoder.stats.dropped_bytes == 0
+    expected = model.measurement(plant.simulator.state, np.zeros(4)) * 1e3
+    np.testing.assert_array_equal(batch.field_mT[-1], expected.reshape(-1, 3).astype(np.float32))
