@@ -80,7 +80,7 @@ P_RIM_RADIUS, P_SCALE, P_K0, P_MASS, P_IXX, P_IYY, P_IZZ, P_TORQUE, P_KINEMATICS
 
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
     """R = Rz(gamma) Ry(beta) Rx(alpha), body to world, shape (3, 3)."""
     ca, sa = math.cos(alpha), math.sin(alpha)
@@ -183,13 +183,13 @@ def loops_field(points, u, src, coil):
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
-def rim_force_torque(x, u, src, coil, rim, par, work):
+def rim_force_torque(x, u, src, coil, rim, par, work, r):
     """Force and torque on the magnet's rim current (fast model), world frame.
 
+    ``r`` is the magnet's rotation matrix (3, 3) for the angles in ``x``.
     Returns an array of shape (6,): (Fx, Fy, Fz) in N, (tau_x, tau_y, tau_z) in N m
     about the magnet's centre.
     """
-    r = rotation_matrix(x[3], x[4], x[5])
     n = rim.shape[1]
     rim_radius = par[P_RIM_RADIUS]
     k0 = par[P_K0]
@@ -254,14 +254,15 @@ def rim_force_torque(x, u, src, coil, rim, par, work):
     return out
 
 
-@njit(cache=True)
-def rigid_body_rates(x, wrench, mass, inertia, kinematics):
+@njit(cache=True, error_model='numpy')
+def rigid_body_rates(x, wrench, mass, inertia, kinematics, r):
     """Time derivative of the 12-state from the magnetic wrench (world frame).
 
     State: position (3) m, Euler angles (alpha, beta, gamma) rad, linear
     velocity (3) m/s (world), angular velocity (3) rad/s (body frame).
     ``kinematics``: KINEMATICS_RIGID (ZYX Euler kinematics, body-frame torque)
-    or KINEMATICS_PUBLISHED (Euler rates = w, world torque).
+    or KINEMATICS_PUBLISHED (Euler rates = w, world torque). ``r``: the rotation
+    matrix (3, 3) of the angles in ``x``.
     """
     dx = np.empty(12)
     dx[0] = x[6]
@@ -273,7 +274,6 @@ def rigid_body_rates(x, wrench, mass, inertia, kinematics):
     wx, wy, wz = x[9], x[10], x[11]
     ixx, iyy, izz = inertia[0], inertia[1], inertia[2]
     if kinematics == KINEMATICS_RIGID:
-        r = rotation_matrix(x[3], x[4], x[5])
         # body-frame torque R^T tau
         tx = r[0, 0] * wrench[3] + r[1, 0] * wrench[4] + r[2, 0] * wrench[5]
         ty = r[0, 1] * wrench[3] + r[1, 1] * wrench[4] + r[2, 1] * wrench[5]
@@ -297,12 +297,13 @@ def rigid_body_rates(x, wrench, mass, inertia, kinematics):
     return dx
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def fast_dynamics(x, u, src, coil, rim, par, work):
     """f(x, u) of the fast model, shape (12,)."""
-    wrench = rim_force_torque(x, u, src, coil, rim, par, work)
+    r = rotation_matrix(x[3], x[4], x[5])
+    wrench = rim_force_torque(x, u, src, coil, rim, par, work, r)
     return rigid_body_rates(x, wrench, par[P_MASS], par[P_IXX:P_IZZ + 1],
-                            int(par[P_KINEMATICS]))
+                            int(par[P_KINEMATICS]), r)
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -340,7 +341,7 @@ def fast_measurement(x, u, src, coil, sens, mag, work):
     return y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def crash_status(x, base_top, magnet_radius, half_thickness, lower, upper):
     """Crash check of a state: STATUS_OK, _CRASH_BASE, _CRASH_WORKSPACE or _NOT_FINITE.
 
@@ -360,7 +361,7 @@ def crash_status(x, base_top, magnet_radius, half_thickness, lower, upper):
     return STATUS_OK
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def coil_voltages(drive, coil_mode, coil_r, v_supply):
     """Coil voltages, V, for the drive signal (see :func:`rk4_sample`), clipped at the supply."""
     v = np.empty(drive.shape[0])
@@ -375,7 +376,7 @@ def coil_voltages(drive, coil_mode, coil_r, v_supply):
     return v
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def extended_rates(xe, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work):
     """Rates of the state; with coil dynamics, of [12-state, coil currents]."""
     if coil_mode == COIL_IDEAL:
@@ -389,7 +390,7 @@ def extended_rates(xe, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
     return out
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work):
     """Advance the state by one sample of length ``dt`` (s) with RK4 sub-steps.
 
@@ -432,7 +433,7 @@ def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, p
     return x
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def coil_step(xe, drive, dt, coil_mode, electrical):
     """Advance only the coil currents by one sample (exact first-order solution).
 
@@ -450,7 +451,7 @@ def coil_step(xe, drive, dt, coil_mode, electrical):
     return new
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
                 crash, check, sens, mag, frozen):
     """One simulator sample: RK4 step, crash check and the true sensor reading.
@@ -483,7 +484,7 @@ def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, 
     return new, status, y
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
 def rk4_run(x0, drives, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
             crash, check, sens, mag, frozen):
     """Integrate over ``drives.shape[0]`` samples; stop at the first crash.

@@ -331,7 +331,8 @@ class MaggyModel:
         current = self._inputs(u)
         if self.options.field == 'fast':
             src, coil, rim, par, work = self.fast_arguments()
-            return kernels.rim_force_torque(state, current, src, coil, rim, par, work)
+            r = kernels.rotation_matrix(state[3], state[4], state[5])
+            return kernels.rim_force_torque(state, current, src, coil, rim, par, work, r)
         return self._surface_wrench(state, current)
 
     def _surface_wrench(self, state: np.ndarray, current: np.ndarray) -> np.ndarray:
@@ -377,7 +378,8 @@ class MaggyModel:
         if self.options.field == 'fast':
             return kernels.fast_dynamics(state, self._inputs(u), *self.fast_arguments())
         return kernels.rigid_body_rates(state, self.wrench(state, u), m.mass, self._inertia,
-                                        self._kinematics)
+                                        self._kinematics,
+                                        kernels.rotation_matrix(state[3], state[4], state[5]))
 
     def measurement(self, x, u=None, with_magnet: bool = True) -> np.ndarray:
         """h(x, u): sensor readings [Bx_0, By_0, Bz_0, Bx_1, ...], T, shape (3 n_sensors,).
