@@ -6,18 +6,19 @@ parameters).
 
 Default solver (``method='auto'``): the normal equations
 ``(Phi^T Phi) theta = Phi^T y`` are built directly from lagged correlations of
-the signals (:mod:`maglev_ros.sysid.correlation`: ~2p dot products, no N x p
+the signals (:mod:`maglev_ros.sysid.correlation`: ~p dot products, no N x p
 regression matrix) and solved by Cholesky.  Why: for the lab's 25,000-sample
 data this is several times faster than forming ``Phi`` and factoring it.  The
 rounding error of normal equations grows like ``cond(Phi^T Phi) * eps``;
-below ``cond = 1e8`` that is < 1e-8 relative, far below any statistical
-error.  Above it (high-order models of slow, oversampled systems such as
-na=7 nb=9 at 5 kHz reach 1e9-1e12) one step of iterative refinement with the
-true residual - obtained by FIR filtering, still without ``Phi`` - restores
-QR-level accuracy up to ``cond = 1e13``.  Beyond that the solver forms ``Phi``
-and uses a Householder QR of ``[Phi, y]`` (LAPACK ``geqrf``, R factor only).
-``method='normal'`` forms ``Phi`` and solves the normal equations with one
-step of iterative refinement; ``method='qr'`` always uses QR.
+below ``cond = 1e10`` that is < 1e-6 relative, far below the statistical
+error of any estimate from noisy data.  Above it (high-order models of slow,
+oversampled systems such as na=7 nb=9 at 5 kHz reach 1e9-1e12) one step of
+iterative refinement with the true residual - obtained by FIR filtering,
+still without ``Phi`` - restores QR-level accuracy up to ``cond = 1e13``.
+Beyond that the solver forms ``Phi`` and uses a Householder QR of
+``[Phi, y]`` (LAPACK ``geqrf``, R factor only).  ``method='normal'`` forms
+``Phi`` and solves the normal equations with one step of iterative
+refinement; ``method='qr'`` always uses QR.
 """
 
 from __future__ import annotations
@@ -37,7 +38,7 @@ __all__ = ['arx', 'least_squares']
 
 COND_LIMIT = 1e12
 CORRELATION_COND_LIMIT = 1e13
-REFINE_ABOVE = 1e8
+REFINE_ABOVE = 1e10
 
 
 def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
@@ -222,7 +223,7 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
     tuple or None
         ``(theta, (Phi^T Phi)^-1, lambda)`` with the unbiased residual variance,
         or None if ``cond(Phi^T Phi) > 1e13`` (the caller then uses QR).  Above
-        ``cond = 1e8`` one step of iterative refinement with the true residual
+        ``cond = 1e10`` one step of iterative refinement with the true residual
         (computed by FIR filtering) restores QR-level accuracy.
     """
     tgt = np.array([[target, 0, 1, 1]], dtype=np.int64)

@@ -68,6 +68,7 @@ def compare_plot(data: IdData, models: Sequence[PolyModel], path: str | Path,
     axes[-1].set_xlabel('time [s]')
     what = 'simulation' if horizon is None else f'{horizon}-step prediction'
     fig.suptitle(f'Measured vs model output ({what})')
+    fig.tight_layout()
     return _save(fig, path)
 
 
