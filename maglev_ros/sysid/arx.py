@@ -126,8 +126,8 @@ def arx(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
     return finish_model('arx', orders, theta, cov, experiments, f'ARX, {used}')
 
 
-def arx_rows(experiments: Sequence[IdData], orders: Orders, method: str = 'auto'
-             ) -> tuple[np.ndarray, np.ndarray, str]:
+def arx_rows(experiments: Sequence[IdData], orders: Orders, method: str = 'auto',
+             refine: bool = True) -> tuple[np.ndarray, np.ndarray, str]:
     """Least-squares estimate of the ``A``/``B`` parameters of every output row.
 
     Parameters
@@ -138,6 +138,9 @@ def arx_rows(experiments: Sequence[IdData], orders: Orders, method: str = 'auto'
         Orders (``nc``, ``nd``, ``nf`` must be zero).
     method : str
         Solver, see :func:`least_squares`.
+    refine : bool
+        Allow the refinement step of :func:`correlation_solve` (off for
+        intermediate estimates whose last digits do not matter).
 
     Returns
     -------
@@ -156,7 +159,7 @@ def arx_rows(experiments: Sequence[IdData], orders: Orders, method: str = 'auto'
         start = orders.row_start(i)
         solved = None
         if method == 'auto':
-            solved = correlation_solve(signals, row_blocks(orders, i), i, start)
+            solved = correlation_solve(signals, row_blocks(orders, i), i, start, refine)
         if solved is not None:
             theta, Rinv, lam = solved
             used = 'normal equations from lagged correlations (Cholesky)'
@@ -204,7 +207,8 @@ def row_blocks(orders: Orders, i: int, out_base: int = 0, in_base: int | None = 
 
 
 def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target: int,
-                      start: int) -> tuple[np.ndarray, np.ndarray, float] | None:
+                      start: int, refine: bool = True
+                      ) -> tuple[np.ndarray, np.ndarray, float] | None:
     """Least squares of ``signal[target](t)`` on lagged regressors from correlations.
 
     Parameters
@@ -217,6 +221,9 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
         Row of the regressed signal (at lag 0).
     start : int
         First time index.
+    refine : bool
+        Allow the iterative-refinement step (needed for full accuracy above
+        ``cond = 1e10`` or with a near-zero residual).
 
     Returns
     -------
@@ -247,7 +254,7 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
     except np.linalg.LinAlgError:
         return None
     theta = sla.cho_solve(factor, r, check_finite=False)
-    if cond < REFINE_ABOVE:
+    if cond < REFINE_ABOVE or not refine:
         sse = yy - 2.0 * theta @ r + theta @ R @ theta
     else:
         sse = -1.0

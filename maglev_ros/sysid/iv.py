@@ -91,6 +91,14 @@ def _iv_rows(signals: Sequence[np.ndarray], orders: Orders, start_offset: int = 
     return thetas, covs
 
 
+def _fir_rows(h: np.ndarray, S: np.ndarray) -> np.ndarray:
+    """Filter every row of ``S`` by the FIR filter ``h`` (zero initial state)."""
+    if len(h) == 1:
+        return S * h[0]
+    N = S.shape[1]
+    return np.stack([np.convolve(row, h)[:N] for row in S])
+
+
 def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
                       theta: np.ndarray) -> list[np.ndarray]:
     """AR model ``L_i`` (order na_i + nb_i) of the equation error of each row."""
@@ -137,7 +145,7 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
     first = experiments[0]
     orders = make_orders(first.ny, first.nu, na=na, nb=nb, nk=nk)
     check_data(experiments, orders)
-    theta1, _, _ = arx_rows(experiments, orders)
+    theta1, _, _ = arx_rows(experiments, orders, refine=False)
     x1 = _simulate(orders, theta1, experiments)
     thetas2, _ = _iv_rows([signal_matrix(d, x) for d, x in zip(experiments, x1, strict=True)],
                           orders, covariance=False)

@@ -250,19 +250,23 @@ class PolyModel:
         if ic not in ('zero', 'estimate'):
             raise ValueError(f"ic must be 'zero' or 'estimate', got {ic!r}")
         u = self._inputs(data)
-        A, B, C, D, _ = innovations_form(self._polys, noise=False)
         if self._coupled:
+            A, B, C, D, _ = innovations_form(self._polys, noise=False)
             ysim = simulate_ss(A, B, C, D, np.zeros(A.shape[0]), np.ascontiguousarray(u))
-        else:  # one rational filter per channel (scipy lfilter)
-            ysim = np.zeros((u.shape[0], self.ny))
+        else:  # one rational filter per channel (scipy lfilter), channel rows
+            ur = np.ascontiguousarray(u.T)
+            rows = np.zeros((self.ny, u.shape[0]))
             for i in range(self.ny):
                 a = self.polynomial('A', i, i)
                 for j in range(self.nu):
                     if self.orders.nb[i, j]:
-                        ysim[:, i] += lfilter(self.polynomial('B', i, j),
-                                              np.convolve(a, self.polynomial('F', i, j)),
-                                              u[:, j])
-        if ic == 'zero' or A.shape[0] == 0:
+                        rows[i] += lfilter(self.polynomial('B', i, j),
+                                           np.convolve(a, self.polynomial('F', i, j)), ur[j])
+            ysim = rows.T
+        if ic == 'zero':
+            return ysim
+        A, B, C, D, _ = innovations_form(self._polys, noise=False)
+        if A.shape[0] == 0:
             return ysim
         if not isinstance(data, IdData):
             raise TypeError("ic='estimate' needs IdData with measured outputs")
