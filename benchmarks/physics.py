@@ -264,6 +264,7 @@ def bench_params(name, quick, load_rows):
                             model.params.workspace.lower, model.params.workspace.upper])
     core_args = model.fast_arguments()
     sens_args = model.measurement_arguments()[2:4]  # sens, mag: the core also reads sensors
+    cfg = kernels.simulator_config(dt, 1, kernels.COIL_IDEAL, True, False, np.ones(3), crash)
     sim_rows = []
     sim_reps = 2 if quick else 3
     for label, inputs in ((f'pairs {n_pairs * dt:.2f} s', pairs[:n_pairs]),
@@ -281,8 +282,7 @@ def bench_params(name, quick, load_rows):
             raise RuntimeError(f'{name}: run crashed on {label} at {result.crash_time} s')
         t_run = best_time(lambda inputs=inputs: sim.run(inputs), sim_reps)
         t_core = best_time(lambda inputs=inputs: kernels.rk4_run(
-            x_eq.copy(), inputs, dt, 1, kernels.COIL_IDEAL, np.ones(3), *core_args, crash,
-            True, *sens_args, False), sim_reps)
+            x_eq.copy(), inputs, cfg, *core_args, *sens_args), sim_reps)
         sim_rows.append((label, len(inputs) * dt, t_step, t_run, t_core, result.x[-1]))
 
     # baseline: the same RK4 (one step per sample) with the reference f(x, u)

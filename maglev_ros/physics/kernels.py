@@ -451,28 +451,56 @@ def coil_step(xe, drive, dt, coil_mode, electrical):
     return new
 
 
+# indices into the simulator configuration ``cfg`` (float array, see :func:`simulator_config`)
+(C_DT, C_SUBSTEPS, C_COIL_MODE, C_CHECK, C_FROZEN, C_R, C_L, C_SUPPLY, C_BASE_TOP,
+ C_MAGNET_RADIUS, C_HALF_THICKNESS, C_LOWER, C_UPPER) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14)
+CONFIG_SIZE = 17
+
+
+def simulator_config(dt, substeps, coil_mode, check, frozen, electrical, crash) -> np.ndarray:
+    """Pack the simulator's settings into one float array (fewer arguments per call).
+
+    ``electrical`` = (R ohm, L H, supply V); ``crash`` = (base top m, magnet radius m,
+    half thickness m, lower xyz m, upper xyz m).
+    """
+    cfg = np.empty(CONFIG_SIZE)
+    cfg[C_DT] = dt
+    cfg[C_SUBSTEPS] = substeps
+    cfg[C_COIL_MODE] = coil_mode
+    cfg[C_CHECK] = 1.0 if check else 0.0
+    cfg[C_FROZEN] = 1.0 if frozen else 0.0
+    cfg[C_R:C_SUPPLY + 1] = electrical
+    cfg[C_BASE_TOP:] = crash
+    return cfg
+
+
 @njit(cache=True, error_model='numpy')
-def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
-                crash, check, sens, mag, frozen):
+def sample_step(xe, drive, cfg, src, coil, rim, par, work, sens, mag):
     """One simulator sample: RK4 step, crash check and the true sensor reading.
 
-    Returns (new extended state, status, reading (3 k,)). On a crash the state
-    is the attempted one and the reading is taken at the previous state; a
-    non-finite drive returns STATUS_BAD_INPUT and leaves the state alone. With
-    ``frozen`` the magnet does not move (fixed or absent magnet): only the coil
-    currents evolve.
+    ``cfg`` is :func:`simulator_config`'s array. Returns (new extended state,
+    status, reading (3 k,)). On a crash the state is the attempted one and the
+    reading is taken at the previous state; a non-finite drive returns
+    STATUS_BAD_INPUT and leaves the state alone. A frozen simulator (fixed or
+    absent magnet) only advances the coil currents.
     """
     for j in range(drive.shape[0]):
         if not math.isfinite(drive[j]):
             return xe.copy(), STATUS_BAD_INPUT, np.zeros(3 * sens.shape[0])
-    if frozen:
+    dt = cfg[C_DT]
+    coil_mode = int(cfg[C_COIL_MODE])
+    electrical = cfg[C_R:C_SUPPLY + 1]
+    if cfg[C_FROZEN] != 0.0:
         new = coil_step(xe, drive, dt, coil_mode, electrical)
         currents = new[12:] if coil_mode != COIL_IDEAL else drive
         y = fast_measurement(new[:12].copy(), currents.copy(), src, coil, sens, mag, work)
         return new, STATUS_OK, y
-    new = rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, par, work)
-    if check:
-        status = crash_status(new[:12], crash[0], crash[1], crash[2], crash[3:6], crash[6:9])
+    new = rk4_sample(xe, drive, dt, int(cfg[C_SUBSTEPS]), coil_mode, electrical, src, coil,
+                     rim, par, work)
+    if cfg[C_CHECK] != 0.0:
+        status = crash_status(new[:12], cfg[C_BASE_TOP], cfg[C_MAGNET_RADIUS],
+                              cfg[C_HALF_THICKNESS], cfg[C_LOWER:C_LOWER + 3],
+                              cfg[C_UPPER:C_UPPER + 3])
     else:
         status = STATUS_OK
         for k in range(new.shape[0]):
@@ -485,28 +513,26 @@ def sample_step(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, 
 
 
 @njit(cache=True, error_model='numpy')
-def rk4_run(x0, drives, dt, substeps, coil_mode, electrical, src, coil, rim, par, work,
-            crash, check, sens, mag, frozen):
+def rk4_run(x0, drives, cfg, src, coil, rim, par, work, sens, mag):
     """Integrate over ``drives.shape[0]`` samples; stop at the first crash.
 
-    ``crash`` = (base top m, magnet radius m, half thickness m, lower xyz, upper xyz)
-    as a (9,) array. Returns (states (K + 1, n_x), true readings (K + 1, 3 k),
-    samples done K, status, attempted state at the crash).
+    ``cfg`` is :func:`simulator_config`'s array. Returns (states (K + 1, n_x),
+    true readings (K + 1, 3 k), samples done K, status, attempted state at the
+    crash).
     """
     n = drives.shape[0]
     n_y = 3 * sens.shape[0]
     states = np.empty((n + 1, x0.shape[0]))
     outputs = np.empty((n + 1, n_y))
     states[0] = x0
-    if coil_mode == COIL_IDEAL:
+    if int(cfg[C_COIL_MODE]) == COIL_IDEAL:
         first = np.zeros(drives.shape[1])
     else:
         first = x0[12:].copy()
     outputs[0] = fast_measurement(x0[:12].copy(), first, src, coil, sens, mag, work)
     x = x0.copy()
     for k in range(n):
-        new, status, y = sample_step(x, drives[k], dt, substeps, coil_mode, electrical, src,
-                                     coil, rim, par, work, crash, check, sens, mag, frozen)
+        new, status, y = sample_step(x, drives[k], cfg, src, coil, rim, par, work, sens, mag)
         if status != STATUS_OK:
             return states[:k + 1], outputs[:k + 1], k, status, new
         x = new

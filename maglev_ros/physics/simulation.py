@@ -232,9 +232,10 @@ class Simulator:
             if magnet == 'absent':
                 mag = np.array([mag[0], 0.0])  # no levitating magnet: its field is zero
             self._sens_args = (sens, mag)
-            self._step_args = (self.dt, self.substeps, self._coil_mode, self._electrical,
-                               *self._fast_args, self._crash, self.check_crash,
-                               *self._sens_args, magnet != 'free')
+            cfg = kernels.simulator_config(self.dt, self.substeps, self._coil_mode,
+                                           self.check_crash, magnet != 'free',
+                                           self._electrical, self._crash)
+            self._step_args = (cfg, *self._fast_args, *self._sens_args)
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -248,10 +249,10 @@ class Simulator:
         """
         if x0 is not None:
             state = self._check_state(x0)
-        elif self._default_x0 is not None:
-            state = self._default_x0
         else:
-            state = self._equilibrium_state()
+            if self._default_x0 is None:  # found once, then reused by every reset
+                self._default_x0 = self._equilibrium_state()
+            state = self._default_x0
         n_s = self.model.n_inputs
         self._xe = np.concatenate([state, np.zeros(n_s)]) if self._coil_mode else state.copy()
         self.time = 0.0
