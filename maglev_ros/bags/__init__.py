@@ -1,1 +1,39 @@
-"""maglev_ros.bags."""
+"""ROS-free rosbag2 tools: record bags, read them, turn them into identification data.
+
+Writing (:class:`BagWriter`), reading (:class:`BagReader`), channel specs
+(:func:`parse_channel`), the time-base rule (:func:`align`) and bag -> data set
+(:func:`read_bag`, :func:`load_bag_dataset`, :func:`write_dataset`).  Uses
+rosbags only; rclpy is never imported here.
+"""
+
+from .alignment import Alignment, Gap, Source, SourceReport, align, estimate_period
+from .channels import Channel, FieldRef, parse_channel, parse_field_path
+from .datasets import BagDataset, load_bag_dataset, read_bag
+from .errors import BagError
+from .export import format_summary, write_dataset
+from .reader import METADATA_TOPIC, BagReader, TopicInfo
+from .writer import BagWriter, TopicHandle
+
+__all__ = [
+    'METADATA_TOPIC',
+    'Alignment',
+    'BagDataset',
+    'BagError',
+    'BagReader',
+    'BagWriter',
+    'Channel',
+    'FieldRef',
+    'Gap',
+    'Source',
+    'SourceReport',
+    'TopicHandle',
+    'TopicInfo',
+    'align',
+    'estimate_period',
+    'format_summary',
+    'load_bag_dataset',
+    'parse_channel',
+    'parse_field_path',
+    'read_bag',
+    'write_dataset',
+]

@@ -1,0 +1,246 @@
+"""Write rosbag2 bags (MCAP or sqlite3) from CDR-serialised messages, without ROS.
+
+:class:`BagWriter` wraps :class:`rosbags.rosbag2.Writer` so that a pip-only
+machine can record: it takes the bytes a ``raw=True`` subscription (or
+``rclpy.serialization.serialize_message``) delivers, stores them unchanged, and
+always finalises the bag (storage index and ``metadata.yaml``) on
+:meth:`BagWriter.close`, also when the ``with`` block ends with an exception.
+
+The bag is written in rosbag2 format version 8 (the one ROS 2 Jazzy writes), so
+``ros2 bag info`` / ``ros2 bag play`` read it.  Run metadata (a flat dict of
+strings, numbers and booleans) goes into the bag's ``custom_data``, one key per
+item, each value a YAML scalar so that :func:`maglev_ros.bags.reader.BagReader`
+gives back the original types.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+
+import yaml
+from rosbags.interfaces import Connection, Qos
+from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
+from rosbags.typesys.store import Typestore
+
+from .errors import BagError
+from .names import normalize_msgtype, normalize_topic
+from .typestore import jazzy_typestore
+
+__all__ = ['STORAGES', 'BagWriter', 'TopicHandle', 'encode_metadata']
+
+#: Storage plugins by name (``ros2 bag record --storage``).
+STORAGES: dict[str, StoragePlugin] = {'mcap': StoragePlugin.MCAP,
+                                      'sqlite3': StoragePlugin.SQLITE3}
+#: rosbag2 metadata version written (ROS 2 Jazzy writes 8).
+BAG_VERSION = 8
+_SCALARS = (str, int, float, bool)
+
+
+def encode_metadata(metadata: Mapping[str, object] | None) -> dict[str, str]:
+    """Check run metadata and encode each value as a YAML scalar string.
+
+    Parameters
+    ----------
+    metadata : mapping of str to str, int, float, bool or None, optional
+        Flat run metadata (parameter set, model options, seed, package version ...).
+
+    Returns
+    -------
+    dict of str to str
+        The ``custom_data`` entries.
+    """
+    encoded: dict[str, str] = {}
+    for key, value in (metadata or {}).items():
+        if not isinstance(key, str) or not key:
+            raise BagError(f'metadata keys must be non-empty strings, got {key!r}')
+        if value is not None and not isinstance(value, _SCALARS):
+            raise BagError(f'metadata {key!r} must be a string, number or boolean (flatten '
+                           f'nested options into keys such as "model.field"), '
+                           f'got {type(value).__name__}')
+        text = yaml.safe_dump(value, default_flow_style=True, width=10**6).strip()
+        encoded[key] = text.removesuffix('\n...').removesuffix('...').strip()
+    return encoded
+
+
+@dataclass(frozen=True, eq=False)
+class TopicHandle:
+    """A topic added to a :class:`BagWriter`; pass it to :meth:`BagWriter.write`.
+
+    Parameters
+    ----------
+    name : str
+        Absolute topic name.
+    msgtype : str
+        Message type ``pkg/msg/Type``.
+    connection : rosbags.interfaces.Connection
+        The rosbags connection the messages are written to.
+    """
+
+    name: str
+    msgtype: str
+    connection: Connection
+
+
+class BagWriter:
+    """A rosbag2 bag being written: open, add topics, write CDR bytes, close.
+
+    Parameters
+    ----------
+    path : str or Path
+        Bag directory to create; it must not exist.
+    storage : {'mcap', 'sqlite3'}
+        Storage plugin (default ``'mcap'``, as ``ros2 bag record``).
+    metadata : mapping, optional
+        Flat run metadata stored in the bag's ``custom_data``.
+    typestore : rosbags Typestore, optional
+        Message definitions (default: ROS 2 Jazzy's standard messages).
+
+    Notes
+    -----
+    Thread-safe: :meth:`add_topic`, :meth:`write` and :meth:`close` take one
+    lock, so subscription callbacks on several executor threads may write while
+    another thread closes.  :meth:`close` is idempotent; call it from the
+    ``finally`` of the recorder's ``main`` (or a shutdown callback).  Writing
+    after :meth:`close` raises :class:`BagError`.  Nothing is readable until
+    :meth:`close` has written ``metadata.yaml``; a process killed with SIGKILL
+    leaves an unfinished bag.
+    """
+
+    def __init__(self, path: str | Path, storage: str = 'mcap',
+                 metadata: Mapping[str, object] | None = None,
+                 typestore: Typestore | None = None) -> None:
+        if storage not in STORAGES:
+            raise BagError(f'unknown bag storage {storage!r} (use one of {sorted(STORAGES)})')
+        self.path = Path(path)
+        if self.path.exists():
+            raise BagError(f'bag directory {str(self.path)!r} exists already; '
+                           f'choose a new name')
+        self.storage = storage
+        self.metadata = dict(metadata or {})
+        self._custom = encode_metadata(self.metadata)
+        self._typestore = typestore or jazzy_typestore()
+        self._writer = Writer(self.path, version=BAG_VERSION, storage_plugin=STORAGES[storage])
+        self._topics: dict[str, TopicHandle] = {}
+        self._lock = threading.RLock()
+        self._state = 'new'
+        self.message_count = 0
+
+    # ------------------------------------------------------------ lifecycle
+    @property
+    def is_open(self) -> bool:
+        """Whether the bag accepts topics and messages."""
+        return self._state == 'open'
+
+    def open(self) -> BagWriter:
+        """Create the bag directory and its storage file.
+
+        Returns
+        -------
+        BagWriter
+            ``self``.
+        """
+        with self._lock:
+            if self._state != 'new':
+                raise BagError(f'bag {str(self.path)!r} was opened already')
+            try:
+                self._writer.open()
+            except (WriterError, OSError) as exc:
+                raise BagError(f'cannot create bag {str(self.path)!r}: {exc}') from None
+            for key, value in self._custom.items():
+                self._writer.set_custom_data(key, value)
+            self._state = 'open'
+        return self
+
+    def close(self) -> None:
+        """Finalise the bag: write the storage index and ``metadata.yaml`` (idempotent)."""
+        with self._lock:
+            if self._state != 'open':
+                self._state = 'closed'
+                return
+            self._state = 'closed'
+            try:
+                self._writer.close()
+            except BaseException:
+                self._writer.abort()
+                raise
+
+    def __enter__(self) -> BagWriter:
+        return self.open()
+
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
+        # finalise also on errors and KeyboardInterrupt: what was written stays readable
+        self.close()
+
+    # -------------------------------------------------------------- writing
+    def add_topic(self, name: str, msgtype: str, serialization_format: str = 'cdr',
+                  offered_qos: Sequence[Qos] | None = None) -> TopicHandle:
+        """Register a topic; returns the handle to write its messages with.
+
+        Parameters
+        ----------
+        name : str
+            Topic name, with or without the leading ``/``.
+        msgtype : str
+            Message type, ``pkg/msg/Type`` (or ``pkg/Type``), known to the type store.
+        serialization_format : str
+            ``'cdr'`` (what rclpy and rosbags produce).
+        offered_qos : sequence of rosbags Qos, optional
+            The publishers' QoS profiles, stored for ``ros2 bag play``.
+
+        Returns
+        -------
+        TopicHandle
+            The topic's handle.
+        """
+        topic, msgtype = normalize_topic(name), normalize_msgtype(msgtype)
+        with self._lock:
+            self._check_open()
+            if topic in self._topics:
+                raise BagError(f'topic {topic!r} was added to bag {str(self.path)!r} already')
+            if msgtype not in self._typestore.fielddefs:
+                raise BagError(f'unknown message type {msgtype!r} for topic {topic!r} (not in '
+                               f'the type store; pass typestore= with its definition)')
+            connection = self._writer.add_connection(
+                topic, msgtype, typestore=self._typestore,
+                serialization_format=serialization_format,
+                offered_qos_profiles=list(offered_qos or ()))
+            handle = TopicHandle(topic, msgtype, connection)
+            self._topics[topic] = handle
+            return handle
+
+    def write(self, topic: TopicHandle | str, timestamp_ns: int, data: bytes) -> None:
+        """Write one serialised message.
+
+        Parameters
+        ----------
+        topic : TopicHandle or str
+            The handle from :meth:`add_topic`, or the topic name.
+        timestamp_ns : int
+            Log (receive) time in nanoseconds since the epoch (or of the ROS clock).
+        data : bytes
+            The CDR-serialised message, with its 4-byte encapsulation header.
+        """
+        with self._lock:
+            self._check_open()
+            handle = topic if isinstance(topic, TopicHandle) else self._topics.get(
+                normalize_topic(topic))
+            if handle is None or self._topics.get(handle.name) is not handle:
+                raise BagError(f'topic {topic if isinstance(topic, str) else topic.name!r} '
+                               f'was not added to bag {str(self.path)!r} '
+                               f'(topics: {sorted(self._topics)})')
+            stamp = int(timestamp_ns)
+            if stamp < 0:
+                raise BagError(f'timestamp must be >= 0 ns, got {timestamp_ns!r}')
+            self._writer.write(handle.connection, stamp, data)
+            self.message_count += 1
+
+    def _check_open(self) -> None:
+        if self._state == 'new':
+            raise BagError(f'bag {str(self.path)!r} is not open (use it in a with block)')
+        if self._state == 'closed':
+            raise BagError(f'bag {str(self.path)!r} is closed')

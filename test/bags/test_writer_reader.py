@@ -1,0 +1,128 @@
+import numpy as np
+import pytest
+
+from maglev_ros.bags import BagError, BagReader, BagWriter
+from maglev_ros.bags.typestore import cdr_deserializer, jazzy_typestore
+
+from .recordings import (
+    COMMAND,
+    CURRENTS,
+    METADATA,
+    SENSOR,
+    currents_msg,
+    field_msg,
+    lockstep_data,
+    write_lockstep_bag,
+)
+
+STORAGES = ['mcap', 'sqlite3']
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_every_message_and_stamp_reads_back(tmp_path, storage):
+    run = lockstep_data(200)
+    written: dict[str, list] = {}
+    bag = write_lockstep_bag(tmp_path / 'run', run, storage, log=written)
+    assert sorted(written) == sorted([COMMAND, CURRENTS, SENSOR])
+    assert [s for s, _ in written[COMMAND]] == list(run.stamps)
+    with BagReader(bag) as reader:
+        assert reader.storage == storage
+        assert {t: i.msgtype for t, i in reader.topics.items()} == {
+            SENSOR: 'sensor_msgs/msg/MagneticField', CURRENTS: 'sensor_msgs/msg/JointState',
+            COMMAND: 'std_msgs/msg/Float64MultiArray'}
+        assert reader.message_count == 600
+        for topic, expected in written.items():
+            got = [(stamp, bytes(raw)) for _, stamp, raw in reader.messages([topic])]
+            assert got == expected
+        decode = reader.deserializer('maglev/currents')
+        msg = decode(next(raw for _, _, raw in reader.messages([CURRENTS])))
+        assert list(msg.name) == ['x+', 'x-', 'y+', 'y-']
+        np.testing.assert_array_equal(msg.effort, run.currents[0])
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == run.stamps[0]
+        assert reader.metadata == METADATA
+
+
+def test_rclpy_padding_is_accepted():
+    # Fast DDS serialises JointState with trailing bytes; rosbags' strict check rejects them
+    raw = currents_msg(5, np.array([1.0, 2.0, 3.0, 4.0]))
+    msg = cdr_deserializer(jazzy_typestore(), 'sensor_msgs/msg/JointState')(raw)
+    np.testing.assert_array_equal(msg.effort, [1.0, 2.0, 3.0, 4.0])
+
+
+def test_bag_is_finalised_when_the_block_raises(tmp_path):
+    with pytest.raises(RuntimeError, match='boom'):
+        with BagWriter(tmp_path / 'b', metadata={'seed': 3}) as bag:
+            topic = bag.add_topic('maglev/sensor_0/field', 'sensor_msgs/MagneticField')
+            bag.write(topic, 10, field_msg(10, np.ones(3)))
+            raise RuntimeError('boom')
+    bag.close()  # idempotent, as a signal handler may call it again
+    with BagReader(tmp_path / 'b') as reader:
+        assert [s for _, s, _ in reader.messages([SENSOR])] == [10]
+        assert reader.metadata == {'seed': 3}
+
+
+def test_writer_rejects_misuse(tmp_path):
+    with pytest.raises(BagError, match='unknown bag storage'):
+        BagWriter(tmp_path / 'x', storage='rosbag1')
+    with pytest.raises(BagError, match='flatten nested'):
+        BagWriter(tmp_path / 'x', metadata={'model': {'field': 'fast'}})
+    with BagWriter(tmp_path / 'x') as bag:
+        topic = bag.add_topic('/a', 'std_msgs/msg/String')
+        with pytest.raises(BagError, match="topic '/a' was added"):
+            bag.add_topic('a', 'std_msgs/msg/String')
+        with pytest.raises(BagError, match='unknown message type'):
+            bag.add_topic('/b', 'maglev_msgs/msg/Nope')
+        with pytest.raises(BagError, match=r"topic '/c' was not added .*\['/a'\]"):
+            bag.write('/c', 1, b'')
+    with pytest.raises(BagError, match='is closed'):
+        bag.write(topic, 1, b'\x00\x01\x00\x00')
+    with pytest.raises(BagError, match='exists already'):
+        BagWriter(tmp_path / 'x')
+
+
+def test_metadata_topic_is_read_too(tmp_path):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    with BagWriter(tmp_path / 'm', metadata={'seed': 1, 'params': 'maggy_v2'}) as bag:
+        topic = bag.add_topic('/maglev/metadata', 'std_msgs/msg/String')
+        bag.write(topic, 5, serialize_message(String(data='params: maggy_v4\nrate_hz: 5000')))
+    with BagReader(tmp_path / 'm') as reader:
+        assert reader.metadata == {'seed': 1, 'params': 'maggy_v4', 'rate_hz': 5000}
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_truncated_bag_is_one_clear_error(tmp_path, storage):
+    bag = write_lockstep_bag(tmp_path / 'run', lockstep_data(500), storage)
+    (store,) = [p for p in bag.iterdir() if p.suffix in ('.mcap', '.db3')]
+    data = store.read_bytes()
+    store.write_bytes(data[:len(data) // 2])
+    with pytest.raises(BagError, match='truncated or corrupt'):
+        with BagReader(bag) as reader:
+            for _ in reader.messages([SENSOR, CURRENTS]):
+                pass
+
+
+def test_missing_empty_and_unfinished_bags(tmp_path):
+    with pytest.raises(BagError, match='does not exist'):
+        BagReader(tmp_path / 'nope')
+    (tmp_path / 'empty').mkdir()
+    with pytest.raises(BagError, match='is empty'):
+        BagReader(tmp_path / 'empty')
+    (tmp_path / 'unfinished').mkdir()
+    (tmp_path / 'unfinished' / 'unfinished.mcap').write_bytes(b'\x89MCAP0\r\n')
+    with pytest.raises(BagError, match='no metadata.yaml'):
+        BagReader(tmp_path / 'unfinished')
+    with BagWriter(tmp_path / 'nomsg', storage='sqlite3') as bag:
+        bag.add_topic('/maglev/currents', 'sensor_msgs/msg/JointState')
+    with pytest.raises(BagError, match=r"is empty: it has no messages \(topics: \['/maglev/"):
+        BagReader(tmp_path / 'nomsg').open()
+
+
+def test_unknown_topic_lists_the_bags_topics(tmp_path):
+    bag = write_lockstep_bag(tmp_path / 'run', lockstep_data(10))
+    with BagReader(bag) as reader:
+        with pytest.raises(BagError, match=r"no topic '/maglev/sensor_1/field'; its topics: "
+                           r"/maglev/currents \(sensor_msgs/msg/JointState\), "
+                           r"/maglev/currents/command .*/maglev/sensor_0/field"):
+            reader.topic('maglev/sensor_1/field')
