@@ -21,7 +21,7 @@ from ..sysid.dataset import IdData
 from .alignment import TOLERANCE, Alignment, Gap, Source, align
 from .channels import Channel, FieldRef, parse_channel, unit_of
 from .errors import BagError
-from .extraction import read_topic
+from .extraction import read_topics
 from .reader import BagReader
 
 __all__ = ['BagDataset', 'load_bag_dataset', 'read_bag']
@@ -175,9 +175,7 @@ def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
             if ref not in refs[ref.topic]:
                 refs[ref.topic].append(ref)
     with BagReader(path) as reader:
-        for topic in roles:
-            reader.topic(topic)  # every missing topic is reported before any reading
-        samples = {t: read_topic(reader, t, refs[t]) for t in roles}
+        samples = read_topics(reader, refs)
         metadata = reader.metadata
         storage = reader.storage
     sources = [Source(t, s.stamps, s.values, roles[t], s.clock) for t, s in samples.items()]

@@ -1,24 +1,30 @@
 """Pull numeric fields and stamps out of one topic's messages, as numpy arrays.
 
-One pass over the topic's raw messages: each is deserialised with the type
-store's generated CDR reader and the needed attributes are fetched with one
-:func:`operator.attrgetter` call (C speed); array indices are applied
-afterwards on whole stacked arrays.  Only the requested topics are read.
+One pass over the bag collects the raw messages of the requested topics (and
+only those).  Then, per topic: if all messages share one byte layout (the
+usual case: same frame id, names and array lengths), every field is one
+strided numpy read over all messages (:mod:`~maglev_ros.bags.cdr_layout`);
+otherwise each message is deserialised with the type store's generated CDR
+reader and the needed attributes are fetched with one
+:func:`operator.attrgetter` call, array indices being applied afterwards on
+whole stacked arrays.  Both give the same numbers.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import gc
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from operator import attrgetter
 
 import numpy as np
 
+from .cdr_layout import cdr_layout, decode_columns
 from .channels import FieldRef, check_field, format_field_path
 from .errors import BagError
 from .reader import BagReader
 
-__all__ = ['TopicSamples', 'read_topic']
+__all__ = ['TopicSamples', 'read_topic', 'read_topics']
 
 _STAMP = ('header.stamp.sec', 'header.stamp.nanosec')
 
@@ -65,8 +71,16 @@ def _split(path: tuple[str | int, ...]) -> tuple[str, tuple[str | int, ...]]:
     return '.'.join(names), ()
 
 
-def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...]
-            ) -> np.ndarray:
+def _stack(objects: Sequence[object]) -> np.ndarray | None:
+    """Stack equal-length numeric arrays into one (n, ...) array; None if ragged."""
+    try:
+        return np.stack(objects)
+    except (ValueError, TypeError):
+        return None
+
+
+def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...],
+            stacked: np.ndarray | None = None) -> np.ndarray:
     """Apply the rest of a path (indices first) to the fetched objects."""
     if not rest:
         return np.asarray(objects, dtype=float)
@@ -76,10 +90,6 @@ def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...
             break
         indices.append(part)
     if len(indices) == len(rest):
-        try:
-            stacked = np.stack(objects)
-        except ValueError:
-            stacked = None  # ragged sequences: element by element below
         if stacked is not None and stacked.ndim > len(indices) and stacked.dtype != object:
             for axis, index in enumerate(indices, start=1):
                 if index >= stacked.shape[axis]:
@@ -98,6 +108,119 @@ def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...
     return out
 
 
+def _decode_fast(reader: BagReader, msgtype: str, raws: list[bytes], has_header: bool,
+                 refs: Sequence[FieldRef]) -> tuple[np.ndarray | None, np.ndarray] | None:
+    """Stamps (or None) and values by strided reads, if all messages share one layout."""
+    paths: list[tuple[str | int, ...]] = [ref.path for ref in refs]
+    if has_header:
+        paths += [('header', 'stamp', 'sec'), ('header', 'stamp', 'nanosec')]
+    layout = cdr_layout(reader.typestore, msgtype, raws[0], paths)
+    if layout is None:
+        return None
+    columns = decode_columns(raws, layout, paths)
+    if columns is None:
+        return None
+    values = np.empty((len(raws), len(refs)))
+    for k in range(len(refs)):
+        values[:, k] = columns[k]
+    if not has_header:
+        return None, values
+    return columns[-2].astype(np.int64) * 1_000_000_000 + columns[-1], values
+
+
+def _decode_slow(reader: BagReader, topic: str, msgtype: str, raws: list[bytes],
+                 has_header: bool, refs: Sequence[FieldRef]
+                 ) -> tuple[np.ndarray | None, np.ndarray]:
+    """Stamps (or None) and values by deserialising message by message."""
+    splits = [_split(ref.path) for ref in refs]
+    chains = list(dict.fromkeys(prefix for prefix, _ in splits))
+    fetch = attrgetter(*(_STAMP if has_header else ()), *chains, '__class__')
+    deserialize = reader.deserializer(topic)
+    # the kept tuples make the cyclic GC rescan a growing heap; nothing here forms cycles
+    gc_was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        rows = [fetch(deserialize(raw)) for raw in raws]
+    finally:
+        if gc_was_enabled:
+            gc.enable()
+    columns = list(zip(*rows, strict=True))
+    stamps, offset = None, 0
+    if has_header:
+        offset = 2
+        stamps = (np.asarray(columns[0], dtype=np.int64) * 1_000_000_000
+                  + np.asarray(columns[1], dtype=np.int64))
+    values = np.empty((len(rows), len(refs)))
+    stacks: dict[str, np.ndarray | None] = {}  # one stack per indexed array field
+    for k, (ref, (prefix, rest)) in enumerate(zip(refs, splits, strict=True)):
+        objects = columns[offset + chains.index(prefix)]
+        if rest and all(isinstance(p, int) for p in rest) and prefix not in stacks:
+            stacks[prefix] = _stack(objects)
+        values[:, k] = _column(ref, objects, rest, stacks.get(prefix))
+    return stamps, values
+
+
+def read_topics(reader: BagReader, refs: Mapping[str, Sequence[FieldRef]],
+                fast: bool = True) -> dict[str, TopicSamples]:
+    """Read the stamps and the given fields of every message of some topics, in one pass.
+
+    Parameters
+    ----------
+    reader : BagReader
+        An open bag.
+    refs : mapping of str to sequence of FieldRef
+        Per topic, the fields to extract (each is checked against the message
+        definition before anything is read).
+    fast : bool
+        Decode topics whose messages share one byte layout by strided numpy
+        reads (:mod:`~maglev_ros.bags.cdr_layout`); False always deserialises
+        message by message (same result, for tests and comparison).
+
+    Returns
+    -------
+    dict of str to TopicSamples
+        Per topic (absolute names, in the order given), stamps and values.
+
+    Raises
+    ------
+    BagError
+        Unknown topic or field, no messages, a truncated storage file.
+    """
+    infos = {topic: reader.topic(topic) for topic in refs}  # all missing topics first
+    for topic, info in infos.items():
+        for ref in refs[topic]:
+            check_field(reader.typestore, info.msgtype, ref)
+    log_times: dict[str, list[int]] = {info.name: [] for info in infos.values()}
+    raws: dict[str, list[bytes]] = {info.name: [] for info in infos.values()}
+    steps = {name: (log_times[name].append, raws[name].append) for name in raws}
+    for name, stamp, raw in reader.messages(list(steps)):
+        add_time, add_raw = steps[name]
+        add_time(stamp)
+        add_raw(raw)
+    out = {}
+    for topic, info in infos.items():
+        messages = raws[info.name]
+        if not messages:
+            raise BagError(f'topic {info.name!r} has no messages in bag {str(reader.path)!r}')
+        if len(messages) < info.count:
+            raise BagError(f'bag {str(reader.path)!r} is truncated: topic {info.name!r} has '
+                           f'{len(messages)} of the {info.count} messages its index lists')
+        has_header = _has_header(reader, info.msgtype)
+        decoded = _decode_fast(reader, info.msgtype, messages, has_header, refs[topic]) \
+            if fast else None
+        if decoded is None:
+            decoded = _decode_slow(reader, info.name, info.msgtype, messages, has_header,
+                                   refs[topic])
+        header_stamps, values = decoded
+        logs = np.asarray(log_times[info.name], dtype=np.int64)
+        if header_stamps is not None and np.any(header_stamps):
+            out[topic] = TopicSamples(info.name, header_stamps, logs, values, 'header')
+        else:
+            out[topic] = TopicSamples(info.name, logs, logs, values, 'log')
+        raws[info.name] = []  # free the bytes early
+    return out
+
+
 def read_topic(reader: BagReader, topic: str, refs: Sequence[FieldRef]) -> TopicSamples:
     """Read the stamps and the given fields of every message of one topic.
 
@@ -108,49 +231,11 @@ def read_topic(reader: BagReader, topic: str, refs: Sequence[FieldRef]) -> Topic
     topic : str
         Topic name.
     refs : sequence of FieldRef
-        Fields of this topic (each is checked against the message definition).
+        Fields of this topic.
 
     Returns
     -------
     TopicSamples
         Stamps and values.
-
-    Raises
-    ------
-    BagError
-        Unknown topic or field, no messages, a truncated storage file.
     """
-    info = reader.topic(topic)
-    for ref in refs:
-        check_field(reader.typestore, info.msgtype, ref)
-    has_header = _has_header(reader, info.msgtype)
-    splits = [_split(ref.path) for ref in refs]
-    chains = list(dict.fromkeys(prefix for prefix, _ in splits))
-    getter = attrgetter(*(_STAMP if has_header else ()), *chains, '__class__')
-    deserialize = reader.deserializer(info.name)
-    log_times: list[int] = []
-    records: list[tuple] = []
-    append_time, append_record = log_times.append, records.append
-    for _, stamp, raw in reader.messages([info.name]):
-        append_time(stamp)
-        append_record(getter(deserialize(raw)))
-    if not records:
-        raise BagError(f'topic {info.name!r} has no messages in bag {str(reader.path)!r}')
-    if len(records) < info.count:
-        raise BagError(f'bag {str(reader.path)!r} is truncated: topic {info.name!r} has '
-                       f'{len(records)} of the {info.count} messages its index lists')
-    columns = list(zip(*records, strict=True))
-    logs = np.asarray(log_times, dtype=np.int64)
-    clock = 'log'
-    stamps = logs
-    offset = 0
-    if has_header:
-        offset = 2
-        sec = np.asarray(columns[0], dtype=np.int64)
-        nsec = np.asarray(columns[1], dtype=np.int64)
-        if np.any(sec) or np.any(nsec):
-            stamps, clock = sec * 1_000_000_000 + nsec, 'header'
-    values = np.empty((len(records), len(refs)))
-    for k, (ref, (prefix, rest)) in enumerate(zip(refs, splits, strict=True)):
-        values[:, k] = _column(ref, columns[offset + chains.index(prefix)], rest)
-    return TopicSamples(info.name, stamps, logs, values, clock)
+    return read_topics(reader, {topic: refs})[topic]

@@ -262,9 +262,10 @@ class BagReader:
         reader = self._open_reader()
         names = [self.topic(t).name for t in topics]
         connections = [c for n in names for c in self._connections[n]]
+        topic_of = {conn.topic: normalize_topic(conn.topic) for conn in connections}
         try:
             for conn, stamp, raw in reader.messages(connections=connections):
-                yield normalize_topic(conn.topic), stamp, raw
+                yield topic_of[conn.topic], stamp, raw
         except (ReaderError, OSError, KeyError, ValueError, TypeError) as exc:
             if isinstance(exc, BagError):
                 raise

@@ -99,12 +99,12 @@ def cdr_deserializer(typestore: Typestore, msgtype: str) -> Callable[[bytes], ob
     little, big, cls = msgdef.deserialize_cdr_le, msgdef.deserialize_cdr_be, msgdef.cls
 
     def deserialize(raw: bytes) -> object:
-        head = raw[:2]
         try:
-            if head == b'\x00\x01':
-                return little(raw[4:], 0, cls, typestore)[0]
-            if head == b'\x00\x00':
-                return big(raw[4:], 0, cls, typestore)[0]
+            if len(raw) >= 4 and raw[0] == 0:
+                if raw[1] == 1:
+                    return little(raw[4:], 0, cls, typestore)[0]
+                if raw[1] == 0:
+                    return big(raw[4:], 0, cls, typestore)[0]
         except Exception as exc:  # struct/decode errors: corrupt data
             raise BagError(f'cannot deserialise a {msgtype} message ({len(raw)} bytes): '
                            f'{exc}') from None

@@ -1,0 +1,149 @@
+"""Benchmarks of the lab pipeline: bag -> data set throughput (``maglev-bag2data``).
+
+bag2data: a bag of 5 kHz lockstep data (one sensor ``MagneticField``, the coil
+currents ``JointState`` and the commands ``Float64MultiArray``; 10 s, 150 000
+messages, MCAP and sqlite3) is read in the same run by
+
+* **bare**: a plain rosbags loop, ``Reader.messages`` over the three topics and
+  ``Typestore.deserialize_cdr`` of every message, nothing kept;
+* **bag2data**: :func:`maglev_ros.bags.read_bag` with 3 outputs (field x, y, z)
+  and 8 inputs (4 currents, 4 commands): read, deserialise, extract, align and
+  build the ``IdData``.
+
+Throughput is messages per CPU second of this process (best of ``--repeat``,
+the two interleaved; CPU time because the machine is shared and wall time
+swings with the other jobs), and the ratio bag2data / bare against the
+target 0.8; the wall-time ratio is printed too.  The bag is built with rosbags' own
+serialiser (rclpy is not needed).
+
+Run: ``/tmp/venv/bin/python benchmarks/lab.py [--quick] [--part bag2data]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from rosbags.rosbag2 import Reader
+
+from maglev_ros.bags import BagWriter, read_bag
+from maglev_ros.bags.typestore import jazzy_typestore
+
+RATE_HZ = 5000.0
+TARGET_RATIO = 0.8
+TOPICS = ('/maglev/sensor_0/field', '/maglev/currents', '/maglev/currents/command')
+OUTPUTS = [f'maglev/sensor_0/field:magnetic_field.{a}' for a in 'xyz']
+INPUTS = ([f'maglev/currents:effort[{i}]' for i in range(4)]
+          + [f'maglev/currents/command:data[{i}]' for i in range(4)])
+
+
+def build_bag(path: Path, seconds: float, storage: str) -> int:
+    """Write a lockstep bag of ``seconds`` at 5 kHz; return the message count."""
+    store = jazzy_typestore()
+    types = store.types
+    Time, Header = types['builtin_interfaces/msg/Time'], types['std_msgs/msg/Header']
+    Vector3 = types['geometry_msgs/msg/Vector3']
+    Field, Joints = types['sensor_msgs/msg/MagneticField'], types['sensor_msgs/msg/JointState']
+    Array = types['std_msgs/msg/Float64MultiArray']
+    Layout = types['std_msgs/msg/MultiArrayLayout']
+    n = int(round(seconds * RATE_HZ))
+    rng = np.random.default_rng(0)
+    field, current = rng.normal(0.0, 1e-3, (n, 3)), rng.uniform(-1.0, 1.0, (n, 4))
+    t0, step = 1_700_000_000_000_000_000, int(round(1e9 / RATE_HZ))
+    cov, names = np.zeros(9), ['x+', 'x-', 'y+', 'y-']
+    with BagWriter(path, storage=storage, metadata={'benchmark': 'lab.py'}) as bag:
+        handles = [bag.add_topic(TOPICS[0], 'sensor_msgs/msg/MagneticField'),
+                   bag.add_topic(TOPICS[1], 'sensor_msgs/msg/JointState'),
+                   bag.add_topic(TOPICS[2], 'std_msgs/msg/Float64MultiArray')]
+        for k in range(n):
+            stamp = t0 + k * step
+            header = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9),
+                            frame_id='maglev_sensor_0')
+            msgs = (Field(header=header, magnetic_field=Vector3(*field[k]),
+                          magnetic_field_covariance=cov),
+                    Joints(header=header, name=names, position=np.zeros(0),
+                           velocity=np.zeros(0), effort=current[k]),
+                    Array(layout=Layout(dim=[], data_offset=0), data=current[k]))
+            for handle, msg in zip(handles, msgs, strict=True):
+                bag.write(handle, stamp + 1000, bytes(store.serialize_cdr(msg, handle.msgtype)))
+    return 3 * n
+
+
+def bare_loop(path: Path) -> int:
+    """Read and deserialise every message of the three topics with plain rosbags."""
+    store = jazzy_typestore()
+    count = 0
+    with Reader(path) as reader:
+        connections = [c for c in reader.connections if c.topic in TOPICS]
+        for connection, _, raw in reader.messages(connections=connections):
+            store.deserialize_cdr(raw, connection.msgtype)
+            count += 1
+    return count
+
+
+def bag2data(path: Path) -> int:
+    """Convert the bag with read_bag; return the samples."""
+    return read_bag(path, OUTPUTS, INPUTS).data.N
+
+
+def timed(func, path: Path) -> tuple[float, float, int]:
+    """CPU time and wall time of one call, s, and the call's result."""
+    cpu, wall = time.process_time(), time.perf_counter()
+    result = func(path)
+    return time.process_time() - cpu, time.perf_counter() - wall, result
+
+
+def measure_bag2data(seconds: float, repeat: int) -> list[dict]:
+    """bag2data vs the bare rosbags loop on the same bags (MCAP and sqlite3)."""
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for storage in ('mcap', 'sqlite3'):
+            path = Path(tmp) / storage
+            messages = build_bag(path, seconds, storage)
+            # interleaved, so that load changes by other jobs hit both alike
+            bare, ours = np.full((repeat, 2), np.inf), np.full((repeat, 2), np.inf)
+            for k in range(repeat):
+                bare[k] = timed(bare_loop, path)[:2]
+                *ours[k], samples = timed(bag2data, path)
+                assert samples == messages // 3, (samples, messages)
+            cpu_bare, wall_bare = bare.min(axis=0)
+            cpu_ours, wall_ours = ours.min(axis=0)
+            rows.append({'storage': storage, 'messages': messages,
+                         'bare_msgs_per_s': messages / cpu_bare,
+                         'bag2data_msgs_per_s': messages / cpu_ours,
+                         'ratio': cpu_bare / cpu_ours, 'wall_ratio': wall_bare / wall_ours})
+    return rows
+
+
+def report_bag2data(rows: list[dict], seconds: float) -> None:
+    """Print the bag2data table."""
+    print(f'bag2data: {seconds:g} s of 5 kHz lockstep data (sensor + currents + commands)')
+    print('throughput in messages per CPU second (best of the repeats); ratio = bag2data '
+          f'/ bare, target >= {TARGET_RATIO}')
+    print('| storage | messages | bare rosbags loop (msg/s) | bag2data (msg/s) | ratio (CPU) '
+          '| ratio (wall) |')
+    print('|---|---|---|---|---|---|')
+    for r in rows:
+        verdict = 'met' if r['ratio'] >= TARGET_RATIO else 'MISSED'
+        print(f"| {r['storage']} | {r['messages']:,} | {r['bare_msgs_per_s']:,.0f} | "
+              f"{r['bag2data_msgs_per_s']:,.0f} | {r['ratio']:.2f} ({verdict}) | "
+              f"{r['wall_ratio']:.2f} |")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--quick', action='store_true', help='2 s of data, 2 repeats')
+    parser.add_argument('--part', choices=('bag2data',), help='run one measurement only')
+    parser.add_argument('--seconds', type=float, default=10.0, help='bag length (s)')
+    parser.add_argument('--repeat', type=int, default=3, help='repeats (best is kept)')
+    args = parser.parse_args()
+    seconds, repeat = (2.0, 2) if args.quick else (args.seconds, args.repeat)
+    if args.part in (None, 'bag2data'):
+        report_bag2data(measure_bag2data(seconds, repeat), seconds)
+
+
+if __name__ == '__main__':
+    main()
