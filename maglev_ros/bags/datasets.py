@@ -14,15 +14,18 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..sysid.dataset import IdData
 from .alignment import TOLERANCE, Alignment, Gap, Source, align
 from .channels import Channel, FieldRef, parse_channel, unit_of
 from .errors import BagError
 from .extraction import read_topics
 from .reader import BagReader
+
+if TYPE_CHECKING:  # importing maglev_ros.sysid costs seconds (scipy.signal)
+    from ..sysid.dataset import IdData
 
 __all__ = ['BagDataset', 'load_bag_dataset', 'read_bag']
 
@@ -129,7 +132,8 @@ class BagDataset:
 
 def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
              inputs: Sequence[str | Channel] | str | None = (), Ts: float | None = None,
-             allow_gaps: bool = False, tolerance: float = TOLERANCE) -> BagDataset:
+             allow_gaps: bool = False, tolerance: float = TOLERANCE,
+             fast: bool = True) -> BagDataset:
     """Read channels of a bag into a data set on one uniform time base.
 
     Parameters
@@ -147,6 +151,9 @@ def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
         Fill gaps (outputs linearly, inputs by zero-order hold) instead of refusing.
     tolerance : float
         Exact-match tolerance, fraction of ``Ts``.
+    fast : bool
+        Decode equal-layout messages by strided numpy reads (default); False
+        deserialises every message (same result, slower).
 
     Returns
     -------
@@ -175,7 +182,7 @@ def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
             if ref not in refs[ref.topic]:
                 refs[ref.topic].append(ref)
     with BagReader(path) as reader:
-        samples = read_topics(reader, refs)
+        samples = read_topics(reader, refs, fast=fast)
         metadata = reader.metadata
         storage = reader.storage
     sources = [Source(t, s.stamps, s.values, roles[t], s.clock) for t, s in samples.items()]
@@ -194,6 +201,8 @@ def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
             for coef, ref in chan.terms:
                 out[:, j] += coef * columns[ref]
         return out
+
+    from ..sysid.dataset import IdData
 
     try:
         data = IdData(combine(outs), combine(ins), alignment.Ts,

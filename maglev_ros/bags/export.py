@@ -18,11 +18,14 @@ Every file holds one :class:`~maglev_ros.sysid.IdData` and loads back with
 from __future__ import annotations
 
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..sysid.dataset import IdData
 from .errors import BagError
+
+if TYPE_CHECKING:  # importing maglev_ros.sysid costs seconds (scipy.signal)
+    from ..sysid.dataset import IdData
 
 __all__ = ['FORMATS', 'format_summary', 'split_paths', 'write_dataset']
 

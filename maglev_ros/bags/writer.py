@@ -15,6 +15,7 @@ gives back the original types.
 
 from __future__ import annotations
 
+import sqlite3
 import threading
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -103,7 +104,10 @@ class BagWriter:
     -----
     Thread-safe: :meth:`add_topic`, :meth:`write` and :meth:`close` take one
     lock, so subscription callbacks on several executor threads may write while
-    another thread closes.  :meth:`close` is idempotent; call it from the
+    another thread closes (also for sqlite3, whose connection is not tied to the
+    opening thread).  :meth:`write` stores the bytes before it returns (MCAP:
+    into the current chunk, flushed to the file every chunk; sqlite3: into one
+    transaction committed at :meth:`close`).  :meth:`close` is idempotent; call it from the
     ``finally`` of the recorder's ``main`` (or a shutdown callback).  Writing
     after :meth:`close` raises :class:`BagError`.  Nothing is readable until
     :meth:`close` has written ``metadata.yaml``; a process killed with SIGKILL
@@ -150,10 +154,28 @@ class BagWriter:
                 self._writer.open()
             except (WriterError, OSError) as exc:
                 raise BagError(f'cannot create bag {str(self.path)!r}: {exc}') from None
+            self._unbind_sqlite_thread()
             for key, value in self._custom.items():
                 self._writer.set_custom_data(key, value)
             self._state = 'open'
         return self
+
+    def _unbind_sqlite_thread(self) -> None:
+        """Let any thread write to a sqlite3 bag (writes are serialised by the lock).
+
+        rosbags opens the database with Python's default ``check_same_thread``,
+        which ties it to the opening thread; a recorder's callbacks run on executor
+        threads.  The schema is committed already, so reconnecting loses nothing.
+        """
+        storage = self._writer.storage
+        conn = getattr(storage, 'conn', None)
+        if not isinstance(conn, sqlite3.Connection) or not hasattr(storage, 'cursor'):
+            return
+        conn.commit()
+        conn.close()
+        storage.conn = sqlite3.connect(f'file:{storage.path}', uri=True,
+                                       check_same_thread=False)
+        storage.cursor = storage.conn.cursor()
 
     def close(self) -> None:
         """Finalise the bag: write the storage index and ``metadata.yaml`` (idempotent)."""
