@@ -92,6 +92,9 @@ class SerialLink:
         self.write_timeout = write_timeout
         self._serial: serial.Serial | None = None
         self._write_lock = threading.Lock()
+        self._poll: select.poll | None = None
+        self._poll_fd = -1
+        self._timeout_ms = max(0, round(read_timeout * 1000))
 
     @property
     def is_open(self) -> bool:
@@ -127,6 +130,7 @@ class SerialLink:
     def close(self) -> None:
         """Close the port (idempotent; errors while closing are ignored)."""
         ser, self._serial = self._serial, None
+        self._poll, self._poll_fd = None, -1
         if ser is not None:
             try:
                 ser.close()
@@ -159,13 +163,16 @@ class SerialLink:
             If the device failed (e.g. was unplugged).
         """
         ser = self._port()
-        # select + one os.read returns everything available in one call;
+        # poll + one os.read returns everything available in one call;
         # pyserial's read(in_waiting or 1) often returns a single byte first,
         # doubling the calls per burst. (POSIX: pyserial exposes the fd.)
         try:
             fd = ser.fileno()
-            ready, _, _ = select.select([fd], [], [], self.read_timeout)
-            if not ready:
+            if self._poll_fd != fd:
+                self._poll = select.poll()
+                self._poll.register(fd, select.POLLIN)
+                self._poll_fd = fd
+            if not self._poll.poll(self._timeout_ms):
                 return b''
             data = os.read(fd, _READ_SIZE)
         except (serial.SerialException, OSError, TypeError, ValueError) as err:

@@ -168,6 +168,74 @@ class RawMessageBatch:
         return [data[i : i + size] for i in range(0, n * size, size)]
 
 
+class SampleSerialiser:
+    """Serialise, per sample, one message of each of several layouts in one go.
+
+    Parameters
+    ----------
+    parts : list of RawMessageBatch
+        The message layouts of one sample (e.g. the field of each sensor,
+        then the currents); all share the sample's stamp.
+    """
+
+    def __init__(self, parts: list[RawMessageBatch]) -> None:
+        names, formats, offsets = [], [], []
+        base = 0
+        self._fields = []
+        for p, part in enumerate(parts):
+            layout = part._dtype
+            for name in layout.names:
+                fmt, offset = layout.fields[name][:2]
+                names.append(f'{p}:{name}')
+                formats.append(fmt)
+                offsets.append(base + offset)
+            self._fields.append([f'{p}:{name}' for name in layout.names])
+            base += part.size
+        self._dtype = np.dtype(
+            {'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': base}
+        )
+        self._template = np.concatenate([part._template for part in parts])
+        self._sizes = [part.size for part in parts]
+        self.size = base
+
+    def serialise(
+        self, sec: np.ndarray, nanosec: np.ndarray, values: list[np.ndarray]
+    ) -> list[bytes]:
+        """Serialise n samples.
+
+        Parameters
+        ----------
+        sec, nanosec : ndarray of int, shape (n,)
+            Header stamps.
+        values : list of ndarray, one per part, shape (n, k_part)
+            The varying float64 fields of each part.
+
+        Returns
+        -------
+        list of bytes
+            n * len(parts) messages, sample by sample, parts in order.
+        """
+        n = sec.shape[0]
+        rows = np.empty(n, dtype=self._dtype)
+        rows.view(np.uint8).reshape(n, self.size)[:] = self._template
+        for fields, part_values in zip(self._fields, values, strict=True):
+            rows[fields[0]] = sec
+            rows[fields[1]] = nanosec
+            if len(fields) == 3:
+                rows[fields[2]] = part_values
+            else:
+                for j, name in enumerate(fields[2:]):
+                    rows[name] = part_values[:, j]
+        data = rows.tobytes()
+        out = []
+        start = 0
+        for _ in range(n):
+            for size in self._sizes:
+                out.append(data[start : start + size])
+                start += size
+        return out
+
+
 def _set_field(msg: MagneticField, values) -> None:
     msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = values
 
@@ -382,17 +450,18 @@ class DriverNode(Node):
             self.create_publisher(MagneticField, f'maglev/sensor_{k}/field', SENSOR_QOS)
             for k in range(cfg.n_sensors)
         ]
-        self._field_raw = []
+        parts = []
         for frame in cfg.sensor_frames:
             template = MagneticField()
             template.header.frame_id = frame
-            self._field_raw.append(RawMessageBatch(template, _set_field, 3))
+            parts.append(RawMessageBatch(template, _set_field, 3))
         self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
-        self._current_raw = RawMessageBatch(
-            JointState(name=list(COIL_NAMES), effort=[0.0] * 4), _set_effort, 4
+        parts.append(
+            RawMessageBatch(JointState(name=list(COIL_NAMES), effort=[0.0] * 4), _set_effort, 4)
         )
-        self._field_handles = [pub.handle for pub in self._field_pubs]
-        self._current_handle = self._current_pub.handle
+        self._serialiser = SampleSerialiser(parts)
+        # per sample: the field of each sensor, then the currents (SampleSerialiser order)
+        self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]
         self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self.create_subscription(
             Float64MultiArray, 'maglev/currents/command', self._on_command, COMMAND_QOS
@@ -595,25 +664,21 @@ class DriverNode(Node):
     def _publish(self, stamps: np.ndarray, field_t: np.ndarray, currents: np.ndarray) -> None:
         """Publish n samples: stamps (n,) ns, fields (n, N, 3) T, currents (n, 4) A.
 
-        Messages are serialised in one go (``RawMessageBatch``) and published
+        Messages are serialised in one go (``SampleSerialiser``) and published
         as bytes; per sample, sensor fields first, then the currents.
         """
         sec = stamps // 1_000_000_000
         nanosec = stamps % 1_000_000_000
-        fields = [
-            raw.serialise(sec, nanosec, field_t[:, k, :]) for k, raw in enumerate(self._field_raw)
-        ]
-        amps = self._current_raw.serialise(sec, nanosec, currents)
+        values = [field_t[:, k, :] for k in range(field_t.shape[1])] + [currents]
+        messages = self._serialiser.serialise(sec, nanosec, values)
         # Publisher.publish(bytes) checks the type and guards the handle per
         # message; the raw handles are safe here: the node destroys its
         # publishers only after close() has joined this thread.
-        handles = self._field_handles
-        current = self._current_handle
-        for i in range(len(amps)):
-            for k, handle in enumerate(handles):
-                handle.publish_raw(fields[k][i])
-            current.publish_raw(amps[i])
-        self.counters['records'] += len(amps)
+        handles = self._handles
+        per_sample = len(handles)
+        for i, message in enumerate(messages):
+            handles[i % per_sample].publish_raw(message)
+        self.counters['records'] += len(stamps)
 
     # -- diagnostics ------------------------------------------------------------
 
