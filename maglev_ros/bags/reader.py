@@ -28,7 +28,7 @@ from .errors import BagError
 from .names import normalize_topic
 from .typestore import bag_typestore, cdr_deserializer
 
-__all__ = ['METADATA_TOPIC', 'BagReader', 'TopicInfo', 'decode_metadata']
+__all__ = ['METADATA_TOPIC', 'BagReader', 'TopicInfo', 'decode_metadata', 'is_bag_path']
 
 #: Topic that may carry the run metadata (std_msgs/msg/String, a YAML mapping).
 METADATA_TOPIC = '/maglev/metadata'
@@ -52,6 +52,23 @@ class TopicInfo:
     name: str
     msgtype: str
     count: int
+
+
+def is_bag_path(path: str | Path) -> bool:
+    """Whether a path names a bag rather than a data file (for tools taking either).
+
+    Parameters
+    ----------
+    path : str or Path
+        A directory (a bag, finished or not) or a ``.mcap`` / ``.db3`` file.
+
+    Returns
+    -------
+    bool
+        True for a directory or a bag storage file.
+    """
+    path = Path(path)
+    return path.is_dir() or path.suffix in _STORAGE_SUFFIXES
 
 
 def decode_metadata(custom: dict[str, str] | None) -> dict[str, object]:

@@ -116,3 +116,24 @@ def test_gaps_exit_2_unless_allowed(tmp_path, run, capsys):
     assert "gap in topic '/maglev/sensor_0/field': 1 missing sample" in _error(capsys)
     assert main([bag, *OUT, '--allow-gaps']) == 0
     assert '/maglev/sensor_0/field: 1 after t = 0.009800 s (linear)' in capsys.readouterr().out
+
+
+def test_sysid_wiring(bag, run, tmp_path):
+    # what maglev-sysid does with a bag argument: the same channel options, then IdData
+    import argparse
+
+    from maglev_ros.bags import is_bag_path, load_bag_dataset
+    from maglev_ros.cli.bag2data import add_channel_arguments
+
+    parser = argparse.ArgumentParser()
+    parser.add_argument('data')
+    parser.add_argument('--outputs')  # maglev-sysid's CSV option stays distinct
+    add_channel_arguments(parser)
+    args = parser.parse_args([bag, *OUT, *IN])
+    assert is_bag_path(args.data) and not is_bag_path(tmp_path / 'data.mat')
+    data = load_bag_dataset(args.data, outputs=args.output, inputs=args.input, Ts=None,
+                            allow_gaps=args.allow_gaps, tolerance=args.tolerance)
+    y, u = _expected(run)
+    np.testing.assert_array_equal(data.y, y)
+    np.testing.assert_array_equal(data.u, u)
+    assert args.outputs is None
