@@ -312,7 +312,7 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
             out, method, first, last = _hold(stamps, values, grid, tol_ns, period)
         else:
             out, method, first, last = _match_or_interpolate(stamps, values, grid, ts_ns,
-                                                              tol_ns)
+                                                              tol_ns, period)
         first_ok, last_ok = max(first_ok, first), min(last_ok, last)
         results.append((out, method, period, gaps))
     if gaps_all and not allow_gaps:
@@ -336,8 +336,14 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
 
 
 def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray,
-                          ts_ns: float, tol_ns: float) -> tuple[np.ndarray, str, int, int]:
-    """Output: exact sample match if every message is on the grid, else linear interpolation."""
+                          ts_ns: float, tol_ns: float, period: float
+                          ) -> tuple[np.ndarray, str, int, int]:
+    """Output: exact sample match if every message is on the grid, else linear interpolation.
+
+    A topic at another rate whose messages happen to lie on grid points (1 kHz
+    on a 5 kHz base) is reported as ``'linear'``: most of its samples are
+    interpolated.
+    """
     first = int(np.searchsorted(grid, stamps[0] - tol_ns, side='left'))
     last = int(np.searchsorted(grid, stamps[-1] + tol_ns, side='right')) - 1
     k = np.rint((stamps - grid[0]) / ts_ns).astype(np.int64)
@@ -349,7 +355,8 @@ def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarr
     out = np.empty((grid.size, values.shape[1]))
     for col in range(values.shape[1]):
         out[:, col] = np.interp(tg, t, values[:, col])
-    if not on_grid:
+    same_rate = abs(period * 1e9 - ts_ns) <= tol_ns
+    if not (on_grid and same_rate):
         return out, 'linear', first, last
     # every message sits on its grid point: take it unchanged; only dropped samples
     # (gaps) keep the interpolated value

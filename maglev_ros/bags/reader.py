@@ -33,6 +33,10 @@ __all__ = ['METADATA_TOPIC', 'BagReader', 'TopicInfo', 'decode_metadata', 'is_ba
 #: Topic that may carry the run metadata (std_msgs/msg/String, a YAML mapping).
 METADATA_TOPIC = '/maglev/metadata'
 _STORAGE_SUFFIXES = {'.mcap': 'mcap', '.db3': 'sqlite3'}
+# rosbags' messages about metadata.yaml (rosbag2/reader.py)
+_METADATA_ERRORS = ('Could not load YAML', 'Could not read metadata', 'A metadata key',
+                    'Invalid bag metadata', 'Rosbag2 version', 'Storage plugin',
+                    'Compression format', 'Serialization format')
 
 
 @dataclass(frozen=True)
@@ -99,6 +103,12 @@ def _corrupt(path: Path, exc: BaseException) -> BagError:
     detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
     files = [p.name for p in path.iterdir() if p.suffix in _STORAGE_SUFFIXES] \
         if path.is_dir() else [path.name]
+    if not files or detail.startswith('Some database files are missing'):
+        return BagError(f'cannot read bag {str(path)!r}: its storage file is missing '
+                        f'({detail})')
+    if detail.startswith(_METADATA_ERRORS):
+        return BagError(f'cannot read bag {str(path)!r}: its metadata.yaml is invalid '
+                        f'({detail})')
     return BagError(f'cannot read bag {str(path)!r}: storage file {", ".join(files)} is '
                     f'truncated or corrupt ({detail})')
 

@@ -198,6 +198,24 @@ class BagWriter:
         # finalise also on errors and KeyboardInterrupt: what was written stays readable
         self.close()
 
+    def set_metadata(self, metadata: Mapping[str, object]) -> None:
+        """Add or replace run metadata items before :meth:`close` (e.g. how the run ended).
+
+        Parameters
+        ----------
+        metadata : mapping
+            Flat items, as the ``metadata`` argument.
+        """
+        encoded = encode_metadata(metadata)
+        with self._lock:
+            if self._state == 'closed':
+                raise BagError(f'bag {str(self.path)!r} is closed')
+            self.metadata.update(metadata)
+            self._custom.update(encoded)
+            if self._state == 'open':
+                for key, value in encoded.items():
+                    self._writer.set_custom_data(key, value)
+
     # -------------------------------------------------------------- writing
     def add_topic(self, name: str, msgtype: str, serialization_format: str = 'cdr',
                   offered_qos: Sequence[Qos] | None = None) -> TopicHandle:

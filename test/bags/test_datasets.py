@@ -146,3 +146,13 @@ def test_unknown_topic_field_and_bad_specs(lockstep_bag):
         read_bag(lockstep_bag, ['maglev/sensor_0/field'])
     with pytest.raises(BagError, match='at least one output'):
         read_bag(lockstep_bag, [])
+
+
+def test_slower_output_on_grid_points_is_reported_as_interpolated():
+    base = np.arange(50, dtype=np.int64) * 200_000
+    slow = base[::5]
+    al = align([Source('/fast', base, np.zeros(50), 'output'),
+                Source('/slow', slow, np.arange(10.0), 'output')])
+    assert [r.method for r in al.reports] == ['exact', 'linear']
+    np.testing.assert_allclose(al.values[1][:46, 0], np.arange(46) / 5.0)
+    assert al.trimmed == (0, 4)  # the slow topic ends at sample 45

@@ -126,3 +126,25 @@ def test_unknown_topic_lists_the_bags_topics(tmp_path):
                            r"/maglev/currents \(sensor_msgs/msg/JointState\), "
                            r"/maglev/currents/command .*/maglev/sensor_0/field"):
             reader.topic('maglev/sensor_1/field')
+
+
+def test_metadata_added_while_recording(tmp_path):
+    with BagWriter(tmp_path / 'r', metadata={'seed': 1}) as bag:
+        topic = bag.add_topic(SENSOR, 'sensor_msgs/msg/MagneticField')
+        bag.write(topic, 1, field_msg(1, np.zeros(3)))
+        bag.set_metadata({'stopped_by': 'SIGTERM', 'seed': 2, 'duration_s': 0.5})
+    with pytest.raises(BagError, match='is closed'):
+        bag.set_metadata({'late': True})
+    with BagReader(tmp_path / 'r') as reader:
+        assert reader.metadata == {'seed': 2, 'stopped_by': 'SIGTERM', 'duration_s': 0.5}
+
+
+def test_broken_metadata_and_missing_storage(tmp_path):
+    bag = write_lockstep_bag(tmp_path / 'run', lockstep_data(10))
+    (bag / 'metadata.yaml').write_text('rosbag2_bagfile_information: [unclosed\n')
+    with pytest.raises(BagError, match='its metadata.yaml is invalid'):
+        BagReader(bag).open()
+    bag = write_lockstep_bag(tmp_path / 'run2', lockstep_data(10))
+    (bag / 'run2.mcap').unlink()
+    with pytest.raises(BagError, match='its storage file is missing'):
+        BagReader(bag).open()
