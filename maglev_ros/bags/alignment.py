@@ -16,7 +16,9 @@ The rule
     interpolation and inputs by zero-order hold: the input at ``t_k`` is the
     last input stamped at or before ``t_k`` (within the tolerance), which is the
     value the plant was holding.  Samples where some topic has no data yet (or
-    any more) are trimmed from the start and the end.
+    any more: an input counts for one of its own periods after its last
+    message, to the end if it has only one) are trimmed from the start and the
+    end.
 
 Gaps
     Each topic is checked against its own sample period (estimated as for
@@ -366,11 +368,18 @@ def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarr
 
 def _hold(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, tol_ns: float,
           period: float) -> tuple[np.ndarray, str, int, int]:
-    """Input: zero-order hold of the last sample at or before each grid time."""
+    """Input: zero-order hold of the last sample at or before each grid time.
+
+    Held for one of its own periods after its last message (a topic that stopped
+    publishing is not extended), to the end if it has a single message (a set-point
+    sent once).
+    """
     j = np.searchsorted(stamps, grid + tol_ns, side='right') - 1
     first = int(np.searchsorted(j, 0, side='left'))
-    horizon = stamps[-1] + (period * 1e9 if np.isfinite(period) else 0.0) + tol_ns
-    last = int(np.searchsorted(grid, horizon, side='right')) - 1
+    if np.isfinite(period):
+        last = int(np.searchsorted(grid, stamps[-1] + period * 1e9 + tol_ns, side='right')) - 1
+    else:
+        last = grid.size - 1
     jj = np.clip(j, 0, stamps.size - 1)
     out = values[jj]
     covered = slice(first, last + 1)

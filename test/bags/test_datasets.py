@@ -156,3 +156,11 @@ def test_slower_output_on_grid_points_is_reported_as_interpolated():
     assert [r.method for r in al.reports] == ['exact', 'linear']
     np.testing.assert_allclose(al.values[1][:46, 0], np.arange(46) / 5.0)
     assert al.trimmed == (0, 4)  # the slow topic ends at sample 45
+
+
+def test_an_input_sent_once_is_held_to_the_end():
+    stamps = np.arange(20, dtype=np.int64) * 1_000_000
+    al = align([Source('/y', stamps, np.zeros(20), 'output'),
+                Source('/setpoint', np.array([4_500_000]), np.array([0.7]), 'input', 'log')])
+    assert al.trimmed == (5, 0)
+    np.testing.assert_array_equal(al.values[1][:, 0], np.full(15, 0.7))
