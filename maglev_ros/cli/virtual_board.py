@@ -1,4 +1,4 @@
-"""``maglev-virtual-board``: a virtual Maggy board on a pseudo-terminal.
+"""maglev-virtual-board: a virtual Maggy board on a pseudo-terminal.
 
 Prints the stable device path, then emulates the board until SIGINT or
 SIGTERM. Examples::

@@ -434,6 +434,7 @@ class DriverNode(Node):
                 'commands_rejected',
                 'commands_clamped',
                 'commands_unsent',
+                'commands_ignored',
                 'timeouts',
                 'reconnects',
                 'io_errors',
@@ -528,8 +529,15 @@ class DriverNode(Node):
         self.counters['commands_sent'] += 1
 
     def _on_command(self, msg: Float64MultiArray) -> None:
-        values = np.asarray(msg.data, dtype=float)
         log = self.get_logger()
+        if not self._v2x:
+            self.counters['commands_ignored'] += 1
+            log.warning(
+                'command ignored: the V4x firmware is read-only (its own controller runs)',
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
+            return
+        values = np.asarray(msg.data, dtype=float)
         if values.shape != (4,):
             self.counters['commands_rejected'] += 1
             log.warning(

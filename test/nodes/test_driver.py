@@ -389,7 +389,11 @@ def test_v4x_telemetry_with_informational_lines(make_harness):
             )
             got = [field.magnetic_field.x, field.magnetic_field.y, field.magnetic_field.z]
             np.testing.assert_allclose(got, expected[k], atol=1e-9)  # 6 decimals in mT
-        h.command([1.0, 1.0, 1.0, 1.0])  # read-only firmware: ignored
+        deadline = time.monotonic() + TIMEOUT
+        while h.driver.counters['commands_ignored'] == 0:  # read-only firmware: ignored
+            assert time.monotonic() < deadline, 'the command never reached the driver'
+            h.command([1.0, 1.0, 1.0, 1.0])
+            time.sleep(0.05)
         assert h.driver.counters['commands_sent'] == 0
 
 
