@@ -1,4 +1,4 @@
-"""Benchmarks of the lab pipeline: bag -> data set throughput (``maglev-bag2data``).
+"""Benchmarks of the lab pipeline: bag -> data set throughput (``maglev-bag2data``), bag writer.
 
 bag2data: a bag of 5 kHz lockstep data (one sensor ``MagneticField``, the coil
 currents ``JointState`` and the commands ``Float64MultiArray``; 10 s, 150 000
@@ -18,7 +18,11 @@ swings with the other jobs), and the ratio bag2data / bare against the
 target 0.8; the wall-time ratio is printed too.  The bag is built with rosbags' own
 serialiser (rclpy is not needed).
 
-Run: ``/tmp/venv/bin/python benchmarks/lab.py [--quick] [--part bag2data]``.
+writer: :class:`maglev_ros.bags.BagWriter` throughput with pre-serialised
+messages, what the recorder node does per received message, and the time
+``close()`` takes to finalise the bag.
+
+Run: ``/tmp/venv/bin/python benchmarks/lab.py [--quick] [--part bag2data|writer]``.
 """
 
 from __future__ import annotations
@@ -143,16 +147,55 @@ def report_bag2data(rows: list[dict], seconds: float) -> None:
               f"{r['deserializing_ratio']:.2f} |")
 
 
+def measure_writer(messages: int) -> list[dict]:
+    """BagWriter.write throughput with pre-serialised messages (what a recorder does)."""
+    store = jazzy_typestore()
+    field = store.types['sensor_msgs/msg/MagneticField']
+    header = store.types['std_msgs/msg/Header'](
+        stamp=store.types['builtin_interfaces/msg/Time'](sec=0, nanosec=0),
+        frame_id='maglev_sensor_0')
+    raw = bytes(store.serialize_cdr(field(header=header, magnetic_field=store.types[
+        'geometry_msgs/msg/Vector3'](0.0, 0.0, 0.05), magnetic_field_covariance=np.zeros(9)),
+        'sensor_msgs/msg/MagneticField'))
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for storage in ('mcap', 'sqlite3'):
+            with BagWriter(Path(tmp) / storage, storage=storage) as bag:
+                topic = bag.add_topic(TOPICS[0], 'sensor_msgs/msg/MagneticField')
+                cpu = time.process_time()
+                for k in range(messages):
+                    bag.write(topic, k, raw)
+                cpu = time.process_time() - cpu
+                close = time.process_time()
+            close = time.process_time() - close
+            rows.append({'storage': storage, 'messages': messages,
+                         'msgs_per_s': messages / cpu, 'close_s': close})
+    return rows
+
+
+def report_writer(rows: list[dict]) -> None:
+    """Print the writer table."""
+    print('writer: BagWriter.write of pre-serialised MagneticField messages (CPU time)')
+    print('| storage | messages | write (msg/s) | close (CPU s) |')
+    print('|---|---|---|---|')
+    for r in rows:
+        print(f"| {r['storage']} | {r['messages']:,} | {r['msgs_per_s']:,.0f} | "
+              f"{r['close_s']:.3f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='2 s of data, 2 repeats')
-    parser.add_argument('--part', choices=('bag2data',), help='run one measurement only')
+    parser.add_argument('--part', choices=('bag2data', 'writer'),
+                        help='run one measurement only')
     parser.add_argument('--seconds', type=float, default=10.0, help='bag length (s)')
     parser.add_argument('--repeat', type=int, default=3, help='repeats (best is kept)')
     args = parser.parse_args()
     seconds, repeat = (2.0, 2) if args.quick else (args.seconds, args.repeat)
     if args.part in (None, 'bag2data'):
         report_bag2data(measure_bag2data(seconds, repeat), seconds)
+    if args.part in (None, 'writer'):
+        report_writer(measure_writer(int(seconds * RATE_HZ) * 3))
 
 
 if __name__ == '__main__':
