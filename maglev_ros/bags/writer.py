@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 
+import numpy as np
 import yaml
 from rosbags.interfaces import Connection, Qos
 from rosbags.rosbag2 import StoragePlugin, Writer, WriterError
@@ -58,6 +59,8 @@ def encode_metadata(metadata: Mapping[str, object] | None) -> dict[str, str]:
     for key, value in (metadata or {}).items():
         if not isinstance(key, str) or not key:
             raise BagError(f'metadata keys must be non-empty strings, got {key!r}')
+        if isinstance(value, np.generic):  # numpy scalars (a seed from a Generator ...)
+            value = value.item()
         if value is not None and not isinstance(value, _SCALARS):
             raise BagError(f'metadata {key!r} must be a string, number or boolean (flatten '
                            f'nested options into keys such as "model.field"), '

@@ -129,7 +129,7 @@ def test_unknown_topic_lists_the_bags_topics(tmp_path):
 
 
 def test_metadata_added_while_recording(tmp_path):
-    with BagWriter(tmp_path / 'r', metadata={'seed': 1}) as bag:
+    with BagWriter(tmp_path / 'r', metadata={'seed': np.int64(1)}) as bag:
         topic = bag.add_topic(SENSOR, 'sensor_msgs/msg/MagneticField')
         bag.write(topic, 1, field_msg(1, np.zeros(3)))
         bag.set_metadata({'stopped_by': 'SIGTERM', 'seed': 2, 'duration_s': 0.5})
