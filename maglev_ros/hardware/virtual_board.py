@@ -14,8 +14,10 @@ a stable symlink (``path``), exactly like a USB serial device, e.g. with
 * ``unplug`` closes the pty (the host's reads fail) and removes the
   symlink; ``plug`` powers up a fresh firmware on a new pty and re-points the
   symlink, so a host can reconnect with the same path.
-* Output the host does not read fast enough is dropped once the pty buffer
-  is full (counted), like a board whose USB writes time out.
+* Output the host does not read fast enough waits in a backlog of up to
+  1 MiB (about 8 s of 1-sensor data: a busy host does not lose data, as with
+  USB flow control); beyond that, new output is dropped (counted), like a
+  board whose USB writes time out.
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ __all__ = ['BoardStatus', 'VirtualBoard', 'VirtualBoardError']
 Firmware = V2xFirmware | V4xFirmware
 _POLL_S = 0.0005  # s: input poll and pacing granularity (bursts are 1 ms apart)
 _CLOSED_POLL_S = 0.002  # s: how often a closed port is checked for a new open
+_MAX_BACKLOG = 1 << 20  # bytes held for a slow host (about 8 s of 1-sensor V2x data)
 
 
 class VirtualBoardError(ValueError):
@@ -62,7 +65,7 @@ class BoardStatus:
         Times the board was plugged in (1 after ``open``).
     bytes_written, bytes_received, bytes_dropped : int
         Bytes written to and read from the host, and output dropped because
-        the host did not read it.
+        the host did not read it (backlog full).
     """
 
     plugged: bool
@@ -112,6 +115,7 @@ class VirtualBoard:
         self._stop = threading.Event()
         self._paused = threading.Event()
         self._tampers: deque[Callable[[bytes], bytes]] = deque()
+        self._backlog = bytearray()  # output the host has not taken yet
         self._master: int | None = None
         self._device: str | None = None
         self._firmware: Firmware | None = None
@@ -235,6 +239,7 @@ class VirtualBoard:
             self._device = None
             self._firmware = None
             self._port_open = False
+            self._backlog.clear()
             if self._link is not None and self._link.is_symlink():
                 self._link.unlink()
 
@@ -300,17 +305,32 @@ class VirtualBoard:
     # -- thread -------------------------------------------------------------------
 
     def _write(self, data: bytes) -> None:
+        """Queue output for the host; beyond the backlog limit, drop it (counted)."""
+        if len(self._backlog) + len(data) > _MAX_BACKLOG:
+            self._dropped += len(data)
+            return
+        self._backlog += data
+        self._flush()
+
+    def _flush(self) -> None:
+        """Write as much of the backlog as the pty takes now."""
+        if not self._backlog or self._master is None:
+            return
         try:
-            n = os.write(self._master, data)
+            n = os.write(self._master, self._backlog)
         except BlockingIOError:
-            n = 0
+            return
         except OSError as err:
             if err.errno != errno.EIO:
                 raise
-            self._port_open = False
-            n = 0
+            self._port_closed()
+            return
         self._written += n
-        self._dropped += len(data) - n
+        del self._backlog[:n]
+
+    def _port_closed(self) -> None:
+        self._port_open = False  # no process holds the slave open
+        self._backlog.clear()  # what a closed port was sent is lost
 
     def _poll_input(self) -> None:
         """Read host bytes; track port open/close through EIO."""
@@ -321,7 +341,7 @@ class VirtualBoard:
         except OSError as err:
             if err.errno != errno.EIO:
                 raise
-            self._port_open = False  # no process holds the slave open
+            self._port_closed()
             return
         if not self._port_open:
             self._port_open = True
@@ -343,13 +363,16 @@ class VirtualBoard:
                             if self._tampers:
                                 out = self._tampers.popleft()(out)
                             self._write(out)
+                        else:
+                            self._flush()
                         self._poll_input()
                     port_open = self._port_open
+                    waiting = [master] if self._backlog else []
                 if master is None or not port_open or self._paused.is_set():
                     time.sleep(_CLOSED_POLL_S)
                     continue
                 try:
-                    select.select([master], [], [], _POLL_S)
+                    select.select([master], waiting, [], _POLL_S)
                 except (OSError, ValueError):  # closed by unplug meanwhile
                     continue
         except BaseException as err:  # surfaced by check()

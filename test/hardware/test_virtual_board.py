@@ -82,9 +82,16 @@ def test_watchdog_zeroes_the_coils_when_commands_stop():
         port.write(encode_command([800, 800, -800, -800]))
         assert board.wait_until(lambda b: list(b.firmware.pwm) == [800, 800, -800, -800], TIMEOUT)
         assert board.wait_until(lambda b: b.firmware.watchdog_trips == 1, TIMEOUT)
-        port.reset_input_buffer()  # drop what queued up while we were not reading
-        _, _, pwm = read_records(port, RecordDecoder(1), 20)
-        np.testing.assert_array_equal(pwm[-5:], 0)
+        # the records (queued while we were not reading) show the PWM applied, then zeroed
+        decoder = RecordDecoder(1)
+        seen = []
+        deadline = time.monotonic() + TIMEOUT
+        while not (seen and np.any(np.concatenate(seen)[:, 0] == 800) and seen[-1][-1, 0] == 0):
+            assert time.monotonic() < deadline, 'the zeroing never showed in the records'
+            seen.append(read_records(port, decoder, 50)[2])
+        pwm = np.concatenate(seen)
+        last_on = np.flatnonzero(pwm[:, 0] == 800)[-1]
+        np.testing.assert_array_equal(pwm[last_on + 1 :], 0)  # zero ever after
 
 
 def test_unplug_and_replug_keep_the_path():
