@@ -122,6 +122,11 @@ class Channel:
     spec: str
 
     @property
+    def expression(self) -> str:
+        """The spec without its ``NAME=`` prefix."""
+        return self.spec.split('=', 1)[1].strip() if '=' in self.spec else self.spec
+
+    @property
     def topics(self) -> tuple[str, ...]:
         """Topics the channel reads, in order of first use."""
         return tuple(dict.fromkeys(ref.topic for _, ref in self.terms))

@@ -110,13 +110,15 @@ class BagDataset:
                                    ('input', self.inputs, data.input_units)):
             for chan, unit in zip(chans, units, strict=True):
                 channels.append({'name': chan.name, 'role': role, 'unit': unit,
-                                 'spec': chan.spec})
+                                 'spec': chan.expression})
         out = {
             'bag': self.bag, 'storage': self.storage,
             'start_ns': al.t0_ns, 'duration_s': data.N * data.Ts, 'Ts_s': data.Ts,
             'samples': data.N, 'channels': channels,
             'topics': [{'topic': r.topic, 'role': r.role, 'clock': r.clock,
-                        'messages': r.samples, 'period_s': r.period, 'method': r.method,
+                        'messages': r.samples,
+                        'period_s': r.period if np.isfinite(r.period) else None,
+                        'method': r.method,
                         'duplicates': r.duplicates} for r in al.reports],
             'trimmed': {'start': al.trimmed[0], 'end': al.trimmed[1]},
             'gaps': [{'topic': g.topic, 'time_s': g.time, 'missing': g.missing,

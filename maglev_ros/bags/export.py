@@ -144,7 +144,9 @@ def format_summary(summary: dict) -> str:
                      f"at the end (not every topic had data)")
     if s['gaps']:
         total = sum(g['missing'] for g in s['gaps'])
-        lines.append(f"gaps      {len(s['gaps'])} ({total} samples), filled:")
+        count = len(s['gaps'])
+        lines.append(f"gaps      {count} gap{'s' if count != 1 else ''} ({total} "
+                     f"sample{'s' if total != 1 else ''}), filled:")
         lines += [f"          {g['topic']}: {g['missing']} after t = {g['time_s']:.6f} s "
                   f"({g['filled']})" for g in s['gaps'][:10]]
         if len(s['gaps']) > 10:
