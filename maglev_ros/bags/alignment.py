@@ -323,7 +323,11 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
         spans = ', '.join(f'{s.topic} {(int(c[0][0]) - t0) * 1e-9:.3f}..'
                           f'{(int(c[0][-1]) - t0) * 1e-9:.3f} s' for s, c in zip(
                               sources, cleaned, strict=True))
-        raise BagError(f'the topics do not overlap in time: {spans}')
+        clocks = {s.clock for s in sources}
+        hint = ('; header stamps and log times come from different clocks: record with '
+                'the clock that stamps the messages (use_sim_time in simulation)'
+                if len(clocks) > 1 else '')
+        raise BagError(f'the topics do not overlap in time: {spans}{hint}')
     window = slice(first_ok, last_ok + 1)
     reports = []
     for source, (_, _, dups), (_, method, period, gaps) in zip(sources, cleaned, results,

@@ -164,3 +164,12 @@ def test_an_input_sent_once_is_held_to_the_end():
                 Source('/setpoint', np.array([4_500_000]), np.array([0.7]), 'input', 'log')])
     assert al.trimmed == (5, 0)
     np.testing.assert_array_equal(al.values[1][:, 0], np.full(15, 0.7))
+
+
+def test_topics_on_different_clocks_do_not_overlap():
+    sim = np.arange(10, dtype=np.int64) * 1_000_000  # simulated time from 0
+    wall = 1_700_000_000_000_000_000 + sim  # a recorder stamping with the wall clock
+    with pytest.raises(BagError, match=r'do not overlap in time: /y 0\.000\.\.0\.009 s, '
+                       r'/u .*different clocks'):
+        align([Source('/y', sim, np.zeros(10), 'output'),
+               Source('/u', wall, np.zeros(10), 'input', 'log')])
