@@ -64,7 +64,7 @@ from maglev_ros.hardware.board_clock import BoardClock
 from maglev_ros.hardware.packet import encode_command
 from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
-from maglev_ros.hardware.v2x_stream import RecordDecoder
+from maglev_ros.hardware.v2x_stream import DecoderStats, RecordDecoder
 from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
 
 __all__ = ['DriverConfig', 'DriverNode', 'DriverParameterError', 'main']
@@ -509,6 +509,11 @@ class DriverNode(Node):
         return SetParametersResult(successful=True)
 
     # -- commands ---------------------------------------------------------------
+
+    @property
+    def decoder_stats(self) -> DecoderStats:
+        """Counters of the record decoder of the current connection (V2x)."""
+        return self._decoder.stats
 
     @property
     def enabled(self) -> bool:

@@ -308,11 +308,11 @@ def test_faults_cost_at_most_the_damaged_records(make_harness):
         garbage = b'\x3e\x3c\x00\xff garbage' * 4
         board.inject(garbage)
         board.tamper_next_burst(lambda b: b[: 2 * size + 5] + b[3 * size :])  # truncated
-        wait_for(lambda: h.driver._decoder.stats.wraps == 1, what='the timestamp wrap')
+        wait_for(lambda: h.driver.decoder_stats.wraps == 1, what='the timestamp wrap')
         board.pause()  # let the driver drain what is in flight
         wait_for(lambda: h.driver._decoder.buffered == size, what='the driver to drain')
         time.sleep(0.1)
-        stats = h.driver._decoder.stats
+        stats = h.driver.decoder_stats
         with board.lock:
             written = board.firmware.records_since_open
         assert board.status.bytes_dropped == 0  # the driver kept up: every fault is ours
