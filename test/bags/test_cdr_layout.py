@@ -110,3 +110,21 @@ def test_fast_and_slow_paths_agree_on_a_bag(tmp_path):
         np.testing.assert_array_equal(fast[topic].values, slow[topic].values)
         np.testing.assert_array_equal(fast[topic].stamps, slow[topic].stamps)
         assert fast[topic].clock == slow[topic].clock
+
+
+@pytest.mark.parametrize('fast', [True, False])
+def test_fields_inside_arrays_of_messages(tmp_path, fast):
+    from maglev_ros.bags import BagWriter
+
+    with BagWriter(tmp_path / f'arr{fast}') as bag:
+        topic = bag.add_topic('/maglev/identifier/model', 'std_msgs/msg/Float64MultiArray')
+        for k in range(10):
+            bag.write(topic, 1000 * k, _multiarray(k))
+    refs = {'/maglev/identifier/model': [
+        parse_channel('maglev/identifier/model:layout.dim[0].size').terms[0][1],
+        parse_channel('maglev/identifier/model:data[3]').terms[0][1]]}
+    with BagReader(tmp_path / f'arr{fast}') as reader:
+        got = read_topics(reader, refs, fast=fast)['/maglev/identifier/model']
+    np.testing.assert_array_equal(got.values[:, 0], np.full(10, 4.0))
+    np.testing.assert_array_equal(got.values[:, 1], 2.0 ** -np.arange(10))
+    assert got.clock == 'log'
