@@ -134,6 +134,7 @@ def _decode_slow(reader: BagReader, topic: str, msgtype: str, raws: list[bytes],
     """Stamps (or None) and values by deserialising message by message."""
     splits = [_split(ref.path) for ref in refs]
     chains = list(dict.fromkeys(prefix for prefix, _ in splits))
+    # '__class__' (unused) keeps the result a tuple when only one attribute is fetched
     fetch = attrgetter(*(_STAMP if has_header else ()), *chains, '__class__')
     deserialize = reader.deserializer(topic)
     # the kept tuples make the cyclic GC rescan a growing heap; nothing here forms cycles
