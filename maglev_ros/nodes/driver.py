@@ -7,7 +7,8 @@ simulator node:
 * ``maglev/sensor_<k>/field`` (sensor_msgs/MagneticField): the field of
   sensor k in tesla, frame from ``sensor_frames``, stamped with the board's
   sample time mapped to ROS time (``hardware.board_clock``: offset and drift
-  estimated, stamps strictly increasing). V2x fields are the raw sensor
+  against the host's system clock estimated, stamps strictly increasing; the
+  system clock is the ROS time of nodes without ``use_sim_time``). V2x fields are the raw sensor
   fields (what the model predicts); V4x fields are after the board's own
   baseline and feedthrough removal (reported in ``/diagnostics``).
 * ``maglev/currents`` (sensor_msgs/JointState, names x+ x- y+ y-): effort
