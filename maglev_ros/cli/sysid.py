@@ -170,7 +170,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError('no model requested: give --arx, --iv, --armax, --oe, --bj, --spec '
                          'or --select')
     split_text = str(args.split)
-    split: float | int = float(split_text) if '.' in split_text else int(split_text)
+    try:
+        split: float | int = float(split_text) if '.' in split_text else int(split_text)
+    except ValueError:
+        raise UsageError(f'--split must be a fraction such as 0.5 or a sample count such as '
+                         f'12500, got {split_text!r}') from None
     data = sysid.load_data(args.data, Ts=args.ts, rows=tuple(args.rows) if args.rows else None,
                            matrix=args.matrix,
                            outputs=args.outputs.split(',') if args.outputs else None,

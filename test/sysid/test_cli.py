@@ -85,6 +85,9 @@ def test_select_and_csv(tmp_path, capsys):
     (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--spec', '{badspec}'],
      'na must be a scalar or have shape'),
     (['{mat}', '--rows', '1', '4', '--ts', '1'], 'no model requested'),
+    (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1, '--split', 'half'],
+     '--split must be a fraction'),
+    (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--oe', 2, 2, 1], 'single-input'),
     (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
 ])
 def test_bad_input_exits_2_with_one_line(lab_mat, tmp_path, capsys, args, match):
