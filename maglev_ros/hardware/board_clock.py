@@ -25,6 +25,8 @@ from numpy.typing import ArrayLike, NDArray
 
 __all__ = ['BoardClock']
 
+_SCALAR_MAX = 16  # samples; up to here a Python loop beats numpy's per-call overhead
+
 
 class BoardClock:
     """Board time (us) to host time (ns) mapping with drift estimation.
@@ -120,6 +122,8 @@ class BoardClock:
         board = np.asarray(board_us, dtype=np.int64)
         if board.size == 0:
             return np.empty(0, np.int64)
+        if board.size <= _SCALAR_MAX:
+            return self._to_host_scalar(board)
         rel = (board - self._ref_us).astype(np.float64)
         stamps = 1000 * board + self._intercept_ns + np.rint(self._slope * rel).astype(np.int64)
         # strictly increasing, also across calls: s_i >= s_{i-1} + 1
@@ -130,3 +134,19 @@ class BoardClock:
         stamps = np.maximum.accumulate(np.maximum(stamps - ramp, floor)) + ramp
         self._last_stamp_ns = int(stamps[-1])
         return stamps
+
+    def _to_host_scalar(self, board: NDArray[np.int64]) -> NDArray[np.int64]:
+        """``to_host`` for a few samples: the same arithmetic without numpy's per-call cost.
+
+        Python's ``round`` and ``numpy.rint`` both round half to even, and the
+        products are the same float64 operations, so both paths agree exactly.
+        """
+        ref, slope, intercept = self._ref_us, self._slope, self._intercept_ns
+        last = -(1 << 62) if self._last_stamp_ns is None else self._last_stamp_ns
+        out = []
+        for b in board.tolist():
+            stamp = 1000 * b + intercept + int(round(slope * float(b - ref)))
+            last = stamp if stamp > last else last + 1
+            out.append(last)
+        self._last_stamp_ns = last
+        return np.array(out, dtype=np.int64)

@@ -322,8 +322,8 @@ class RecordDecoder:
 
     # -- internals --------------------------------------------------------------
 
-    def _block_plausible(self, buf: bytes, n: int) -> bool:
-        """Whether n aligned records satisfy the field and PWM invariants.
+    def _block_plausible(self, words: np.ndarray, n: int) -> bool:
+        """Whether n aligned records (flat uint32 words) satisfy the field and PWM invariants.
 
         Works on the flat, contiguous words and halves of the block with
         cached masks (a per-column loop over strided views is several times
@@ -333,13 +333,12 @@ class RecordDecoder:
         width = self._size // 4
         if n > self._scratch_records:
             self._grow_scratch(max(n, 2 * self._scratch_records))
-        words = np.frombuffer(buf, '<u4', count=n * width)
         masked = np.bitwise_and(
             words, self._field_mask[: n * width], out=self._word_scratch[: n * width]
         )
         if masked.max() > self._field_bits:  # |B| > max, NaN or infinite
             return False
-        halves = np.frombuffer(buf, '<i2', count=n * 2 * width)
+        halves = words.view('<i2')
         pwm = np.multiply(
             halves, self._pwm_mask[: 2 * n * width], out=self._half_scratch[: 2 * n * width]
         )
@@ -361,13 +360,15 @@ class RecordDecoder:
         self._half_scratch = np.empty(2 * n * width, np.int16)
         self._scratch_records = n
 
-    def _views(self, buf: bytes, n: int) -> _Run:
+    def _views(self, buf: bytes, n: int, words: np.ndarray | None = None) -> _Run:
         """Timestamp (n,), field (n, N, 3) and PWM (n, 4) views of n aligned records."""
         width = self._size // 4
-        words = np.frombuffer(buf, '<u4', count=n * width).reshape(n, width)
-        field = words.view('<f4')[:, 1 : 1 + 3 * self.n_sensors].reshape(n, self.n_sensors, 3)
-        pwm = words.view('<i2')[:, -4:]
-        return words[:, 0], field, pwm
+        if words is None:
+            words = np.frombuffer(buf, '<u4', count=n * width)
+        rows = words.reshape(n, width)
+        field = rows.view('<f4')[:, 1 : 1 + 3 * self.n_sensors].reshape(n, self.n_sensors, 3)
+        pwm = rows.view('<i2')[:, -4:]
+        return rows[:, 0], field, pwm
 
     def _run_locked(self, out: list[_Run]) -> bool:
         """Decode aligned records; return True if the boundary was lost."""
@@ -382,8 +383,8 @@ class RecordDecoder:
                 self._head = False
             return False
         bounds = self.bounds
-        ts, field, pwm = self._views(buf, n)
-        floats = field.reshape(n, 3 * self.n_sensors)
+        words = np.frombuffer(buf, '<u4', count=n * self._size // 4)
+        ts, field, pwm = self._views(buf, n, words)
         step = ts[1:] - ts[:-1]  # uint32: the true step even across a wrap
         first_ok = True
         if not start:
@@ -397,11 +398,12 @@ class RecordDecoder:
                 or (step - np.uint32(bounds.min_step_us)).max()
                 <= bounds.max_step_us - bounds.min_step_us
             )
-            and self._block_plausible(buf, n)
+            and self._block_plausible(words, n)
         )
         if ok:
             last = n - 1
         else:  # find the first record that breaks an invariant
+            floats = field.reshape(n, 3 * self.n_sensors)
             bad = ~np.all(np.abs(floats) <= bounds.max_field_mT, axis=1)  # NaN -> bad
             bad |= np.any((pwm < -PWM_FULL_SCALE) | (pwm > PWM_FULL_SCALE), axis=1)
             bad[1:] |= (step < bounds.min_step_us) | (step > bounds.max_step_us)

@@ -58,3 +58,22 @@ def test_reset():
     assert clock.observations == 0 and clock.drift == 0.0
     with pytest.raises(ValueError):
         clock.to_host([0])
+
+
+def test_scalar_and_vector_paths_agree():
+    rng = np.random.default_rng(3)
+    a, b = BoardClock(), BoardClock()
+    board = 1_000_000
+    for _ in range(300):
+        host = 7 * 10**17 + round(board * 1000 * (1 + 37e-6)) + int(rng.uniform(0, 9e5))
+        a.observe(board, host)
+        b.observe(board, host)
+        times = board - 200 * np.arange(int(rng.integers(1, 40)))[::-1]
+        small = np.concatenate([a.to_host(times[i : i + 5]) for i in range(0, len(times), 5)])
+        large = b.to_host(times) if len(times) > 16 else None
+        if large is not None:
+            np.testing.assert_array_equal(small, large)
+        else:
+            b.to_host(times)  # keep both clocks' last stamp in step
+            assert b._last_stamp_ns == a._last_stamp_ns
+        board += 1000 + int(rng.integers(0, 3000))
