@@ -4,8 +4,9 @@ Model ``A(q) y(t) = B(q) u(t - nk) + C(q) e(t)`` with a diagonal ``C`` for MIMO
 data (``nc`` has one order per output).  Output rows share no parameters, so
 each row is a separate minimization of ``sum e_i(t)^2``:
 
-* prediction error ``e_i = (A_i y - B_i u) / C_i`` (``lfilter``, zero initial
-  state at the first sample where all regressors exist);
+* prediction error ``e_i = (A_i y - B_i u) / C_i`` with zero past before the
+  first sample (as the model's one-step predictor), summed from the first
+  sample where all regressors exist;
 * gradient ``psi = [phi_AB, e(t-1) .. e(t-nc)] / C_i``: ``y``, ``u`` and ``e`` are
   filtered by ``1/C_i`` once per iteration and ``psi^T psi``, ``psi^T e`` are
   formed from their lagged correlations (:mod:`~.correlation`), never ``psi``;
@@ -84,10 +85,9 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
         solved = correlation_solve([signal_matrix(d) for d in experiments], reg, i, start)
         if solved is not None:
             return solved[0], solved[2] * solved[1], 0
-    Phis = [arx_regressors(d.y, d.u, orders, i, start) for d in experiments]
-    Ys = [d.y[start:, i] for d in experiments]
     if nc == 0:
-        Phi, Y = stack_rows(Phis), join(Ys)
+        Phi = stack_rows([arx_regressors(d.y, d.u, orders, i, start) for d in experiments])
+        Y = join([d.y[start:, i] for d in experiments])
         theta, Rinv, _ = least_squares(Phi, Y)
         r = Y - Phi @ theta
         return theta, float(r @ r) / max(1, len(Y) - len(theta)) * Rinv, 0
@@ -102,31 +102,39 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
                                    zip(experiments, ehat, strict=True)], blocks, i, start)
         theta0 = None if first is None else first[0]
     if theta0 is None:  # ill-conditioned start: plain ARX with C = 1
-        theta0 = np.r_[least_squares(stack_rows(Phis), join(Ys))[0], np.zeros(nc)]
+        Phi = stack_rows([arx_regressors(d.y, d.u, orders, i, start) for d in experiments])
+        theta0 = np.r_[least_squares(Phi, join([d.y[start:, i] for d in experiments]))[0],
+                       np.zeros(nc)]
 
     def project(theta: np.ndarray) -> np.ndarray:
         out = theta.copy()
         out[n_ab:] = stabilize(np.concatenate([[1.0], theta[n_ab:]]))[1:]
         return out
 
+    cache: dict[bytes, list[np.ndarray]] = {}
+
+    def full_errors(theta: np.ndarray) -> list[np.ndarray]:
+        """``e = (A_i y - B_i u) / C_i`` from the first sample (zero past), per experiment."""
+        key = theta.tobytes()
+        if key not in cache:
+            cache.clear()
+            C = np.concatenate([[1.0], theta[n_ab:]])
+            cache[key] = [inverse_filter(C, _row_equation_error(d, orders, i, theta[:n_ab]))
+                          for d in experiments]
+        return cache[key]
+
     def errors(theta: np.ndarray) -> np.ndarray:
-        C = np.concatenate([[1.0], theta[n_ab:]])
-        return join([inverse_filter(C, Y - P @ theta[:n_ab])
-                     for P, Y in zip(Phis, Ys, strict=True)])
+        return join([e[start:] for e in full_errors(theta)])
 
     target = np.array([[e_row + 1, 0, 1, 1]], dtype=np.int64)
 
     def normal(theta: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        # psi = [phi_AB, e lags] / C: filter y, u and e by 1/C once, then form
-        # psi^T psi and psi^T e from lagged correlations (psi is never built).
+        # psi = -de/dtheta = [phi_AB, e lags] / C, exactly: filter y, u and e by 1/C
+        # once, then form psi^T psi and psi^T e from lagged correlations (no psi).
         C = np.concatenate([[1.0], theta[n_ab:]])
         H = np.zeros((n_ab + nc, n_ab + nc))
         g = np.zeros(n_ab + nc)
-        pos = 0
-        for d in experiments:
-            e_full = np.zeros(d.N)
-            e_full[start:] = e[pos:pos + d.N - start]
-            pos += d.N - start
+        for d, e_full in zip(experiments, full_errors(theta), strict=True):
             S = np.empty((e_row + 2, d.N))
             S[:orders.ny] = inverse_filter(C, d.y.T)
             S[orders.ny:e_row] = inverse_filter(C, d.u.T)
