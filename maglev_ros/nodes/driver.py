@@ -35,6 +35,14 @@ Scaling (V2x): ``counts = round(counts_per_ampere * I)``, clamped to +-4096,
 with ``counts_per_ampere = 4096 * coil_resistance / supply_voltage`` unless
 ``counts_per_ampere`` is set (> 0).
 
+Latency (V2x): with ``confirm_records`` (default) the newest record of each
+read waits for the next record to confirm its boundary, so a record whose
+tail was lost is dropped instead of published with foreign bytes; the last
+record of each burst is then published with the next burst (up to 1 ms
+later). A loop closed on the PC that prefers latency can set it false (USB
+itself does not cut records; the decoder still resynchronises after any
+damage).
+
 QoS: sensor fields and currents are RELIABLE, KEEP_LAST 1000 (every sample
 must arrive for identification; 1000 samples = 0.2 s at 5 kHz); the command
 subscription is BEST_EFFORT, KEEP_LAST 10, which matches both reliable and
@@ -277,6 +285,9 @@ class DriverConfig:
         Back-off bounds in s for reopening the port.
     diagnostics_period : float
         s between diagnostics messages.
+    confirm_records : bool
+        Hold the newest V2x record of each read until the next record
+        confirms its boundary (see ``hardware.v2x_stream``).
     """
 
     port: str
@@ -291,6 +302,7 @@ class DriverConfig:
     reconnect_min_delay: float
     reconnect_max_delay: float
     diagnostics_period: float
+    confirm_records: bool = True
 
 
 def _positive(name: str, value: float) -> float:
@@ -365,6 +377,7 @@ def build_config(values: dict) -> DriverConfig:
         reconnect_min_delay=min_delay,
         reconnect_max_delay=max_delay,
         diagnostics_period=_positive('diagnostics_period', values['diagnostics_period']),
+        confirm_records=bool(values.get('confirm_records', True)),
     )
 
 
@@ -384,6 +397,13 @@ _PARAMETERS = {
     'reconnect_min_delay': (0.2, 's, first delay before reopening the port', True),
     'reconnect_max_delay': (5.0, 's, longest delay between reopen attempts', True),
     'diagnostics_period': (1.0, 's between /diagnostics messages', True),
+    'confirm_records': (
+        True,
+        'V2x: hold the newest record until the next confirms it (a cut record is then '
+        'dropped, not published corrupted; up to 1 ms more latency for the last record '
+        'of each burst); false: publish at once',
+        True,
+    ),
 }
 
 
@@ -418,7 +438,7 @@ class DriverNode(Node):
         self._v2x = cfg.firmware == 'v2x'
         self._link = SerialLink(cfg.port, cfg.baudrate)
         self._backoff = Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay)
-        self._decoder = RecordDecoder(cfg.n_sensors)
+        self._decoder = RecordDecoder(cfg.n_sensors, confirm=cfg.confirm_records)
         self._telemetry = TelemetryStream(cfg.n_sensors)
         self._board_clock = BoardClock()
         self._lock = threading.Lock()  # command state
@@ -629,7 +649,7 @@ class DriverNode(Node):
         self._connections += 1
         self.counters['reconnects'] = self._connections - 1
         self._backoff.reset()
-        self._decoder = RecordDecoder(self.config.n_sensors)
+        self._decoder = RecordDecoder(self.config.n_sensors, confirm=self.config.confirm_records)
         self._telemetry = TelemetryStream(self.config.n_sensors)
         self._board_clock = BoardClock()  # the board may have been power-cycled
         self.link_state = 'connected'
@@ -641,7 +661,7 @@ class DriverNode(Node):
         self._link.close()
         self._base['resyncs'] += self._decoder.stats.resyncs
         self._base['dropped_bytes'] += self._decoder.stats.dropped_bytes
-        self._decoder = RecordDecoder(self.config.n_sensors)
+        self._decoder = RecordDecoder(self.config.n_sensors, confirm=self.config.confirm_records)
         self.link_state = 'disconnected'
         self.get_logger().warning(f'{self.config.port}: {reason}')
 

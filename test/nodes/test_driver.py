@@ -413,6 +413,7 @@ def _base_values(**changes):
         'reconnect_min_delay': 0.2,
         'reconnect_max_delay': 5.0,
         'diagnostics_period': 1.0,
+        'confirm_records': True,
     }
     return values | changes
 
@@ -596,3 +597,24 @@ def test_published_fields_equal_the_physics_model_in_tesla(make_harness):
                 np.testing.assert_array_equal([field.x, field.y, field.z], model_t)
                 checked += 1
         assert checked > 300
+
+
+def test_unconfirmed_records_are_published_at_once(make_harness):
+    size = record_size(1)
+    board, _ = v2x_board()
+    with board:
+        board.tamper_next_burst(lambda b: b[7:])  # mid-burst start
+        h = make_harness(board.path, confirm_records=False)
+        wait_for(lambda: h.driver.counters['records'] > 500, what='records')
+        garbage = bytes(range(256)) * 2
+        board.inject(garbage)
+        wait_for(lambda: h.driver.decoder_stats.resyncs == 1, what='the resync')
+        board.pause()
+        wait_for(lambda: h.driver._decoder.buffered == 0, what='the driver to drain')
+        time.sleep(0.1)
+        with board.lock:
+            written = board.firmware.records_since_open
+        stats = h.driver.decoder_stats
+        assert stats.dropped_bytes == (size - 7) + len(garbage)
+        # nothing held back: all but the partial first record are published
+        assert h.driver.counters['records'] == stats.records == written - 1
