@@ -59,6 +59,7 @@ setup(
         ],
         'test': [
             'pytest>=7',
+            'pytest-timeout>=2',
             'magpylib>=5',
             'colcon-common-extensions',
             'ruff',
