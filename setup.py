@@ -19,6 +19,7 @@ NODES: dict[str, str] = {
     'virtual_board': 'maglev_ros.cli.virtual_board:main',
     'maglev-virtual-board': 'maglev_ros.cli.virtual_board:main',
     'driver': 'maglev_ros.nodes.driver:main',
+    'simulator': 'maglev_ros.nodes.simulator:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]

@@ -1,0 +1,369 @@
+import itertools
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import deque
+
+import numpy as np
+import pytest
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.parameter import Parameter
+from rclpy.serialization import deserialize_message, serialize_message
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState, MagneticField
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool, Trigger
+from visualization_msgs.msg import MarkerArray
+
+from maglev_ros.nodes import contract
+from maglev_ros.nodes.simulator import (
+    SimulatorNode,
+    SimulatorParameterError,
+    build_config,
+    make_simulator,
+)
+
+TIMEOUT = 30.0  # s, generous: the machine is shared
+_DOMAINS = itertools.count(100 + os.getpid() % 40)
+
+
+def wait_for(predicate, timeout=TIMEOUT, what='condition'):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.005)
+
+
+@pytest.fixture
+def domain(monkeypatch):
+    domain_id = next(_DOMAINS) % 230
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return domain_id
+
+
+@pytest.fixture
+def ctx(domain):
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+class Peer:
+    """The simulator and a test peer on one executor; the peer answers each sample."""
+
+    def __init__(self, ctx, commands=None, lockstep=True, raw=False, **params):
+        params.setdefault('mode', 'lockstep' if lockstep else 'realtime')
+        params.setdefault('start_paused', True)
+        overrides = [Parameter(k, value=v) for k, v in params.items()]
+        self.sim = SimulatorNode(context=ctx, parameter_overrides=overrides)
+        self.node = rclpy.create_node('simulator_test_peer', context=ctx)
+        self.commands = None if commands is None else np.asarray(commands, dtype=float)
+        self.sent = 0
+        self.fields = {k: [] for k in self.sim.sensors}
+        self.currents, self.states, self.clock = [], [], []
+        self.diagnostics = deque(maxlen=20)
+        self.markers = deque(maxlen=2)
+        qos = contract.SENSOR_QOS
+        self.pub = self.node.create_publisher(
+            Float64MultiArray, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS)
+        for k in self.sim.sensors:
+            self.node.create_subscription(MagneticField, contract.field_topic(k),
+                                          self.fields[k].append, qos, raw=raw)
+        self.node.create_subscription(Odometry, contract.TRUE_STATE_TOPIC, self.states.append,
+                                      qos, raw=raw)
+        self.node.create_subscription(Clock, contract.CLOCK_TOPIC, self.clock.append, qos,
+                                      raw=raw)
+        self.node.create_subscription(JointState, contract.CURRENTS_TOPIC, self._on_sample,
+                                      qos, raw=raw)
+        self.node.create_subscription(DiagnosticArray, '/diagnostics',
+                                      lambda m: self.diagnostics.append(m), 10)
+        self.node.create_subscription(MarkerArray, contract.MARKERS_TOPIC,
+                                      lambda m: self.markers.append(m), contract.MARKERS_QOS)
+        self.reset_client = self.node.create_client(Trigger, 'maglev/simulator/reset')
+        self.pause_client = self.node.create_client(SetBool, 'maglev/simulator/pause')
+        self.closed = False
+        self.spinner = contract.Spinner(ctx, [self.sim, self.node])
+        wait_for(lambda: self.pub.get_subscription_count() > 0
+                 and self.sim._current_pub.get_subscription_count() > 0, what='discovery')
+
+    def _on_sample(self, msg):
+        self.currents.append(msg)
+        if self.commands is not None and self.sent < len(self.commands):
+            self.pub.publish(Float64MultiArray(data=self.commands[self.sent].tolist()))
+            self.sent += 1
+
+    def call(self, client, request):
+        assert client.wait_for_service(timeout_sec=TIMEOUT)
+        future = client.call_async(request)
+        wait_for(future.done, what='service')
+        return future.result()
+
+    def run(self, n_samples):
+        """Resume and wait until n_samples samples arrived."""
+        self.call(self.pause_client, SetBool.Request(data=False))
+        wait_for(lambda: len(self.currents) >= n_samples, what=f'{n_samples} samples')
+
+    def close(self):
+        if self.closed:
+            return
+        self.closed = True
+        self.spinner.close()
+        self.sim.destroy_node()
+        self.node.destroy_node()
+
+
+@pytest.fixture
+def make_peer(ctx):
+    made = []
+
+    def make(*args, **kwargs):
+        peer = Peer(ctx, *args, **kwargs)
+        made.append(peer)
+        return peer
+
+    yield make
+    for peer in made:
+        peer.close()
+
+
+def stamp_ns(msg):
+    stamp = msg.clock if isinstance(msg, Clock) else msg.header.stamp
+    return stamp.sec * 10**9 + stamp.nanosec
+
+
+def test_published_fields_equal_the_core_h_of_the_same_state(make_peer):
+    rng = np.random.default_rng(1)
+    n = 300
+    commands = rng.uniform(-0.3, 0.3, (n, 4))
+    peer = make_peer(commands, coil_dynamics=False, sensor_delay=0, marker_rate=20.0)
+    peer.run(n + 1)
+    sim = peer.sim
+    model = sim.sim.model
+    reference = make_simulator(sim.config)  # the core, driven with the same commands
+    for i in range(n + 1):
+        x = reference.state
+        current = reference.currents
+        stamp = i * 200_000
+        assert [stamp_ns(peer.fields[k][i]) for k in sim.sensors] == [stamp] * 3
+        assert stamp_ns(peer.clock[i]) == stamp_ns(peer.currents[i]) == stamp
+        h = model.measurement(x, current)
+        for k in sim.sensors:
+            msg = peer.fields[k][i]
+            assert msg.header.frame_id == f'maglev_sensor_{k}'
+            got = [msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z]
+            np.testing.assert_allclose(got, h[3 * k : 3 * k + 3], rtol=1e-12, atol=1e-18)
+        np.testing.assert_array_equal(peer.currents[i].effort, current)
+        assert list(peer.currents[i].name) == ['x+', 'x-', 'y+', 'y-']
+        odom = peer.states[i]
+        assert (odom.header.frame_id, odom.child_frame_id) == ('maglev_base', 'maglev_magnet')
+        assert odom.pose.pose.position.z == x[2]
+        np.testing.assert_allclose(odom.pose.pose.position.x, x[0], atol=1e-15)
+        if i < n:
+            reference.step(commands[i])
+    assert np.ptp([m.pose.pose.position.x for m in peer.states]) > 0  # the magnet moved
+    assert sim.counters['timeouts'] == 0
+    wait_for(lambda: len(peer.markers) > 0, what='markers')
+    namespaces = [m.ns for m in peer.markers[-1].markers]
+    assert namespaces.count('solenoids') == 4 and namespaces.count('magnet') == 1
+
+
+def test_true_state_as_odometry():
+    x = np.array([0.001, -0.002, 0.03, 0.1, -0.2, 0.3, 0.5, -0.4, 0.2, 1.0, 2.0, 3.0])
+    msg = contract.odometry_message(123, x)
+    q = msg.pose.pose.orientation
+    a, b, g = x[3:6]
+
+    def rot(axis, angle):
+        c, s = np.cos(angle), np.sin(angle)
+        i, j = [(1, 2), (0, 2), (0, 1)][axis]
+        m = np.eye(3)
+        m[i, i] = m[j, j] = c
+        m[i, j], m[j, i] = (-s, s) if axis != 1 else (s, -s)
+        return m
+
+    R = rot(2, g) @ rot(1, b) @ rot(0, a)
+    w, v = q.w, np.array([q.x, q.y, q.z])
+    Rq = (w * w - v @ v) * np.eye(3) + 2 * np.outer(v, v) + 2 * w * np.array(
+        [[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    np.testing.assert_allclose(Rq, R, atol=1e-14)
+    twist = msg.twist.twist
+    np.testing.assert_allclose([twist.linear.x, twist.linear.y, twist.linear.z],
+                               R.T @ x[6:9], atol=1e-14)
+    assert [twist.angular.x, twist.angular.y, twist.angular.z] == [1.0, 2.0, 3.0]
+    raw = contract.odometry_template().serialise(123, contract.odometry_values(x).tolist())
+    assert raw == serialize_message(msg)
+    assert deserialize_message(raw, Odometry) == msg
+
+
+def _lockstep_run(make_peer, seed, n=400):
+    commands = np.random.default_rng(5).uniform(-1.0, 1.0, (n, 4))
+    peer = make_peer(commands, seed=seed, sensor_noise=2e-5, sensor_delay=1,
+                     coil_dynamics=True, magnet='fixed', marker_rate=0.0)
+    peer.run(n + 1)
+    fields = np.array([[stamp_ns(m), m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z]
+                       for k in peer.sim.sensors for m in peer.fields[k][: n + 1]])
+    currents = np.array([[stamp_ns(m), *m.effort] for m in peer.currents[: n + 1]])
+    states = np.array([[m.pose.pose.position.z, m.twist.twist.linear.z]
+                       for m in peer.states[: n + 1]])
+    assert peer.sim.counters['timeouts'] == 0
+    peer.close()
+    return fields.tobytes(), currents.tobytes(), states.tobytes()  # bit patterns
+
+
+def test_lockstep_is_bit_for_bit_reproducible(make_peer):
+    first = _lockstep_run(make_peer, seed=7)
+    second = _lockstep_run(make_peer, seed=7)
+    other = _lockstep_run(make_peer, seed=8)
+    assert first == second
+    assert first[1] == other[1] and first[0] != other[0]  # same currents, other noise
+    efforts = np.frombuffer(first[1]).reshape(-1, 5)[:, 1]
+    assert efforts[0] == 0.0 and 0 < np.abs(efforts).max() < 1.0  # the L/R coil lags
+
+
+def test_crash_is_reported_and_reset_recovers(make_peer):
+    x0 = [0.001, 0.0, 0.0365] + [0.0] * 9
+    peer = make_peer(np.zeros((100000, 4)), initial_state=x0, diagnostics_period=0.2,
+                     publish_state=True, marker_rate=0.0)
+    peer.run(1)
+    sim = peer.sim
+
+    def crashed():
+        return any(s.level == DiagnosticStatus.ERROR and 'crashed' in s.message
+                   for d in list(peer.diagnostics) for s in d.status)
+
+    wait_for(crashed, what='the crash on /diagnostics')
+    status = next(s for d in list(peer.diagnostics) for s in d.status
+                  if s.level == DiagnosticStatus.ERROR)
+    values = {kv.key: kv.value for kv in status.values}
+    assert values['crash reason'] == 'touched the base'
+    assert 0.05 < float(values['crash time (s)']) < 1.0
+    assert sim.counters['crashes'] == 1
+    before = len(peer.currents)
+    time.sleep(0.3)
+    assert len(peer.currents) == before  # integration stopped
+    response = peer.call(peer.reset_client, Trigger.Request())
+    assert response.success
+    wait_for(lambda: len(peer.currents) > before + 50, what='samples after the reset')
+    stamps = [stamp_ns(m) for m in peer.currents]
+    assert np.all(np.diff(stamps) > 0)  # time continues across the reset
+    assert sim.counters['resets'] == 1
+    first = peer.states[before]
+    assert first.pose.pose.position.x == pytest.approx(0.001)  # back at the initial state
+
+
+def test_lockstep_timeout_holds_the_last_command(make_peer):
+    peer = make_peer([[0.2, 0.0, 0.0, 0.0]], coil_dynamics=False, command_timeout=0.1,
+                     marker_rate=0.0)
+    peer.run(4)
+    assert peer.sim.counters['timeouts'] >= 2
+    assert list(peer.currents[3].effort) == [0.2, 0.0, 0.0, 0.0]
+
+
+def test_realtime_follows_commands_and_pauses(make_peer):
+    peer = make_peer(lockstep=False, coil_dynamics=False, marker_rate=0.0, start_paused=False,
+                     magnet='fixed', sensors=[0], publish_clock=False,
+                     diagnostics_period=0.5)
+    wait_for(lambda: len(peer.currents) > 500, what='real-time samples')
+    wait_for(lambda: any(list(m.effort) == [0.5, -0.5, 0.0, 0.0] for m in peer.currents[-50:])
+             or peer.pub.publish(Float64MultiArray(data=[0.5, -0.5, 0.0, 0.0])),
+             what='the command applied')
+    stamps = np.array([stamp_ns(m) for m in peer.currents])
+    assert np.all(np.diff(stamps) > 0) and np.all(stamps % 200_000 == 0)
+    peer.call(peer.pause_client, SetBool.Request(data=True))
+    time.sleep(0.1)
+    count = len(peer.currents)
+    time.sleep(0.3)
+    assert len(peer.currents) == count
+    peer.call(peer.pause_client, SetBool.Request(data=False))
+    wait_for(lambda: len(peer.currents) > count + 100, what='samples after resume')
+    wait_for(lambda: any(float(kv.value) > 0 for d in list(peer.diagnostics)
+                         for s in d.status for kv in s.values if kv.key == 'real-time factor'),
+             what='a real-time factor')
+    for key in ('late commands', 'held samples', 'overruns'):
+        assert any(kv.key == key for kv in peer.diagnostics[-1].status[0].values)
+
+
+def _values(**changes):
+    values = {
+        'params': 'maggy_v2', 'field_model': 'fast', 'torque': 'true', 'kinematics': 'rigid',
+        'sample_rate': 5000.0, 'substeps': 1, 'magnet': 'free', 'initial_state': None,
+        'coil_dynamics': True, 'sensor_noise': 0.0, 'sensor_quantization': 0.0,
+        'sensor_delay': 1, 'seed': 0, 'mode': 'realtime', 'command_timeout': 1.0,
+        'start_paused': False, 'start_subscribers': 0, 'sensors': None, 'publish_state': True,
+        'publish_clock': True, 'marker_rate': 10.0, 'diagnostics_period': 1.0,
+    }
+    return values | changes
+
+
+@pytest.mark.parametrize('changes, match', [
+    ({'mode': 'fast'}, "mode must be one of realtime, lockstep, got 'fast'"),
+    ({'magnet': 'glued'}, "magnet must be one of free, fixed, absent, got 'glued'"),
+    ({'sample_rate': 0.0}, 'sample_rate must be a finite number > 0, got 0.0'),
+    ({'sensor_noise': -1.0}, 'sensor_noise must be a finite number >= 0'),
+    ({'initial_state': [0.0] * 3}, 'initial_state must be 12 finite numbers'),
+    ({'sensors': [0, 0]}, 'sensors must be distinct sensor indices'),
+    ({'field_model': 'slow'}, 'field_model must be one of fast, accurate, filament'),
+    ({'substeps': 0}, 'substeps must be an integer >= 1, got 0'),
+    ({'seed': -3}, 'seed must be an integer >= 0, got -3'),
+])
+def test_config_errors(changes, match):
+    with pytest.raises(SimulatorParameterError, match=match):
+        build_config(_values(**changes))
+
+
+def test_unknown_parameter_set_and_sensor(ctx):
+    with pytest.raises(SimulatorParameterError, match="params 'maggy_v9'"):
+        make_simulator(build_config(_values(params='maggy_v9')))
+    with pytest.raises(SimulatorParameterError, match='sensors must be indices below 3'):
+        SimulatorNode(context=ctx, parameter_overrides=[Parameter('sensors', value=[5])])
+
+
+def _process(domain, *params):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    cmd = [sys.executable, '-m', 'maglev_ros.nodes.simulator', '--ros-args']
+    for item in params:
+        cmd += ['-p', item]
+    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                            text=True, start_new_session=True)
+
+
+def test_main_exits_2_on_invalid_parameters(domain):
+    proc = _process(domain, 'mode:=turbo')
+    out, _ = proc.communicate(timeout=60.0)
+    assert proc.returncode == 2
+    assert "mode must be one of realtime, lockstep, got 'turbo'" in out
+    assert 'Traceback' not in out
+
+
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
+def test_signal_ends_the_node_cleanly(ctx, domain, signum):
+    proc = _process(domain, 'marker_rate:=0.0')
+    try:
+        node = rclpy.create_node('simulator_signal_peer', context=ctx)
+        got = []
+        node.create_subscription(JointState, contract.CURRENTS_TOPIC, got.append,
+                                 contract.SENSOR_QOS)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60.0
+        while len(got) < 100:
+            assert time.monotonic() < deadline and proc.poll() is None, 'no samples'
+            executor.spin_once(timeout_sec=0.05)
+        executor.shutdown()
+        proc.send_signal(signum)
+        out, _ = proc.communicate(timeout=30.0)
+        assert proc.returncode == 0, out
+        assert 'Traceback' not in out
+        node.destroy_node()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
