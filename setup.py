@@ -20,6 +20,7 @@ NODES: dict[str, str] = {
     'maglev-virtual-board': 'maglev_ros.cli.virtual_board:main',
     'driver': 'maglev_ros.nodes.driver:main',
     'simulator': 'maglev_ros.nodes.simulator:main',
+    'excitation': 'maglev_ros.nodes.excitation:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]

@@ -138,7 +138,8 @@ def build_config(values: dict) -> ExcitationConfig:
 
     amplitude = values['amplitude']
     if not (isinstance(amplitude, float) and math.isfinite(amplitude) and amplitude >= 0):
-        raise ExcitationParameterError(f'amplitude must be a finite number >= 0, got {amplitude!r}')
+        raise ExcitationParameterError(
+            f'amplitude must be a finite number >= 0, got {amplitude!r}')
     band = tuple(float(b) for b in values['band'])
     if len(band) != 2 or not (0.0 <= band[0] < band[1] <= 1.0):
         raise ExcitationParameterError(
