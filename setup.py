@@ -21,6 +21,8 @@ NODES: dict[str, str] = {
     'driver': 'maglev_ros.nodes.driver:main',
     'simulator': 'maglev_ros.nodes.simulator:main',
     'excitation': 'maglev_ros.nodes.excitation:main',
+    'recorder': 'maglev_ros.nodes.recorder:main',
+    'player': 'maglev_ros.nodes.player:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]

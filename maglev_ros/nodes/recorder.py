@@ -1,0 +1,357 @@
+"""Recorder node: ``ros2 run maglev_ros recorder``.
+
+Writes chosen topics to a rosbag2 directory (MCAP by default, sqlite3 on
+request) with rosbags (:class:`maglev_ros.bags.BagWriter`), so a pip-only
+machine can record. Messages are stored as received (``raw=True``
+subscriptions: the CDR bytes, no conversion). A topic is subscribed as soon as
+its type appears in the graph; the subscription is RELIABLE if every
+publisher offers reliable delivery, else BEST_EFFORT, with depth ``depth``.
+
+Log times: ``log_clock = ros`` uses the node's clock (wall time, or ``/clock``
+with ``use_sim_time``); ``topic`` uses the newest ``/clock`` message the
+recorder received itself (``/clock`` must be among ``topics``): every message
+of a lockstep run is then logged at the simulated time of its sample, which is
+what the bag converter needs for header-less commands.
+
+Metadata (the bag's ``custom_data``): package version, storage, topics,
+recording start, and every parameter of ``metadata_node`` (default the
+simulator: parameter set, model options, seed, ...) as ``<node>.<name>``,
+fetched through its parameter services when it appears. The bag is finalised
+(index and ``metadata.yaml``) when the node is destroyed, also after SIGINT
+or SIGTERM.
+"""
+
+from __future__ import annotations
+
+import struct
+import time
+from dataclasses import dataclass
+from importlib import metadata as importlib_metadata
+from pathlib import Path
+
+from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.srv import GetParameters, ListParameters
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from maglev_ros.bags import BagError, BagWriter
+from maglev_ros.nodes import contract
+
+__all__ = ['DEFAULT_TOPICS', 'RecorderConfig', 'RecorderNode', 'RecorderParameterError',
+           'build_config', 'main', 'message_class']
+
+NODE_NAME = 'maglev_recorder'
+DEFAULT_TOPICS = ['maglev/sensor_0/field', 'maglev/sensor_1/field', 'maglev/sensor_2/field',
+                  contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC, contract.TRUE_STATE_TOPIC,
+                  contract.CLOCK_TOPIC]
+_CLOCK = struct.Struct('<iI')  # rosgraph_msgs/Clock after the 4-byte CDR header
+
+
+class RecorderParameterError(ValueError):
+    """A recorder parameter has an invalid value."""
+
+
+@dataclass(frozen=True)
+class RecorderConfig:
+    """Validated recorder parameters.
+
+    Attributes
+    ----------
+    path : str
+        Bag directory (must not exist).
+    storage : str
+        ``mcap`` or ``sqlite3``.
+    topics : tuple of str
+        Fully qualified topic names.
+    depth : int
+        Subscription queue depth.
+    log_clock : str
+        ``ros`` or ``topic``.
+    metadata_node : str
+        Node whose parameters go into the metadata ('' for none).
+    """
+
+    path: str
+    storage: str
+    topics: tuple[str, ...]
+    depth: int
+    log_clock: str
+    metadata_node: str
+
+
+_PARAMETERS = {
+    'path': ('', "bag directory to create; '' : maglev_<date>_<time> in the working directory"),
+    'storage': ('mcap', 'bag storage: mcap or sqlite3'),
+    'topics': (DEFAULT_TOPICS, 'topics to record'),
+    'depth': (10000, 'subscription queue depth (messages)'),
+    'log_clock': ('ros', 'log time: ros (node clock) or topic (newest /clock received)'),
+    'metadata_node': ('maglev_simulator', "node whose parameters are stored ('' : none)"),
+}
+
+
+def _absolute(topic: str) -> str:
+    return topic if topic.startswith('/') else '/' + topic
+
+
+def build_config(values: dict) -> RecorderConfig:
+    """Validate raw parameter values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name to value.
+
+    Returns
+    -------
+    RecorderConfig
+
+    Raises
+    ------
+    RecorderParameterError
+        Naming the first invalid parameter and its value.
+    """
+    if values['storage'] not in ('mcap', 'sqlite3'):
+        raise RecorderParameterError(
+            f"storage must be one of mcap, sqlite3, got {values['storage']!r}")
+    topics = tuple(dict.fromkeys(_absolute(t) for t in values['topics'] if t))
+    if not topics:
+        raise RecorderParameterError(f"topics must name at least one topic, got "
+                                     f"{list(values['topics'])}")
+    depth = values['depth']
+    if not isinstance(depth, int) or depth < 1:
+        raise RecorderParameterError(f'depth must be an integer >= 1, got {depth!r}')
+    if values['log_clock'] not in ('ros', 'topic'):
+        raise RecorderParameterError(
+            f"log_clock must be one of ros, topic, got {values['log_clock']!r}")
+    if values['log_clock'] == 'topic' and contract.CLOCK_TOPIC not in topics:
+        raise RecorderParameterError('log_clock topic needs /clock among topics, got '
+                                     f'{list(topics)}')
+    path = values['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
+    if Path(path).exists():
+        raise RecorderParameterError(f'path must be a new directory, got {path!r} (exists)')
+    return RecorderConfig(path=path, storage=values['storage'], topics=topics, depth=depth,
+                          log_clock=values['log_clock'], metadata_node=values['metadata_node'])
+
+
+def message_class(msgtype: str):
+    """Return the rclpy message class of ``pkg/msg/Type``."""
+    import importlib
+
+    package, kind, name = msgtype.split('/')
+    return getattr(importlib.import_module(f'{package}.{kind}'), name)
+
+
+def package_version() -> str:
+    """Return the installed maglev_ros version ('unknown' if not installed)."""
+    try:
+        return importlib_metadata.version('maglev_ros')
+    except importlib_metadata.PackageNotFoundError:
+        return 'unknown'
+
+
+def _parameter_value(value):
+    kinds = {
+        ParameterType.PARAMETER_BOOL: 'bool_value',
+        ParameterType.PARAMETER_INTEGER: 'integer_value',
+        ParameterType.PARAMETER_DOUBLE: 'double_value',
+        ParameterType.PARAMETER_STRING: 'string_value',
+    }
+    if value.type in kinds:
+        return getattr(value, kinds[value.type])
+    arrays = {
+        ParameterType.PARAMETER_BOOL_ARRAY: 'bool_array_value',
+        ParameterType.PARAMETER_INTEGER_ARRAY: 'integer_array_value',
+        ParameterType.PARAMETER_DOUBLE_ARRAY: 'double_array_value',
+        ParameterType.PARAMETER_STRING_ARRAY: 'string_array_value',
+    }
+    if value.type in arrays:
+        return ' '.join(str(v) for v in getattr(value, arrays[value.type]))
+    return ''
+
+
+class RecorderNode(Node):
+    """The bag recorder (see the module docstring).
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Raises
+    ------
+    RecorderParameterError
+        If a parameter is invalid.
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        for name, (default, text) in _PARAMETERS.items():
+            self.declare_parameter(name, default,
+                                   ParameterDescriptor(description=text, read_only=True))
+        self.config = cfg = build_config(
+            {name: self.get_parameter(name).value for name in _PARAMETERS})
+        meta = {'maglev_ros.version': package_version(), 'recorder.storage': cfg.storage,
+                'recorder.topics': ' '.join(cfg.topics), 'recorder.log_clock': cfg.log_clock,
+                'recorder.started': time.strftime('%Y-%m-%dT%H:%M:%S%z')}
+        try:
+            self.writer = BagWriter(cfg.path, cfg.storage, metadata=meta)
+            self.writer.open()
+        except BagError as err:
+            raise RecorderParameterError(f'path {cfg.path!r}: {err}') from err
+        self.counts = dict.fromkeys(cfg.topics, 0)
+        self._handles = {}
+        self._clock_ns = 0
+        self._metadata_done = not cfg.metadata_node
+        self._metadata_pending = False
+        self._closed = False
+        self.create_timer(0.1, self._discover)
+        self._discover()
+        self.get_logger().info(f'recording {len(cfg.topics)} topic(s) to {cfg.path} '
+                               f'({cfg.storage})')
+
+    @property
+    def subscribed(self) -> list[str]:
+        """Topics subscribed so far."""
+        return list(self._handles)
+
+    @property
+    def metadata_complete(self) -> bool:
+        """True once the metadata node's parameters are in the bag's metadata."""
+        return self._metadata_done
+
+    def _discover(self) -> None:
+        if self._closed:
+            return
+        types = dict(self.get_topic_names_and_types())
+        for topic in self.config.topics:
+            if topic in self._handles or not types.get(topic):
+                continue
+            publishers = self.get_publishers_info_by_topic(topic)
+            if not publishers:
+                continue
+            msgtype = types[topic][0]
+            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE
+                           for p in publishers)
+            qos = QoSProfile(depth=self.config.depth, history=HistoryPolicy.KEEP_LAST,
+                             reliability=ReliabilityPolicy.RELIABLE if reliable
+                             else ReliabilityPolicy.BEST_EFFORT)
+            try:
+                handle = self.writer.add_topic(topic, msgtype)
+                cls = message_class(msgtype)
+            except (BagError, ImportError, AttributeError, ValueError) as err:
+                self.get_logger().error(f'cannot record {topic} ({msgtype}): {err}')
+                self._handles[topic] = None
+                continue
+            self._handles[topic] = handle
+            is_clock = topic == contract.CLOCK_TOPIC
+            self.create_subscription(cls, topic, self._writer_for(handle, topic, is_clock), qos,
+                                     raw=True)
+        if not self._metadata_done and not self._metadata_pending:
+            self._request_metadata()
+        elif self._metadata_pending and time.monotonic() - self._metadata_since > 0.3:
+            self._metadata_skip()  # no answer (an unset parameter): skip it
+
+    def _writer_for(self, handle, topic: str, is_clock: bool):
+        write = self.writer.write
+        counts = self.counts
+        by_topic = self.config.log_clock == 'topic'
+        clock = self.get_clock()
+
+        def on_message(data: bytes) -> None:
+            if is_clock:
+                sec, nanosec = _CLOCK.unpack_from(data, 4)
+                self._clock_ns = sec * 1_000_000_000 + nanosec
+            stamp = self._clock_ns if by_topic else clock.now().nanoseconds
+            try:
+                write(handle, stamp, data)
+            except BagError:  # closed while this message was in flight
+                return
+            counts[topic] += 1
+
+        return on_message
+
+    def _request_metadata(self) -> None:
+        name = self.config.metadata_node
+        nodes = {n for n, _ in self.get_node_names_and_namespaces()}
+        if name not in nodes:
+            return
+        self._metadata_pending = True
+        prefix = f'/{name}'
+        lister = self.create_client(ListParameters, f'{prefix}/list_parameters')
+        getter = self.create_client(GetParameters, f'{prefix}/get_parameters')
+        if not (lister.service_is_ready() and getter.service_is_ready()):
+            self.destroy_client(lister)
+            self.destroy_client(getter)
+            self._metadata_pending = False
+            return
+
+        items: dict[str, object] = {}
+        self._metadata_since = time.monotonic()
+
+        def ask(names):
+            # one parameter per request, one request at a time: a node answers
+            # nothing for an unset (typed, no default) parameter
+            if not names:
+                if not self._closed and not self._metadata_done:
+                    self.writer.set_metadata(items)
+                self._metadata_done = True
+                self._metadata_pending = False
+                return
+            parameter = names[0]
+            self._metadata_since = time.monotonic()
+            self._metadata_skip = lambda: ask(names[1:])
+            token = self._metadata_since
+
+            def got_value(future):
+                if token != self._metadata_since:
+                    return  # skipped after the timeout
+                result = future.result()
+                if result is not None and result.values:
+                    items[f'{name}.{parameter}'] = _parameter_value(result.values[0])
+                ask(names[1:])
+
+            getter.call_async(GetParameters.Request(names=[parameter])).add_done_callback(
+                got_value)
+
+        def got_names(future):
+            result = future.result()
+            if result is None or not result.result.names:
+                self._metadata_pending = False
+                return
+            ask(list(result.result.names))
+
+        lister.call_async(ListParameters.Request()).add_done_callback(got_names)
+
+    def close(self) -> None:
+        """Finalise the bag (idempotent)."""
+        if self._closed:
+            return
+        self._closed = True
+        self.writer.close()
+        total = sum(self.counts.values())
+        self.get_logger().info(f'bag {self.config.path} closed: {total} messages')
+
+    def destroy_node(self) -> None:
+        """Finalise the bag, then destroy the node."""
+        self.close()
+        super().destroy_node()
+
+
+def main(args: list[str] | None = None) -> int:
+    """Record until SIGINT or SIGTERM; the bag is finalised either way.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS arguments included).
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 2 for invalid parameters.
+    """
+    return contract.run_nodes([RecorderNode], args, NODE_NAME, (RecorderParameterError,))
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
