@@ -12,6 +12,7 @@ PACKAGE = 'maglev_ros'
 CLI_TOOLS = {
     'model': 'maglev_ros.cli.model:main',
     'sysid': 'maglev_ros.cli.sysid:main',
+    'lab': 'maglev_ros.cli.lab:main',
     'bag2data': 'maglev_ros.cli.bag2data:main',
 }
 # ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.

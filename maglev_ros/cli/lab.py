@@ -1,0 +1,357 @@
+"""``maglev-lab``: the lab session as one command (pip-only friendly).
+
+Runs the simulator (lockstep), the excitation and the recorder as three nodes on
+one executor in this process, for a given simulated duration; then converts the
+bag into a data set (:func:`maglev_ros.bags.read_bag`: command inputs by log
+time, exact alignment), identifies one ARX model per field component against
+the excitation inputs, prints the fit on estimation and validation data and
+writes the plots::
+
+    maglev-lab --duration 5 --params maggy_v2 --magnet fixed --excitation prbs --out lab/
+
+Outputs in ``--out``: ``bag/`` (rosbag2, MCAP), ``models.json`` (fits and
+coefficients), ``compare_<output>.png`` (validation data vs model). Exit status
+0, 2 on bad input (one line on stderr), 130 when interrupted (the bag is
+finalised).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')  # small solves; see cli/sysid.py
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # keep the lab local
+
+import argparse  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+from maglev_ros.cli.usage import (  # noqa: E402
+    Parser,
+    UsageError,
+    non_negative_float,
+    positive_float,
+    run_command,
+)
+from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix  # noqa: E402
+
+__all__ = ['build_parser', 'identify', 'input_channels', 'load_data', 'main',
+           'run_experiment']
+
+PROG = 'maglev-lab'
+AXES = 'xyz'
+WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``maglev-lab``."""
+    p = Parser(prog=PROG, description='Simulate, excite, record and identify: the Maggy lab '
+               'session in one command.')
+    p.add_argument('--duration', type=positive_float, default=5.0,
+                   help='simulated seconds to record (default 5)')
+    p.add_argument('--params', default='maggy_v2', help='parameter set (maggy_v2, maggy_v4, '
+                   'or a YAML path)')
+    p.add_argument('--magnet', choices=('free', 'fixed', 'absent'), default='fixed',
+                   help='levitating magnet (default fixed: no controller needed)')
+    p.add_argument('--field-model', choices=('fast', 'accurate', 'filament'), default='fast')
+    p.add_argument('--sample-rate', type=positive_float, default=5000.0, help='Hz')
+    p.add_argument('--no-coil', action='store_true', help='no coil L/R dynamics')
+    p.add_argument('--delay', type=int, default=1, help='sensor delay in samples (default 1)')
+    p.add_argument('--noise', type=non_negative_float, default=0.0,
+                   help='sensor noise, T rms (default 0)')
+    p.add_argument('--seed', type=int, default=0, help='seed of noise and excitation')
+    p.add_argument('--sensors', type=int, nargs='+', default=[0],
+                   help='sensors to record and identify (default 0)')
+    p.add_argument('--excitation', choices=SIGNALS, default='prbs', help='input signal')
+    p.add_argument('--amplitude', type=non_negative_float, default=0.5, help='A (default 0.5)')
+    p.add_argument('--band', type=float, nargs=2, default=[0.0, 1.0], metavar=('LOW', 'HIGH'),
+                   help='band as fractions of Nyquist (default 0 1)')
+    p.add_argument('--pattern', choices=PATTERNS, default='pairs',
+                   help='coil pattern (default pairs: +u on x+, -u on x-, same for y)')
+    p.add_argument('--length', type=int, default=8191, help='samples per excitation period')
+    p.add_argument('--na', type=int, default=2, help='ARX order of A (default 2)')
+    p.add_argument('--nb', type=int, default=2, help='ARX order of B per input (default 2)')
+    p.add_argument('--nk', type=int, default=1, help='ARX input delay (default 1)')
+    p.add_argument('--split', type=float, default=0.5,
+                   help='fraction of samples for estimation (default 0.5)')
+    p.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
+    p.add_argument('--out', default=None, help='output directory (default lab_<date>_<time>)')
+    p.add_argument('--no-plots', action='store_true', help='write no plots')
+    return p
+
+
+def input_channels(pattern: str) -> list[str]:
+    """Bag channel specs of the excitation inputs: one per pattern signal.
+
+    Each signal is read from the first coil it drives, as commanded (the
+    ``+u`` coil of an antisymmetric pair), e.g. ``u_x=maglev/currents/command:data[0]``.
+    """
+    matrix = pattern_matrix(pattern)
+    names = {0: 'x', 2: 'y', 1: 'xm', 3: 'ym'}
+    specs = []
+    for j in range(matrix.shape[1]):
+        coil = int(np.flatnonzero(matrix[:, j])[0])
+        label = names[coil] if matrix.shape[1] > 1 else pattern
+        specs.append(f'u_{label}=maglev/currents/command:data[{coil}]')
+    return specs
+
+
+def output_channels(sensors) -> list[str]:
+    """Bag channel specs of the field components of ``sensors``."""
+    return [f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}'
+            for k in sensors for a in AXES]
+
+
+def load_data(bag: Path, sensors, pattern: str):
+    """Read the recorded experiment into an identification data set.
+
+    Parameters
+    ----------
+    bag : Path
+        The bag directory.
+    sensors : sequence of int
+        Sensors whose fields are the outputs.
+    pattern : str
+        Excitation pattern (chooses the inputs).
+
+    Returns
+    -------
+    maglev_ros.bags.BagDataset
+        Data (outputs in T, inputs in A) and the bag's metadata.
+    """
+    from maglev_ros.bags import read_bag
+
+    return read_bag(bag, output_channels(sensors), input_channels(pattern))
+
+
+def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
+    """Estimate one ARX model per output (all inputs), fits on estimation/validation data.
+
+    Parameters
+    ----------
+    data : IdData
+        The experiment.
+    na, nb, nk : int
+        ARX orders (``nb``, ``nk`` for every input).
+    split : float
+        Fraction of samples for estimation.
+
+    Returns
+    -------
+    list of dict
+        Per output: ``output``, ``model`` (PolyModel), ``fit_estimation``,
+        ``fit_validation`` (percent), ``estimation``/``validation`` (IdData),
+        ``note``. An output that does not respond to the inputs (constant
+        after detrending, e.g. by symmetry) gets no model and NaN fits.
+    """
+    from maglev_ros.sysid import arx, compare
+
+    est_all, val_all = data.detrend().split(split)
+    spread = np.std(np.asarray(est_all.y), axis=0)
+    rows = []
+    for i, name in enumerate(data.output_names):
+        if spread[i] <= 1e-9 * spread.max():
+            # e.g. Bz at the centre sensor under antisymmetric pairs: zero by symmetry
+            rows.append({'output': name, 'model': None, 'fit_estimation': float('nan'),
+                         'fit_validation': float('nan'), 'note': 'no response to the inputs'})
+            continue
+        est, val = est_all.select(outputs=[i]), val_all.select(outputs=[i])
+        nu = data.nu
+        model = arx(est, na, [[nb] * nu], [[nk] * nu])
+        rows.append({
+            'output': name, 'model': model,
+            'fit_estimation': float(compare(model, est, ic='estimate').fit[0]),
+            'fit_validation': float(compare(model, val, ic='estimate').fit[0]),
+            'estimation': est, 'validation': val, 'note': '',
+        })
+    return rows
+
+
+def _check(args: argparse.Namespace) -> None:
+    if not 0.0 < args.split < 1.0:
+        raise UsageError(f'--split must be in (0, 1), got {args.split}')
+    for name in ('na', 'nb', 'length'):
+        if getattr(args, name) < 1:
+            raise UsageError(f'--{name} must be >= 1, got {getattr(args, name)}')
+    if args.nk < 0 or args.delay < 0:
+        raise UsageError('--nk and --delay must be >= 0')
+    if not 0.0 <= args.band[0] < args.band[1] <= 1.0:
+        raise UsageError(f'--band must be LOW HIGH with 0 <= LOW < HIGH <= 1, got {args.band}')
+
+
+def _wait(predicate, ctx, what: str, timeout: float = WAIT_S) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if not ctx.ok():
+            raise KeyboardInterrupt
+        if time.monotonic() > deadline:
+            raise RuntimeError(f'timed out after {timeout:g} s waiting for {what}')
+        time.sleep(0.01)
+
+
+def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
+    """Run simulator (lockstep), excitation and recorder on one executor.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed ``maglev-lab`` arguments.
+    bag : Path
+        Bag directory to create.
+
+    Returns
+    -------
+    dict
+        ``samples``, ``simulated_s``, ``wall_s``, ``timeouts``, ``crashed``.
+
+    Raises
+    ------
+    KeyboardInterrupt
+        On SIGINT/SIGTERM (the bag is finalised first).
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from maglev_ros.nodes import contract
+    from maglev_ros.nodes.excitation import ExcitationNode
+    from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.simulator import SimulatorNode
+
+    def overrides(**values):
+        return [Parameter(k, value=v) for k, v in values.items()]
+
+    topics = ([contract.field_topic(k) for k in args.sensors]
+              + [contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC, contract.TRUE_STATE_TOPIC,
+                 contract.CLOCK_TOPIC])
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    nodes, spinner = [], None
+    try:
+        sim = SimulatorNode(context=ctx, parameter_overrides=overrides(
+            params=args.params, field_model=args.field_model, magnet=args.magnet,
+            sample_rate=args.sample_rate, coil_dynamics=not args.no_coil,
+            sensor_delay=args.delay, sensor_noise=args.noise, seed=args.seed, mode='lockstep',
+            start_paused=True, sensors=list(args.sensors), marker_rate=0.0,
+            command_timeout=5.0))
+        nodes.append(sim)
+        excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
+            signal=args.excitation, amplitude=args.amplitude, band=list(args.band),
+            pattern=args.pattern, seed=args.seed, length=args.length))
+        nodes.append(excite)
+        recorder = RecorderNode(context=ctx, parameter_overrides=overrides(
+            path=str(bag), storage=args.storage, topics=topics, log_clock='topic'))
+        nodes.insert(0, recorder)  # destroyed last: finalises the bag
+        spinner = contract.Spinner(ctx, nodes)
+        _wait(lambda: len(recorder.subscribed) == len(topics) and recorder.metadata_complete
+              and excite._pub.get_subscription_count() >= 2
+              and sim._current_pub.get_subscription_count() >= 2, ctx, 'the node graph')
+        wall = time.monotonic()
+        sim.set_paused(False)
+        _wait(lambda: sim.sim.time >= args.duration or sim.sim.crashed, ctx,
+              'the simulation', timeout=1e9)
+        sim.set_paused(True)
+        wall = time.monotonic() - wall
+        published = sim.counters['samples']
+        _wait(lambda: recorder.counts['/maglev/currents'] >= published
+              and recorder.counts['/' + contract.COMMAND_TOPIC] >= published - 1, ctx,
+              'the recorder')
+        return {'samples': published, 'simulated_s': sim.sim.time, 'wall_s': wall,
+                'timeouts': sim.counters['timeouts'], 'crashed': sim.sim.crashed,
+                'crash_reason': sim.sim.reason}
+    finally:
+        if spinner is not None:
+            spinner.close()
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def _run(args: argparse.Namespace) -> int:
+    _check(args)
+    out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
+    bag = out / 'bag'
+    if bag.exists():
+        raise UsageError(f'{bag} exists already; choose another --out')
+    out.mkdir(parents=True, exist_ok=True)
+    print(f'{PROG}: {args.duration:g} s of {args.params}, magnet {args.magnet}, '
+          f'{args.excitation} {args.amplitude:g} A on {args.pattern}, coil dynamics '
+          f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
+          f'{args.noise:g} T, seed {args.seed}')
+    try:
+        stats = run_experiment(args, bag)
+    except KeyboardInterrupt:
+        print(f'{PROG}: interrupted; bag finalised in {bag}', file=sys.stderr)
+        return 130
+    rate = stats['simulated_s'] / max(stats['wall_s'], 1e-9)
+    print(f'recorded {stats["samples"]} samples ({stats["simulated_s"]:.3f} s simulated in '
+          f'{stats["wall_s"]:.1f} s, {rate:.2f} x real time; {stats["timeouts"]} command '
+          f'timeouts) -> {bag}')
+    if stats['crashed']:
+        print(f'warning: the magnet crashed ({stats["crash_reason"]}); identifying the '
+              f'samples before the crash', file=sys.stderr)
+    dataset = load_data(bag, args.sensors, args.pattern)
+    data = dataset.data
+    rows = identify(data, args.na, args.nb, args.nk, args.split)
+    print(f'ARX na={args.na} nb={args.nb} nk={args.nk}, inputs {", ".join(data.input_names)}; '
+          f'{data.N} samples, Ts = {data.Ts:g} s, split {args.split:g}')
+    print(f'{"output":<10} {"fit est. %":>11} {"fit val. %":>11}')
+    for row in rows:
+        print(f'{row["output"]:<10} {row["fit_estimation"]:>11.2f} '
+              f'{row["fit_validation"]:>11.2f}  {row["note"]}')
+    rows_fitted = [row for row in rows if row['model'] is not None]
+    if not args.no_plots:
+        from maglev_ros.sysid import compare_plot
+
+        for row in rows_fitted:
+            path = compare_plot(row['validation'], [row['model']],
+                                out / f'compare_{row["output"]}.png',
+                                labels=[f'ARX {args.na} {args.nb} {args.nk}'], ic='estimate')
+            print(f'wrote {path}')
+    summary = {
+        'run': stats, 'args': {k: v for k, v in vars(args).items()},
+        'metadata': {k: v for k, v in dataset.metadata.items()},
+        'models': [{
+            'output': r['output'], 'fit_estimation': r['fit_estimation'],
+            'fit_validation': r['fit_validation'], 'note': r['note'],
+            'A': r['model'].polynomial('A').tolist(),
+            'B': [r['model'].polynomial('B', 0, j).tolist() for j in range(data.nu)],
+            'theta': np.asarray(r['model'].theta).tolist(),
+        } if r['model'] is not None else {'output': r['output'], 'note': r['note']}
+            for r in rows],
+    }
+    (out / 'models.json').write_text(json.dumps(summary, indent=2, default=_plain))
+    print(f'wrote {out / "models.json"}')
+    return 0
+
+
+def _plain(value):
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    return str(value)
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``maglev-lab`` (see the module docstring).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments (default ``sys.argv[1:]``).
+
+    Returns
+    -------
+    int
+        Exit status.
+    """
+    return run_command(PROG, build_parser(), _run, argv)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,48 @@
+import itertools
+import json
+import os
+
+import pytest
+
+from maglev_ros.cli import lab
+
+_DOMAINS = itertools.count(180 + os.getpid() % 30)
+
+
+@pytest.fixture
+def domain(monkeypatch):
+    domain_id = next(_DOMAINS) % 230
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return domain_id
+
+
+def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd):
+    # magnet fixed, coil dynamics and the one-sample sensor delay on, noise off;
+    # input: the commanded current, read from the bag by log time
+    out = tmp_path / 'lab'
+    status = lab.main(['--duration', '0.6', '--magnet', 'fixed', '--delay', '1', '--noise', '0',
+                       '--excitation', 'prbs', '--out', str(out), '--seed', '3'])
+    captured = capfd.readouterr()
+    printed = captured.out
+    assert status == 0, captured.err
+    summary = json.loads((out / 'models.json').read_text())
+    fits = {m['output']: m.get('fit_validation') for m in summary['models']}
+    assert fits['Bx_0'] >= 95.0 and fits['By_0'] >= 95.0, printed
+    assert summary['run']['timeouts'] == 0 and not summary['run']['crashed']
+    assert summary['metadata']['maglev_simulator.magnet'] == 'fixed'
+    assert summary['metadata']['maglev_simulator.coil_dynamics'] is True
+    assert summary['metadata']['maglev_simulator.sensor_delay'] == 1
+    assert (out / 'compare_Bx_0.png').stat().st_size > 1000
+    assert 'fit val. %' in printed and (out / 'bag' / 'metadata.yaml').is_file()
+
+
+@pytest.mark.parametrize('argv, match', [
+    (['--split', '1.5'], '--split must be in (0, 1)'),
+    (['--magnet', 'glued'], "invalid choice: 'glued'"),
+    (['--band', '0.5', '0.1'], '--band must be LOW HIGH'),
+])
+def test_bad_input_is_one_line_and_status_2(argv, match, capfd):
+    assert lab.main(argv) == 2
+    err = capfd.readouterr().err
+    assert match in err and err.count('\n') == 1

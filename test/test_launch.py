@@ -1,0 +1,49 @@
+"""The launch files name only installed executables and declared parameters.
+
+Checked without the launch package: the XML is parsed with ``xml.etree``; an
+executable is a console script of this distribution, its node module's
+``_PARAMETERS`` are the parameters it declares.
+"""
+
+import importlib
+import xml.etree.ElementTree as ET
+from importlib.metadata import distribution
+from pathlib import Path
+
+import pytest
+
+LAUNCH = Path(__file__).resolve().parents[1] / 'launch'
+BUILT_IN = {'use_sim_time'}
+
+
+def console_scripts():
+    entry_points = distribution('maglev_ros').entry_points
+    return {ep.name: ep.value for ep in entry_points if ep.group == 'console_scripts'}
+
+
+@pytest.mark.parametrize('path', sorted(LAUNCH.glob('*.launch.xml')), ids=lambda p: p.name)
+def test_nodes_executables_and_parameters_exist(path):
+    root = ET.parse(path).getroot()
+    assert root.tag == 'launch'
+    scripts = console_scripts()
+    nodes = root.findall('.//node')
+    assert nodes
+    for node in nodes:
+        assert node.get('pkg') == 'maglev_ros'
+        executable = node.get('exec')
+        assert executable in scripts, f'{path.name}: no executable {executable!r}'
+        module = importlib.import_module(scripts[executable].split(':')[0])
+        declared = set(module._PARAMETERS) | BUILT_IN
+        for param in node.findall('param'):
+            assert param.get('name') in declared, (
+                f'{path.name}: {executable} declares no parameter {param.get("name")!r}')
+    args = {a.get('name') for a in root.findall('arg')}
+    for element in root.iter():
+        for value in element.attrib.values():
+            if '$(var ' in value:
+                name = value.split('$(var ')[1].split(')')[0]
+                assert name in args, f'{path.name}: undeclared launch argument {name!r}'
+
+
+def test_lab_launch_exists():
+    assert (LAUNCH / 'lab.launch.xml').is_file()
