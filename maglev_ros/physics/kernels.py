@@ -144,30 +144,43 @@ def base_field_points(px, py, pz, u, src, coil, work, out):
     # the list) in sibling subtrees, so a centred magnet feels exactly zero
     # horizontal force in floating point and stays centred (an unstable mode
     # would otherwise amplify round-off into visible drift).
-    width = n_src
+    sum_x = _tree_sum(ddx, zz, n, n_src)  # the pair rows z, a, I are free again
+    sum_y = _tree_sum(ddy, aa, n, n_src)
+    sum_z = _tree_sum(bz, cur, n, n_src)
+    for i in range(n):
+        out[0, i] = sum_x[i]
+        out[1, i] = sum_y[i]
+        out[2, i] = sum_z[i]
+
+
+@njit(cache=True, fastmath=FASTMATH, error_model='numpy')
+def _tree_sum(values, scratch, n, n_blocks):
+    """Pairwise sum of ``n_blocks`` consecutive blocks of length ``n``.
+
+    Ping-pongs between ``values`` and ``scratch`` (one read-read-write stream
+    per loop, so it vectorises); returns the array whose first ``n`` entries
+    hold the sum.
+    """
+    src = values
+    dst = scratch
+    width = n_blocks
     while width > 1:
         half = width // 2
         for j in range(half):
-            dst = j * n
+            d = j * n
             a = 2 * j * n
             b = a + n
             for i in range(n):
-                ddx[dst + i] = ddx[a + i] + ddx[b + i]
-                ddy[dst + i] = ddy[a + i] + ddy[b + i]
-                bz[dst + i] = bz[a + i] + bz[b + i]
+                dst[d + i] = src[a + i] + src[b + i]
         if width % 2:
-            dst = half * n
-            src_row = (width - 1) * n
+            d = half * n
+            last = (width - 1) * n
             for i in range(n):
-                ddx[dst + i] = ddx[src_row + i]
-                ddy[dst + i] = ddy[src_row + i]
-                bz[dst + i] = bz[src_row + i]
+                dst[d + i] = src[last + i]
             half += 1
         width = half
-    for i in range(n):
-        out[0, i] = ddx[i]
-        out[1, i] = ddy[i]
-        out[2, i] = bz[i]
+        src, dst = dst, src
+    return src
 
 
 @njit(cache=True)
