@@ -183,10 +183,107 @@ def report_writer(rows: list[dict]) -> None:
               f"{r['close_s']:.3f} |")
 
 
+# --------------------------------------------------------------------------- simulator node
+def measure_simulator_rtf(seconds: float, topics: str) -> dict:
+    """Real-time factor of the simulator node at 5 kHz, recorder in a second process.
+
+    The simulator (real-time mode, one sensor, magnet fixed, coil dynamics and
+    the one-sample sensor delay on) runs in this process on the package's
+    executor; ``maglev_ros.nodes.recorder`` runs as its own process recording
+    ``topics`` (a ROS list literal), as on a lab PC. The
+    real-time factor is simulated time / wall time over ``seconds`` of steady
+    running (target >= 1.0: the node keeps up with the board's rate), with
+    Fast DDS publishing asynchronously as the ``simulator`` executable sets it; the
+    recorder's message count against the published samples is reported too.
+    """
+    import os
+    import subprocess
+    import sys
+
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from maglev_ros.bags import BagReader
+    from maglev_ros.nodes import contract
+    from maglev_ros.nodes.simulator import SimulatorNode
+
+    domain = 150 + os.getpid() % 50
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    os.environ.update(ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    # as the simulator executable's main() does (asynchronous Fast DDS publishing)
+    os.environ.setdefault('RMW_FASTRTPS_PUBLICATION_MODE', 'ASYNCHRONOUS')
+    with tempfile.TemporaryDirectory() as tmp:
+        bag = Path(tmp) / 'rtf'
+        recorder = subprocess.Popen(
+            [sys.executable, '-m', 'maglev_ros.nodes.recorder', '--ros-args', '-p',
+             f'path:={bag}', '-p', f'topics:={topics}', '-p', 'metadata_node:=""'],
+            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+            start_new_session=True)
+        ctx = Context()
+        rclpy.init(context=ctx, domain_id=domain)
+        sim = SimulatorNode(context=ctx, parameter_overrides=[
+            Parameter('mode', value='realtime'), Parameter('sensors', value=[0]),
+            Parameter('magnet', value='fixed'), Parameter('start_paused', value=True),
+            Parameter('marker_rate', value=0.0)])
+        spinner = contract.Spinner(ctx, [sim])
+        try:
+            deadline = time.monotonic() + 60.0
+            while sim._field_pubs[0].get_subscription_count() == 0:
+                if time.monotonic() > deadline:
+                    raise RuntimeError('the recorder process never subscribed')
+                time.sleep(0.05)
+            time.sleep(2.0)  # the recorder subscribes topic by topic
+            sim.set_paused(False)
+            time.sleep(1.0)  # warm-up
+            t0, s0, c0 = time.monotonic(), sim.sim.time, time.process_time()
+            samples0 = sim.counters['samples']
+            time.sleep(seconds)
+            t1, s1, c1 = time.monotonic(), sim.sim.time, time.process_time()
+            samples = sim.counters['samples'] - samples0
+            sim.set_paused(True)
+            published = sim.counters['samples']
+            overruns = sim.counters['overruns']
+            time.sleep(1.0)
+        finally:
+            spinner.close()
+            sim.destroy_node()
+            rclpy.try_shutdown(context=ctx)
+            recorder.send_signal(2)  # SIGINT: the recorder finalises its bag
+            try:
+                recorder.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                recorder.kill()
+                recorder.wait()
+        with BagReader(bag) as reader:
+            recorded = sum(1 for _ in reader.messages(['/maglev/currents']))
+    return {'topics': topics, 'rtf': (s1 - s0) / (t1 - t0), 'samples': samples, 'wall_s': t1 - t0,
+            'cpu_per_sample_us': (c1 - c0) / max(samples, 1) * 1e6, 'overruns': overruns,
+            'published': published, 'recorded': recorded}
+
+
+SIMULATOR_RECORDINGS = (
+    '[maglev/sensor_0/field, maglev/currents]',
+    '[maglev/sensor_0/field, maglev/currents, maglev/state/true, /clock]',
+)
+
+
+def report_simulator(rows: list[dict]) -> None:
+    print('\n## Simulator node real-time factor (5 kHz, 1 sensor, recorder in a 2nd process)\n')
+    print('| recorded topics | real-time factor (target >= 1.0) | samples | wall (s) | '
+          'simulator-process CPU / sample (us) | overruns | recorded / published currents |')
+    print('|---|---|---|---|---|---|---|')
+    for row in rows:
+        print(f"| {row['topics']} | {row['rtf']:.3f} | {row['samples']:,} | "
+              f"{row['wall_s']:.1f} | {row['cpu_per_sample_us']:.0f} | {row['overruns']} | "
+              f"{row['recorded']:,} / {row['published']:,} = "
+              f"{row['recorded'] / max(row['published'], 1):.3f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='2 s of data, 2 repeats')
-    parser.add_argument('--part', choices=('bag2data', 'writer'),
+    parser.add_argument('--part', choices=('bag2data', 'writer', 'simulator'),
                         help='run one measurement only')
     parser.add_argument('--seconds', type=float, default=10.0, help='bag length (s)')
     parser.add_argument('--repeat', type=int, default=3, help='repeats (best is kept)')
@@ -196,6 +293,8 @@ def main() -> None:
         report_bag2data(measure_bag2data(seconds, repeat), seconds)
     if args.part in (None, 'writer'):
         report_writer(measure_writer(int(seconds * RATE_HZ) * 3))
+    if args.part in (None, 'simulator'):
+        report_simulator([measure_simulator_rtf(seconds, t) for t in SIMULATOR_RECORDINGS])
 
 
 if __name__ == '__main__':

@@ -255,8 +255,9 @@ def test_crash_is_reported_and_reset_recovers(make_peer):
     stamps = [stamp_ns(m) for m in peer.currents]
     assert np.all(np.diff(stamps) > 0)  # time continues across the reset
     assert sim.counters['resets'] == 1
-    first = peer.states[before]
+    first = next(m for m in peer.states if stamp_ns(m) == stamps[before])
     assert first.pose.pose.position.x == pytest.approx(0.001)  # back at the initial state
+    assert stamps[before] == stamps[before - 1] + 200_000
 
 
 def test_lockstep_timeout_holds_the_last_command(make_peer):
@@ -297,6 +298,7 @@ def _values(**changes):
         'sample_rate': 5000.0, 'substeps': 1, 'magnet': 'free', 'initial_state': None,
         'coil_dynamics': True, 'sensor_noise': 0.0, 'sensor_quantization': 0.0,
         'sensor_delay': 1, 'seed': 0, 'mode': 'realtime', 'command_timeout': 1.0,
+        'pace_period': 0.001,
         'start_paused': False, 'start_subscribers': 0, 'sensors': None, 'publish_state': True,
         'publish_clock': True, 'marker_rate': 10.0, 'diagnostics_period': 1.0,
     }
