@@ -50,3 +50,18 @@ def test_armax_order_errors():
         armax(data, 1, 1, [1, 1, 1])
     with pytest.raises(ValueError, match='fewer samples than parameters'):
         armax(simulate_siso(20, 0), 5, 5, 5)
+
+
+def test_multi_experiment_estimators_use_all_data():
+    from maglev_ros.sysid import iv4, merge, oe
+
+    d1 = simulate_siso(4000, 1, C=C_ARMAX, noise=0.5)
+    d2 = simulate_siso(3000, 2, C=C_ARMAX, noise=0.5)
+    truth = np.concatenate([A2[1:], B2[1:], C_ARMAX[1:]])
+    both = armax(merge(d1, d2), 2, 2, 1, 1)
+    assert both.report.n_samples == 7000
+    assert np.all(np.abs(both.theta - truth) < 5 * both.std)
+    assert np.all(np.abs(both.std) < armax(d1, 2, 2, 1, 1).std)
+    iv = iv4(merge(d1, d2), 2, 2, 1)
+    assert np.all(np.abs(iv.theta - truth[:4]) < 5 * iv.std)
+    assert oe(merge(d1, d2), 2, 2, 1).report.n_samples == 7000
