@@ -47,3 +47,26 @@ def test_nodes_executables_and_parameters_exist(path):
 
 def test_lab_launch_exists():
     assert (LAUNCH / 'lab.launch.xml').is_file()
+
+
+CONFIG = LAUNCH.parent / 'config'
+NODE_MODULES = {'maglev_simulator': 'maglev_ros.nodes.simulator',
+                'maglev_excitation': 'maglev_ros.nodes.excitation',
+                'maglev_recorder': 'maglev_ros.nodes.recorder',
+                'maglev_player': 'maglev_ros.nodes.player'}
+
+
+@pytest.mark.parametrize('path', sorted(CONFIG.glob('*_params.yaml')), ids=lambda p: p.name)
+def test_parameter_files_name_declared_parameters_with_their_types(path):
+    import yaml
+
+    data = yaml.safe_load(path.read_text())
+    for node, section in data.items():
+        module = importlib.import_module(NODE_MODULES[node])
+        for name, value in section['ros__parameters'].items():
+            assert name in module._PARAMETERS, f'{path.name}: {node} has no parameter {name!r}'
+            default = module._PARAMETERS[name][0]
+            if not hasattr(default, 'name'):  # a typed default, not Parameter.Type
+                assert type(value) is type(default), (
+                    f'{path.name}: {name} = {value!r} is not a {type(default).__name__}')
+                assert value == default, f'{path.name}: {name} = {value!r}, default {default!r}'
