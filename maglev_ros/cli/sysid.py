@@ -50,7 +50,11 @@ def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-sysid``."""
     p = _Parser(prog=PROG, description='Identify ARX/IV/ARMAX/OE/BJ models from data '
                 'files, like the MATLAB System Identification Toolbox.')
-    p.add_argument('data', help='data file: .npz, .csv or MATLAB .mat (v7 or older)')
+    p.add_argument('data', help='data file (.npz, .csv or MATLAB .mat, v7 or older) or a '
+                   'rosbag2 bag directory (then choose channels with --output/--input)')
+    from .bag2data import add_channel_arguments
+
+    add_channel_arguments(p)
     p.add_argument('--ts', type=float, help='sample time in seconds (default: from file)')
     p.add_argument('--rows', nargs=2, type=_int_list, metavar=('OUTPUTS', 'INPUTS'),
                    help='rows of the channel matrix (e.g. DATA) used as outputs and inputs, '
@@ -175,10 +179,19 @@ def run(args: argparse.Namespace) -> int:
     except ValueError:
         raise UsageError(f'--split must be a fraction such as 0.5 or a sample count such as '
                          f'12500, got {split_text!r}') from None
-    data = sysid.load_data(args.data, Ts=args.ts, rows=tuple(args.rows) if args.rows else None,
-                           matrix=args.matrix,
-                           outputs=args.outputs.split(',') if args.outputs else None,
-                           inputs=args.inputs.split(',') if args.inputs else None)
+    from maglev_ros.bags import is_bag_path, load_bag_dataset
+
+    if is_bag_path(args.data):
+        if not args.output:
+            raise UsageError(f'{args.data} is a bag: choose channels with --output TOPIC:FIELD '
+                             '(and --input); maglev-bag2data --topics lists them')
+        data = load_bag_dataset(args.data, outputs=args.output, inputs=args.input, Ts=args.ts,
+                                allow_gaps=args.allow_gaps, tolerance=args.tolerance)
+    else:
+        data = sysid.load_data(args.data, Ts=args.ts,
+                               rows=tuple(args.rows) if args.rows else None, matrix=args.matrix,
+                               outputs=args.outputs.split(',') if args.outputs else None,
+                               inputs=args.inputs.split(',') if args.inputs else None)
     if args.detrend:
         data = data.detrend(args.detrend)
     if args.filter:
