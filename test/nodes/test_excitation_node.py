@@ -124,3 +124,37 @@ def test_main_exits_2_on_invalid_parameters():
     assert proc.returncode == 2
     assert "pattern must be one of pairs" in proc.stdout + proc.stderr
     assert 'Traceback' not in proc.stdout + proc.stderr
+
+
+def test_sigterm_ends_the_node_cleanly(ctx):
+    import signal
+
+    from rclpy.executors import SingleThreadedExecutor
+
+    domain = os.environ['ROS_DOMAIN_ID']
+    env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    proc = subprocess.Popen(
+        [sys.executable, '-m', 'maglev_ros.nodes.excitation', '--ros-args', '-p',
+         'trigger:=timer', '-p', 'sample_rate:=100.0'], env=env, stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        node = rclpy.create_node('excitation_signal_peer', context=ctx)
+        got = []
+        node.create_subscription(Float64MultiArray, contract.COMMAND_TOPIC, got.append,
+                                 contract.COMMAND_QOS)
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(node)
+        deadline = time.monotonic() + 60.0
+        while len(got) < 5:
+            assert time.monotonic() < deadline and proc.poll() is None, 'no commands'
+            executor.spin_once(timeout_sec=0.05)
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=30.0)
+        assert proc.returncode == 0, out
+        assert 'Traceback' not in out
+        executor.shutdown()
+        node.destroy_node()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
