@@ -31,26 +31,14 @@ from .filters import inverse_filter
 from .model import PolyModel
 from .orders import Orders, make_orders
 from .pem import levenberg_marquardt, stabilize
-from .regression import arx_regressors, check_data, finish_model, join, stack_rows
+from .regression import arx_regressors, check_data, equation_errors, finish_model, join, stack_rows
 
 __all__ = ['armax']
 
 
 def _row_equation_error(d: IdData, orders: Orders, i: int, theta_ab: np.ndarray) -> np.ndarray:
     """``A_i y - B_i u`` of one row for all samples (FIR filters, zero past), shape (N,)."""
-    v = d.y[:, i].copy()
-    pos = 0
-    for j in range(orders.ny):
-        n = int(orders.na[i, j])
-        if n:
-            v += np.convolve(d.y[:, j], np.r_[0.0, theta_ab[pos:pos + n]])[:d.N]
-            pos += n
-    for j in range(orders.nu):
-        n, k = int(orders.nb[i, j]), int(orders.nk[i, j])
-        if n:
-            v -= np.convolve(d.u[:, j], np.r_[np.zeros(k), theta_ab[pos:pos + n]])[:d.N]
-            pos += n
-    return v
+    return equation_errors(d.y, d.u, orders, theta_ab, rows=[i])[0]
 
 
 def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,

@@ -13,15 +13,28 @@ The stages (Ljung, *System Identification*, 2nd ed., sec. 15.3):
 The estimate is consistent under colored equation noise (where ARX is biased),
 because the instruments are built from the inputs only.  MIMO order matrices
 are supported: the instruments of cross-output terms are the simulated outputs.
+
+``iv4(..., method='extended')`` is the extended (overdetermined, weighted) IV
+of Soderstrom & Stoica (*System Identification*, 1989, sec. 8.2):
+
+1. two-stage least squares with ``p`` delayed inputs per input channel as
+   instruments (``p``: parameters of the row), which needs no ARX estimate;
+2. AR(na + nb) prefilter ``L`` of its equation error and simulated outputs
+   ``x = B/A u`` (as stages 3-4 above);
+3. weighted IV on the ``L``-prefiltered data with the instrument vector
+   ``[x lags 1..na, u lags nk..nk+p-1]`` (more instruments than parameters),
+   ``theta = (R^T W R)^-1 R^T W r`` with ``R = Z^T Phi``, ``r = Z^T y`` and
+   ``W = (Z^T Z)^-1``.
+
+All products come from lagged correlations (no regression matrix).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.linalg as sla
-from scipy.signal import lfilter
 
 from .arx import arx_rows, correlation_solve, row_blocks, signal_matrix
 from .correlation import block_sizes, lag_gram
@@ -30,13 +43,16 @@ from .model import PolyModel
 from .orders import Orders, make_orders
 from .pem import stabilize
 from .polynomial import pack, unpack
-from .regression import check_data, finish_model
+from .regression import check_data, equation_errors, finish_model, fir_rows
 
 __all__ = ['iv4']
 
+METHODS = ('toolbox', 'extended')
+
 
 def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
-              fallback: np.ndarray | None = None) -> list[np.ndarray]:
+              fallback: np.ndarray | Callable[[], np.ndarray] | None = None
+              ) -> list[np.ndarray]:
     """Noise-free outputs ``x = A^-1 B u`` used as instruments.
 
     An unstable ``A`` would make the instruments blow up: its roots are
@@ -54,7 +70,8 @@ def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
             model = PolyModel('arx', orders, pack(orders, (A, B, C, D, F)), model.Ts,
                               np.eye(orders.ny))
         elif fallback is not None:
-            return _simulate(orders, fallback, experiments)
+            return _simulate(orders, fallback() if callable(fallback) else fallback,
+                             experiments)
     return [model.simulate(d.u) for d in experiments]
 
 
@@ -91,19 +108,97 @@ def _iv_rows(signals: Sequence[np.ndarray], orders: Orders, start_offset: int = 
     return thetas, covs
 
 
-def _fir_rows(h: np.ndarray, S: np.ndarray) -> np.ndarray:
-    """Filter every row of ``S`` by the FIR filter ``h`` (zero initial state)."""
-    if len(h) == 1:
-        return S * h[0]
-    N = S.shape[1]
-    return np.stack([np.convolve(row, h)[:N] for row in S])
+def _input_instruments(orders: Orders, i: int, count: int) -> np.ndarray:
+    """Blocks of ``count`` delayed inputs per input channel of row ``i`` (from its delay)."""
+    used = [j for j in range(orders.nu) if orders.nb[i, j]] or list(range(orders.nu))
+    return np.array([(orders.ny + j, max(1, int(orders.nk[i, j])), count, 1) for j in used],
+                    dtype=np.int64).reshape(-1, 4)
+
+
+def _weighted_iv(signals: Sequence[np.ndarray], reg: np.ndarray, ins: np.ndarray, target: int,
+                 start: int, covariance: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+    """Solve the extended (overdetermined) IV problem with weight ``W = (Z^T Z)^-1``.
+
+    Parameters
+    ----------
+    signals : sequence of ndarray, shape (n_signals, N_e)
+        Signal matrices, one per experiment.
+    reg, ins : ndarray, shape (n_blocks, 4)
+        Regressor and instrument blocks (at least as many instruments as regressors).
+    target : int
+        Row of the regressed signal.
+    start : int
+        First time index (>= every lag).
+    covariance : bool
+        Also return ``lambda (R^T W R)^-1``, the asymptotic covariance for white
+        equation error of variance ``lambda`` (estimated from the residuals).
+
+    Returns
+    -------
+    theta : ndarray, shape (p,)
+        ``(R^T W R)^-1 R^T W r``, ``R = Z^T Phi``, ``r = Z^T y``.
+    cov : ndarray, shape (p, p) or None
+        Parameter covariance.
+    """
+    tgt = np.array([[target, 0, 1, 1]], dtype=np.int64)
+    blocks = np.vstack([ins, reg, tgt])  # one symmetric product gives every block
+    q, p = block_sizes(ins), block_sizes(reg)
+    G = np.zeros((q + p + 1, q + p + 1))
+    M = 0
+    for S in signals:
+        G += lag_gram(S, blocks, blocks, start)
+        M += S.shape[1] - start
+    ZZ, R, r = G[:q, :q], G[:q, q:q + p], G[:q, -1]
+    # W^(1/2) from the eigen-decomposition: Z^T Z is nearly singular when the
+    # simulated outputs are almost a combination of the delayed inputs (high SNR).
+    s, V = np.linalg.eigh(ZZ)
+    keep = s > 1e-12 * max(float(s[-1]), 1e-300)
+    Wh = V[:, keep] / np.sqrt(s[keep])
+    Rw, rw = Wh.T @ R, Wh.T @ r
+    RtWR = Rw.T @ Rw
+    theta = sla.solve(RtWR, Rw.T @ rw, assume_a='pos', check_finite=False)
+    if not covariance:
+        return theta, None
+    PtP, Pty, yy = G[q:q + p, q:q + p], G[q:q + p, -1], G[-1, -1]
+    sse = max(yy - 2.0 * theta @ Pty + theta @ PtP @ theta, 0.0)
+    cov = sse / max(1, M - p) * sla.solve(RtWR, np.eye(p), assume_a='pos', check_finite=False)
+    return theta, cov
+
+
+def _extended_iv(experiments: Sequence[IdData], orders: Orders) -> tuple[np.ndarray, np.ndarray]:
+    """Two-stage LS start, AR prefilter, weighted IV with ``[x, u]`` instruments."""
+    ny, nu = orders.ny, orders.nu
+    raw = [signal_matrix(d) for d in experiments]
+    sizes = orders.row_sizes()
+    thetas1 = []
+    for i in range(ny):
+        ins = _input_instruments(orders, i, max(1, sizes[i]))
+        start = max(orders.row_start(i), int((ins[:, 1] + ins[:, 2] - 1).max()))
+        thetas1.append(_weighted_iv(raw, row_blocks(orders, i), ins, i, start,
+                                    covariance=False)[0])
+    theta1 = np.concatenate(thetas1)
+    prefilters = _noise_prefilters(experiments, orders, theta1)
+    x = _simulate(orders, theta1, experiments,
+                  fallback=lambda: arx_rows(experiments, orders, refine=False)[0])
+    full = [signal_matrix(d, xe) for d, xe in zip(experiments, x, strict=True)]
+    thetas, covs = [], []
+    for i, L in enumerate(prefilters):
+        signals = full if len(L) == 1 else [fir_rows(L, S) for S in full]
+        ins_u = _input_instruments(orders, i, max(1, sizes[i]))
+        ins_x = np.array([(ny + nu + j, 1, int(orders.na[i, j]), -1) for j in range(ny)
+                          if orders.na[i, j]], dtype=np.int64).reshape(-1, 4)
+        ins = np.vstack([ins_x, ins_u])
+        start = max(orders.row_start(i), int((ins[:, 1] + ins[:, 2] - 1).max())) + len(L) - 1
+        theta, cov = _weighted_iv(signals, row_blocks(orders, i), ins, i, start)
+        thetas.append(theta)
+        covs.append(cov)
+    return np.concatenate(thetas), sla.block_diag(*covs)
 
 
 def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
                       theta: np.ndarray) -> list[np.ndarray]:
     """AR model ``L_i`` (order na_i + nb_i) of the equation error of each row."""
-    model = PolyModel('arx', orders, theta, experiments[0].Ts, np.eye(orders.ny))
-    residuals = [model._filter_residuals(d.y, d.u) for d in experiments]
+    residuals = [equation_errors(d.y, d.u, orders, theta).T for d in experiments]
     filters = []
     for i, size in enumerate(orders.row_sizes()):
         start = orders.row_start(i)
@@ -118,7 +213,7 @@ def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
 
 
 def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
-        refine: int = 0) -> PolyModel:
+        refine: int = 0, method: str = 'toolbox') -> PolyModel:
     """Estimate an ARX model by the four-stage instrumental-variable method.
 
     Parameters
@@ -133,7 +228,18 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
         Extra passes of stages 3-4 (prefilter and instruments rebuilt from the
         latest estimate).  0 is exactly the toolbox's four stages; one pass
         lowers the variance at low signal-to-noise ratios, where the stage-2
-        estimate that builds the final instruments is poor.
+        estimate that builds the final instruments is poor.  Ignored by
+        ``method='extended'``.
+    method : {'toolbox', 'extended'}
+        ``'toolbox'`` (default): the four stages of MATLAB's ``iv4``, same
+        results as the toolbox.  ``'extended'``: two-stage least squares with
+        delayed-input instruments, then a weighted IV on noise-prefiltered data
+        with the overdetermined instrument vector ``[x lags, u lags]`` (module
+        docstring).  Recommended at low signal-to-noise ratios: on the
+        benchmark's 7th-order system (25,000 samples, MA(2) colored noise,
+        15 noise realizations) the median relative parameter error is
+        0.59 vs 1.36 at 0 dB and 1.37e-2 vs 1.39e-2 at 30 dB, at about half
+        the cost (no ARX stage, one IV stage less).
 
     Returns
     -------
@@ -141,10 +247,16 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
         Model with structure ``'iv4'`` and the asymptotic IV covariance
         ``lambda M Z^T Z M^T``, ``M = (Z^T Phi)^-1``.
     """
+    if method not in METHODS:
+        raise ValueError(f"method must be 'toolbox' or 'extended', got {method!r}")
     experiments = as_experiments(data)
     first = experiments[0]
     orders = make_orders(first.ny, first.nu, na=na, nb=nb, nk=nk)
     check_data(experiments, orders)
+    if method == 'extended':
+        theta, cov = _extended_iv(experiments, orders)
+        return finish_model('iv4', orders, theta, cov, experiments,
+                            'extended IV (2SLS start, prefiltered, weighted [x, u] instruments)')
     theta1, _, _ = arx_rows(experiments, orders, refine=False)
     x1 = _simulate(orders, theta1, experiments)
     thetas2, _ = _iv_rows([signal_matrix(d, x) for d, x in zip(experiments, x1, strict=True)],
@@ -156,7 +268,7 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
         x2 = _simulate(orders, theta_prev, experiments, fallback=theta1)
         thetas4, covs4 = [], []
         for i, L in enumerate(prefilters):
-            signals = [lfilter(L, 1.0, signal_matrix(d, x), axis=1)
+            signals = [fir_rows(L, signal_matrix(d, x))
                        for d, x in zip(experiments, x2, strict=True)]
             thetas, covs = _iv_rows(signals, orders, len(L) - 1, rows=[i])
             thetas4.append(thetas[0])

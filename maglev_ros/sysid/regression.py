@@ -7,6 +7,11 @@ The regressor of output ``i`` at time ``t`` is::
 
 so that ``y_i(t) = phi_i(t)^T theta_i + v_i(t)`` for an ARX row.  Matrices are
 built by slicing (one copy per column, no Python loop over samples).
+
+:func:`equation_errors` computes ``A y - B u`` with a compiled FIR kernel
+(:func:`fir_add`): ``numpy.convolve`` and ``scipy.signal.lfilter`` with a
+trivial denominator cost 0.3-0.5 ms per 25,000-sample channel here, the kernel
+(one vectorisable pass per tap) about a tenth of that.
 """
 
 from __future__ import annotations
@@ -14,13 +19,110 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from numba import njit
 
 from .criteria import aic, fit_percent, fpe
 from .dataset import IdData
 from .model import EstimationReport, PolyModel
 from .orders import OrderError, Orders
 
-__all__ = ['arx_regressors', 'check_data', 'finish_model', 'join', 'lagged', 'stack_rows']
+__all__ = ['arx_regressors', 'check_data', 'equation_errors', 'finish_model', 'fir_add',
+           'fir_rows', 'join', 'lagged', 'stack_rows']
+
+
+@njit(cache=True)
+def _fir_add(h: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
+    N = x.shape[0]
+    for k in range(h.shape[0]):
+        c = h[k]
+        if c != 0.0:
+            for t in range(k, N):  # contiguous, vectorised by LLVM
+                out[t] += c * x[t - k]
+
+
+def fir_add(h: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """Add ``sum_k h[k] x(t - k)`` (zero past) to ``out`` in place.
+
+    Parameters
+    ----------
+    h : ndarray, shape (n,)
+        FIR coefficients, ``h[0]`` at lag 0.
+    x : ndarray, shape (N,)
+        Signal (C-contiguous float64).
+    out : ndarray, shape (N,)
+        Accumulator, modified in place.
+    """
+    _fir_add(np.ascontiguousarray(h, dtype=float), np.ascontiguousarray(x, dtype=float), out)
+
+
+def fir_rows(h: np.ndarray, X: np.ndarray) -> np.ndarray:
+    """Filter every row of ``X`` by the FIR filter ``h`` (zero initial state).
+
+    Equals ``scipy.signal.lfilter(h, 1.0, X, axis=1)`` up to rounding.
+
+    Parameters
+    ----------
+    h : ndarray, shape (n,)
+        FIR coefficients.
+    X : ndarray, shape (rows, N)
+        Signals along axis 1.
+
+    Returns
+    -------
+    ndarray, shape (rows, N)
+        Filtered signals.
+    """
+    out = np.zeros(X.shape)
+    h = np.ascontiguousarray(h, dtype=float)
+    for r in range(X.shape[0]):
+        _fir_add(h, np.ascontiguousarray(X[r], dtype=float), out[r])
+    return out
+
+
+def equation_errors(y: np.ndarray, u: np.ndarray, orders: Orders, theta: np.ndarray,
+                    rows: Sequence[int] | None = None) -> np.ndarray:
+    """Equation errors ``A_i y - B_i u`` of ARX-layout rows, zero past, shape (len(rows), N).
+
+    Parameters
+    ----------
+    y : ndarray, shape (N, ny)
+        Outputs.
+    u : ndarray, shape (N, nu)
+        Inputs.
+    orders : Orders
+        Orders (only ``na``, ``nb``, ``nk`` are used).
+    theta : ndarray
+        ``A``/``B`` parameters of all rows (ARX layout, row after row), or of
+        the single row ``rows[0]`` when ``len(rows) == 1`` and the size matches.
+    rows : sequence of int, optional
+        Output rows (default all).
+
+    Returns
+    -------
+    ndarray, shape (len(rows), N)
+        ``y_i(t) + sum_j sum_k a_ijk y_j(t-k) - sum_j sum_k b_ijk u_j(t-nk_ij-k)``.
+    """
+    rows = list(range(orders.ny)) if rows is None else list(rows)
+    sizes = [int(orders.na[i].sum() + orders.nb[i].sum()) for i in range(orders.ny)]
+    offsets = np.concatenate([[0], np.cumsum(sizes)])
+    single = len(rows) == 1 and theta.shape[0] == sizes[rows[0]]
+    yr = np.ascontiguousarray(np.asarray(y, dtype=float).T)
+    ur = np.ascontiguousarray(np.asarray(u, dtype=float).T)
+    out = np.empty((len(rows), yr.shape[1]))
+    for r, i in enumerate(rows):
+        pos = 0 if single else int(offsets[i])
+        out[r] = yr[i]
+        for j in range(orders.ny):
+            n = int(orders.na[i, j])
+            if n:
+                _fir_add(np.r_[0.0, theta[pos:pos + n]], yr[j], out[r])
+                pos += n
+        for j in range(orders.nu):
+            n, k = int(orders.nb[i, j]), int(orders.nk[i, j])
+            if n:
+                _fir_add(np.r_[np.zeros(k), -theta[pos:pos + n]], ur[j], out[r])
+                pos += n
+    return out
 
 
 def stack_rows(blocks: Sequence[np.ndarray]) -> np.ndarray:
@@ -154,7 +256,10 @@ def finish_model(structure: str, orders: Orders, theta: np.ndarray,
     draft = PolyModel(structure, orders, theta, first.Ts, np.eye(orders.ny), None,
                       first.output_names, first.input_names, first.output_units,
                       first.input_units)
-    errors = [draft.residuals(d) for d in experiments]
+    if structure in ('arx', 'iv4'):  # e = A y - B u: compiled FIR instead of convolutions
+        errors = [equation_errors(d.y, d.u, orders, theta).T for d in experiments]
+    else:
+        errors = [draft.residuals(d) for d in experiments]
     e = stack_rows(errors)
     y = stack_rows([d.y for d in experiments])
     N = e.shape[0]

@@ -60,3 +60,58 @@ def test_refinement_pass_and_unstable_stage_two_are_handled():
 
     x = _simulate(make_orders(1, 1, na=2, nb=2), np.array([-3.0, 1.5, 1.0, 0.5]), [data])[0]
     assert np.all(np.isfinite(x)) and np.abs(x).max() < 1e3
+
+
+def test_extended_iv_removes_colored_noise_bias_and_converges():
+    data = colored(20000, 11)
+    err_arx = np.linalg.norm(arx(data, 2, 2, 1).theta - TRUTH)
+    model = iv4(data, 2, 2, 1, method='extended')
+    assert np.linalg.norm(model.theta - TRUTH) < 0.1 * err_arx
+    assert np.all(np.abs(model.theta - TRUTH) < 5 * model.std)
+    assert model.structure == 'iv4' and 'extended' in model.report.method
+    errors = mean_error(lambda N, s: iv4(colored(N, s), 2, 2, 1, method='extended').theta,
+                        [1000, 16000], [0, 1, 2], TRUTH)
+    assert 0.1 < errors[1] / errors[0] < 0.5
+
+
+def test_extended_iv_low_snr_is_at_least_as_accurate_as_four_stages():
+    # noise as strong as the signal: the four stages build their final instruments
+    # from a poor stage-2 estimate, the 2SLS start of the extended IV is better
+    errs = {'toolbox': [], 'extended': []}
+    for seed in range(5):
+        data = simulate_siso(5000, 100 + seed, C=C_COLORED, noise=3.0)
+        for method in errs:
+            errs[method].append(np.linalg.norm(iv4(data, 2, 2, 1, method=method).theta - TRUTH))
+    assert np.median(errs['extended']) <= np.median(errs['toolbox'])
+
+
+def test_extended_iv_mimo_and_multi_experiment():
+    from maglev_ros.sysid import merge
+
+    na, nb, nk = [[4, 4], [0, 4]], [[2, 2], [0, 2]], [[1, 1], [1, 1]]
+    model = iv4(simulate_mimo_arx(20000, 3), na, nb, nk, method='extended')
+    assert np.all(np.abs(model.theta - mimo_arx_truth()) < 5 * model.std)
+    merged = iv4(merge(colored(6000, 1), colored(6000, 2)), 2, 2, 1, method='extended')
+    assert np.all(np.abs(merged.theta - TRUTH) < 5 * merged.std)
+
+
+def test_iv4_rejects_unknown_method():
+    import pytest
+
+    with pytest.raises(ValueError, match='method'):
+        iv4(colored(500, 0), 2, 2, 1, method='optimal')
+
+
+def test_fir_kernels_match_scipy_and_model_residuals():
+    from scipy.signal import lfilter
+
+    from maglev_ros.sysid.regression import equation_errors, fir_rows
+
+    rng = np.random.default_rng(0)
+    X = rng.standard_normal((3, 500))
+    h = rng.standard_normal(7)
+    assert np.allclose(fir_rows(h, X), lfilter(h, 1.0, X, axis=1), rtol=0, atol=1e-12)
+    data = simulate_mimo_arx(800, 5)
+    model = arx(data, [[4, 4], [0, 4]], [[2, 2], [0, 2]], [[1, 1], [1, 1]])
+    e = equation_errors(data.y, data.u, model.orders, model.theta)
+    assert np.allclose(e.T, model._filter_residuals(data.y, data.u), rtol=0, atol=1e-12)
