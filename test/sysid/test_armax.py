@@ -65,3 +65,15 @@ def test_multi_experiment_estimators_use_all_data():
     iv = iv4(merge(d1, d2), 2, 2, 1)
     assert np.all(np.abs(iv.theta - truth[:4]) < 5 * iv.std)
     assert oe(merge(d1, d2), 2, 2, 1).report.n_samples == 7000
+
+
+def test_default_tolerance_stops_within_a_fraction_of_a_standard_deviation():
+    # the default tol = 0.1/N stops where further steps change the loss by less than
+    # 0.1/N relative: the estimate is statistically the minimizer of a tight tolerance
+    data = simulate_siso(20000, 8, C=C_COLORED, noise=2.0)
+    default = armax(data, 2, 2, 2, 1)
+    tight = armax(data, 2, 2, 2, 1, tol=1e-10)
+    assert np.all(np.abs(default.theta - tight.theta) < 0.5 * tight.std)
+    assert default.report.iterations <= tight.report.iterations
+    truth = np.concatenate([A2[1:], B2[1:], C_COLORED[1:]])
+    assert np.all(np.abs(default.theta - truth) < 5 * default.std)
