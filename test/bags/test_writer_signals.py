@@ -19,8 +19,11 @@ RECORDER = textwrap.dedent('''
     from sensor_msgs.msg import MagneticField
     from maglev_ros.bags import BagWriter
 
-    # SIGTERM ends the process like Ctrl-C does: the with block unwinds and closes the bag
+    # SIGTERM ends the process like Ctrl-C does: the with block unwinds and closes the bag.
+    # Ctrl-C raises KeyboardInterrupt even if this process inherited an ignored SIGINT
+    # (a test run started in the background by a non-interactive shell).
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     with BagWriter(sys.argv[1], storage=sys.argv[2], metadata={'seed': 7}) as bag:
         topic = bag.add_topic('/maglev/sensor_0/field', 'sensor_msgs/msg/MagneticField')
         k = 0
