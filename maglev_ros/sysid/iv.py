@@ -35,6 +35,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 import scipy.linalg as sla
+from scipy.signal import lfilter
 
 from .arx import arx_rows, correlation_solve, row_blocks, signal_matrix
 from .correlation import block_sizes, lag_gram
@@ -42,7 +43,7 @@ from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
 from .pem import stabilize
-from .polynomial import pack, unpack
+from .polynomial import unpack
 from .regression import check_data, equation_errors, finish_model, fir_rows
 
 __all__ = ['iv4']
@@ -60,18 +61,29 @@ def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
     parameters are used (cross-coupled ``A``).  Any stable model gives valid
     instruments; only their efficiency is affected.
     """
-    model = PolyModel('arx', orders, theta, experiments[0].Ts, np.eye(orders.ny))
-    if not model.is_stable:
-        if not model._coupled:
-            A, B, C, D, F = unpack(orders, theta)
+    coupled = bool(np.any(orders.na[~np.eye(orders.ny, dtype=bool)]))
+    if not coupled:  # one rational filter per channel; unstable A_ii reflected
+        A, B, _, _, _ = unpack(orders, theta)
+        dens = []
+        for i in range(orders.ny):
+            a = A[i, i, :orders.na[i, i] + 1]
+            if len(a) > 1 and not np.all(np.abs(np.roots(a)) < 1.0):
+                a = stabilize(a)
+            dens.append(a)
+        out = []
+        for d in experiments:
+            x = np.zeros((orders.ny, d.N))
+            ur = np.ascontiguousarray(d.u.T)
             for i in range(orders.ny):
-                n = orders.na[i, i] + 1
-                A[i, i, :n] = stabilize(A[i, i, :n])
-            model = PolyModel('arx', orders, pack(orders, (A, B, C, D, F)), model.Ts,
-                              np.eye(orders.ny))
-        elif fallback is not None:
-            return _simulate(orders, fallback() if callable(fallback) else fallback,
-                             experiments)
+                for j in range(orders.nu):
+                    if orders.nb[i, j]:
+                        x[i] += lfilter(B[i, j, :orders.nk[i, j] + orders.nb[i, j]], dens[i],
+                                        ur[j])
+            out.append(x.T)
+        return out
+    model = PolyModel('arx', orders, theta, experiments[0].Ts, np.eye(orders.ny))
+    if not model.is_stable and fallback is not None:
+        return _simulate(orders, fallback() if callable(fallback) else fallback, experiments)
     return [model.simulate(d.u) for d in experiments]
 
 
@@ -141,12 +153,14 @@ def _weighted_iv(signals: Sequence[np.ndarray], reg: np.ndarray, ins: np.ndarray
         Parameter covariance.
     """
     tgt = np.array([[target, 0, 1, 1]], dtype=np.int64)
-    blocks = np.vstack([ins, reg, tgt])  # one symmetric product gives every block
+    blocks = np.vstack([ins, reg, tgt])
     q, p = block_sizes(ins), block_sizes(reg)
-    G = np.zeros((q + p + 1, q + p + 1))
+    # with the covariance, one symmetric product gives every block; without it
+    # only the instrument rows are needed
+    G = np.zeros((q + p + 1 if covariance else q, q + p + 1))
     M = 0
     for S in signals:
-        G += lag_gram(S, blocks, blocks, start)
+        G += lag_gram(S, blocks if covariance else ins, blocks, start)
         M += S.shape[1] - start
     ZZ, R, r = G[:q, :q], G[:q, q:q + p], G[:q, -1]
     # W^(1/2) from the eigen-decomposition: Z^T Z is nearly singular when the

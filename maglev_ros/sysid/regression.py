@@ -33,11 +33,13 @@ __all__ = ['arx_regressors', 'check_data', 'equation_errors', 'finish_model', 'f
 @njit(cache=True)
 def _fir_add(h: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:  # pragma: no cover
     N = x.shape[0]
-    for k in range(h.shape[0]):
+    for k in range(min(h.shape[0], N)):
         c = h[k]
         if c != 0.0:
-            for t in range(k, N):  # contiguous, vectorised by LLVM
-                out[t] += c * x[t - k]
+            dst = out[k:]  # slice views: unit-stride loop that LLVM vectorises
+            src = x[:N - k]
+            for t in range(N - k):
+                dst[t] += c * src[t]
 
 
 def fir_add(h: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
