@@ -9,7 +9,7 @@ writes ``.npz``, ``.csv`` or ``.mat`` files (the lab's ``DATA`` layout)::
         --input 'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]' \
         --out data.mat
 
-Channel specs, the time-base rule and the gap policy: ``docs/bags.md``.
+Channel specs, the time-base rule and the gap policy: the README, section "Bags".
 Exit status: 0 on success, 2 on bad input (one line on stderr).
 """
 
