@@ -1,0 +1,185 @@
+"""The driver's topics feed the recorder and the bag converter unchanged.
+
+A virtual V2x board (linear plant: the expected field of every record is known
+from the PWM in force) on a pty, the real driver node, the excitation node
+(timer trigger, antisymmetric pairs) and the recorder node run in this process
+on one executor for about 1.5 s of board time; the bag is finalised and read
+back with :func:`maglev_ros.bags.read_bag`, inputs being the currents the
+driver reports as applied.
+"""
+
+import itertools
+import os
+import time
+from functools import partial
+
+import numpy as np
+import pytest
+import rclpy
+from rclpy.context import Context
+from rclpy.parameter import Parameter
+
+from maglev_ros.bags import BagReader, load_bag_dataset, parse_channel, read_bag
+from maglev_ros.bags.extraction import read_topics
+from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware
+from maglev_ros.hardware.virtual_board import VirtualBoard
+from maglev_ros.nodes import contract
+from maglev_ros.nodes.driver import DriverNode
+from maglev_ros.nodes.excitation import ExcitationNode
+from maglev_ros.nodes.recorder import RecorderNode
+
+TIMEOUT = 20.0  # s, generous: the machine is shared
+# Fast DDS refuses domain ids above 232 (port numbers): 1 .. 9 here, 10 .. 18 in
+# test_lab_board.py, below the other node tests (20 .. 232)
+_DOMAINS = itertools.count(os.getpid())
+COUNTS_PER_AMPERE = 1000.0
+AMPLITUDE = 0.25  # A: 250 counts, well inside +-4096
+RECORD_S = 1.5  # board seconds to record
+AXES = 'xyz'
+
+
+def wait_for(predicate, timeout=TIMEOUT, what='condition'):
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        assert time.monotonic() < deadline, f'timed out waiting for {what}'
+        time.sleep(0.01)
+
+
+@pytest.fixture
+def ctx(monkeypatch):
+    domain_id = 1 + next(_DOMAINS) % 9
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    context = Context()
+    rclpy.init(context=context, domain_id=domain_id, args=[])
+    yield context
+    rclpy.try_shutdown(context=context)
+
+
+def overrides(**values):
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def record(ctx, board, bag):
+    """Run driver, excitation and recorder until RECORD_S of samples are in the bag."""
+    topics = [contract.field_topic(0), contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC]
+    nodes, spinner = [], None
+    try:
+        recorder = RecorderNode(context=ctx, parameter_overrides=overrides(
+            path=str(bag), topics=topics, metadata_node='maglev_driver'))
+        nodes.append(recorder)
+        driver = DriverNode(context=ctx, parameter_overrides=overrides(
+            port=board.path, n_sensors=1, counts_per_ampere=COUNTS_PER_AMPERE,
+            start_enabled=True, command_timeout=5.0))
+        nodes.append(driver)
+        excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
+            trigger='timer', sample_rate=1000.0, signal='prbs', amplitude=AMPLITUDE,
+            pattern='pairs', length=1023, seed=5))
+        nodes.append(excite)
+        spinner = contract.Spinner(ctx, nodes)
+        wait_for(lambda: len(recorder.subscribed) == len(topics) and recorder.metadata_complete,
+                 what='the recorder to subscribe and store the driver parameters')
+        # the excitation reached the board: the applied PWM follows the pairs pattern
+        wait_for(lambda: len(board.firmware.accepted) > 10, what='commands at the board')
+        start = recorder.counts['/maglev/currents']
+        wait_for(lambda: recorder.counts['/maglev/currents'] - start >= RECORD_S * 5000,
+                 what='samples in the bag')
+        recorder.close()  # finalised: index and metadata.yaml
+        return dict(recorder.counts), dict(driver.counters), driver.decoder_stats
+    finally:
+        if spinner is not None:
+            spinner.close()
+        for node in reversed(nodes):
+            node.destroy_node()
+
+
+def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path):
+    plant = LinearPlant.default(1)
+    board = VirtualBoard(partial(V2xFirmware, plant, 1, startup_delay=0.2))
+    bag = tmp_path / 'bag'
+    with board:
+        counts, counters, stats = record(ctx, board, bag)
+        written = board.firmware.records_written
+    assert (bag / 'metadata.yaml').is_file()
+    assert counts['/maglev/currents'] >= RECORD_S * 5000
+    assert counters['records'] <= written
+
+    # the bag holds the driver's messages unchanged: every field equals what the board
+    # sent (float32 mT) in tesla, for the PWM the twin currents message reports
+    fields, currents = raw_samples(bag)
+    assert fields.clock == currents.clock == 'header'
+    assert np.all(np.diff(fields.stamps) > 0) and np.all(np.diff(currents.stamps) > 0)
+    twins, fi, ci = np.intersect1d(fields.stamps, currents.stamps, return_indices=True)
+    assert twins.size >= fields.stamps.size - 2  # the last sample may be cut by the close
+    pwm = np.rint(currents.values[ci] * COUNTS_PER_AMPERE)
+    np.testing.assert_array_equal(fields.values[fi], expected_tesla(plant, pwm))
+    assert counters['resyncs'] == 0 and counters['dropped_bytes'] == 0  # link lost nothing
+
+    outputs = [f'B{a}=maglev/sensor_0/field:magnetic_field.{a}' for a in AXES]
+    inputs = [f'i{j}=maglev/currents:effort[{j}]' for j in range(4)]
+    # the board's stamps are 200 us apart (the driver maps them with offset and drift,
+    # both constant between steps); Ts is given: estimated from the stamps it is off by
+    # the held-back samples of the steps below (about 1 % over a 1.5 s run)
+    assert np.median(np.diff(fields.stamps)) == pytest.approx(200_000, abs=100)
+    dataset = read_bag(bag, outputs, inputs, Ts=200e-6, allow_gaps=True)
+    data = dataset.data
+    assert data.Ts == 200e-6
+    assert data.N >= RECORD_S * 5000 - 10
+    assert [r.clock for r in dataset.alignment.reports] == ['header', 'header']
+    assert [r.duplicates for r in dataset.alignment.reports] == [0, 0]
+    assert list(data.output_names) == ['Bx', 'By', 'Bz']
+    assert list(data.input_names) == ['i0', 'i1', 'i2', 'i3']
+    assert list(data.output_units) == ['T'] * 3 and list(data.input_units) == ['A'] * 4
+    assert dataset.metadata['maglev_driver.port'] == board.path
+    assert dataset.metadata['maglev_driver.counts_per_ampere'] == COUNTS_PER_AMPERE
+
+    # gaps: nothing was lost between board and bag (all stamps are there, see above); a
+    # "gap" is a step of the driver's board-clock mapping (a new minimum of the read
+    # latency lowers the offset line; stamps are then held back 1 ns apart until the
+    # line catches up): the converter reports each step, and nothing else
+    for samples, report in zip((fields, currents), dataset.alignment.reports, strict=True):
+        diffs = np.diff(samples.stamps)
+        assert len(report.gaps) == np.count_nonzero(diffs > 1.5 * report.period * 1e9)
+        held = np.count_nonzero(diffs < 0.5 * report.period * 1e9)
+        assert sum(g.missing for g in report.gaps) <= held + len(report.gaps)
+    steps = np.abs(np.diff(fields.stamps) - 200_000) > 10_000  # beyond the 5 % tolerance
+    methods = [r.method for r in dataset.alignment.reports]
+    print('converter report:', [g.describe() for g in dataset.gaps] or 'no gaps', methods,
+          f'{np.count_nonzero(steps)} stamp steps')
+    assert methods == (['linear', 'zoh'] if steps.any() else ['exact', 'exact'])
+    if not steps.any():  # every sample on the grid, taken unchanged
+        pwm = np.rint(np.asarray(data.u) * COUNTS_PER_AMPERE)
+        np.testing.assert_array_equal(np.asarray(data.y), expected_tesla(plant, pwm))
+
+    # inputs: the applied currents follow the excitation (antisymmetric pairs, +-AMPLITUDE)
+    u = np.asarray(data.u)
+    np.testing.assert_array_equal(u[:, 1], -u[:, 0])
+    np.testing.assert_array_equal(u[:, 3], -u[:, 2])
+    excited = u[np.any(u != 0.0, axis=1)]
+    assert excited.shape[0] > data.N // 2
+    assert set(np.unique(np.abs(excited))) == {AMPLITUDE}
+    assert len(np.unique(u[:, 0])) == 2 and len(np.unique(u[:, 2])) == 2
+
+    # the command topic (no header: log times) converts too, next to the applied current
+    commanded = load_bag_dataset(bag, outputs[:1], ['u=maglev/currents/command:data[0]'],
+                                 allow_gaps=True)  # a wall-clock timer: jitter, late ticks
+    assert list(commanded.input_units) == ['A']
+    assert set(np.unique(np.abs(np.asarray(commanded.u)))) == {AMPLITUDE}
+
+
+def raw_samples(bag):
+    """Header stamps and values of every field and currents message in the bag."""
+    field_refs = [parse_channel(f'maglev/sensor_0/field:magnetic_field.{a}').terms[0][1]
+                  for a in AXES]
+    current_refs = [parse_channel(f'maglev/currents:effort[{j}]').terms[0][1]
+                    for j in range(4)]
+    with BagReader(bag) as reader:
+        samples = read_topics(reader, {'/maglev/sensor_0/field': field_refs,
+                                       '/maglev/currents': current_refs})
+    return samples['/maglev/sensor_0/field'], samples['/maglev/currents']
+
+
+def expected_tesla(plant, pwm):
+    """Fields the V2x board sends for PWM counts (float32 mT), in tesla."""
+    sent_mt = plant.offset_mT[0] + pwm @ plant.gain_mT_per_count[0].T
+    return sent_mt.astype(np.float32).astype(np.float64) * 1e-3
