@@ -235,15 +235,13 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
     """
     tgt = np.array([[target, 0, 1, 1]], dtype=np.int64)
     p = block_sizes(blocks)
-    R = np.zeros((p, p))
-    r = np.zeros(p)
-    yy = 0.0
+    both = np.vstack([np.asarray(blocks, dtype=np.int64).reshape(-1, 4), tgt])
+    G = np.zeros((p + 1, p + 1))  # [Phi, y]^T [Phi, y] in one symmetric product
     M = 0
     for S in signals:
-        R += lag_gram(S, blocks, blocks, start)
-        r += lag_gram(S, blocks, tgt, start)[:, 0]
-        yy += float(lag_gram(S, tgt, tgt, start)[0, 0])
+        G += lag_gram(S, both, both, start)
         M += S.shape[1] - start
+    R, r, yy = G[:p, :p], G[:p, p].copy(), float(G[p, p])
     if p == 0:
         return np.zeros(0), np.zeros((0, 0)), yy / max(M, 1)
     cond = np.linalg.cond(R)

@@ -255,19 +255,20 @@ def finish_model(structure: str, orders: Orders, theta: np.ndarray,
         The model.
     """
     first = experiments[0]
-    draft = PolyModel(structure, orders, theta, first.Ts, np.eye(orders.ny), None,
-                      first.output_names, first.input_names, first.output_units,
-                      first.input_units)
     if structure in ('arx', 'iv4'):  # e = A y - B u: compiled FIR instead of convolutions
         errors = [equation_errors(d.y, d.u, orders, theta).T for d in experiments]
     else:
+        draft = PolyModel(structure, orders, theta, first.Ts, np.eye(orders.ny), None,
+                          first.output_names, first.input_names, first.output_units,
+                          first.input_units)
         errors = [draft.residuals(d) for d in experiments]
     e = stack_rows(errors)
     y = stack_rows([d.y for d in experiments])
     N = e.shape[0]
-    lam = e.T @ e / N if noise_variance is None else noise_variance
+    ete = e.T @ e
+    lam = ete / N if noise_variance is None else noise_variance
     report = EstimationReport(method=method, n_samples=N, fit=fit_percent(y, y - e),
-                              mse=np.diag(e.T @ e) / N, fpe=fpe(e, orders.n_params),
+                              mse=np.diag(ete) / N, fpe=fpe(e, orders.n_params),
                               aic=aic(e, orders.n_params), iterations=iterations)
     return PolyModel(structure, orders, theta, first.Ts, lam, covariance, first.output_names,
                      first.input_names, first.output_units, first.input_units, report)
