@@ -45,8 +45,9 @@ def test_nodes_executables_and_parameters_exist(path):
                 assert name in args, f'{path.name}: undeclared launch argument {name!r}'
 
 
-def test_lab_launch_exists():
-    assert (LAUNCH / 'lab.launch.xml').is_file()
+@pytest.mark.parametrize('name', ['lab.launch.xml', 'lab_board.launch.xml'])
+def test_lab_launch_exists(name):
+    assert (LAUNCH / name).is_file()
 
 
 CONFIG = LAUNCH.parent / 'config'

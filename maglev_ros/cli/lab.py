@@ -9,6 +9,16 @@ writes the plots::
 
     maglev-lab --duration 5 --params maggy_v2 --magnet fixed --excitation prbs --out lab/
 
+Against a board (real time: the board sets the pace, ``--duration`` is wall-clock
+seconds): ``--board PATH`` runs the driver node on a serial device instead of the
+simulator; ``--virtual-board`` starts ``maglev-virtual-board --plant physics``
+(``--params``, ``--magnet``) in a child process and uses it. The excitation then
+runs on a wall-clock timer (``--command-rate``), the inputs are the currents the
+driver reports as applied (``maglev/currents:effort[coil]``, header stamps) and the
+default ARX delay is 0 (a record's field and PWM are simultaneous)::
+
+    maglev-lab --virtual-board --magnet fixed --duration 3 --amplitude 0.2 --out lab/
+
 Outputs in ``--out``: ``bag/`` (rosbag2, MCAP), ``models.json`` (fits and
 coefficients), ``compare_<output>.png`` (validation data vs model). Exit status
 0, 2 on bad input (one line on stderr), 130 when interrupted (the bag is
@@ -24,8 +34,11 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # keep the 
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import signal  # noqa: E402
+import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
+from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -39,12 +52,13 @@ from maglev_ros.cli.usage import (  # noqa: E402
 )
 from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix  # noqa: E402
 
-__all__ = ['build_parser', 'identify', 'input_channels', 'load_data', 'main',
-           'run_experiment']
+__all__ = ['applied_channels', 'build_parser', 'identify', 'input_channels', 'load_data',
+           'main', 'on_board', 'run_board_experiment', 'run_experiment', 'start_virtual_board']
 
 PROG = 'maglev-lab'
 AXES = 'xyz'
 WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
+BOARD_TS = 200e-6  # s, the board's sample period (V2x and V4x)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -75,13 +89,30 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--length', type=int, default=8191, help='samples per excitation period')
     p.add_argument('--na', type=int, default=2, help='ARX order of A (default 2)')
     p.add_argument('--nb', type=int, default=2, help='ARX order of B per input (default 2)')
-    p.add_argument('--nk', type=int, default=1, help='ARX input delay (default 1)')
+    p.add_argument('--nk', type=int, default=None,
+                   help='ARX input delay (default 1; 0 against a board)')
     p.add_argument('--split', type=float, default=0.5,
                    help='fraction of samples for estimation (default 0.5)')
     p.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
     p.add_argument('--out', default=None, help='output directory (default lab_<date>_<time>)')
     p.add_argument('--no-plots', action='store_true', help='write no plots')
+    board = p.add_mutually_exclusive_group()
+    board.add_argument('--board', metavar='PATH', default=None,
+                       help='run the driver on this serial device instead of the simulator')
+    board.add_argument('--virtual-board', action='store_true',
+                       help='start a virtual board (physics plant, --params, --magnet) in a '
+                       'child process and run the driver on it')
+    p.add_argument('--board-sensors', type=int, default=None,
+                   help='sensors per board record (default: --params for a virtual board, '
+                   'else max(--sensors) + 1)')
+    p.add_argument('--command-rate', type=positive_float, default=1000.0,
+                   help='board: excitation commands per wall-clock second, Hz (default 1000)')
     return p
+
+
+def on_board(args: argparse.Namespace) -> bool:
+    """Whether the session runs against a board (driver) rather than the simulator."""
+    return bool(getattr(args, 'board', None) or getattr(args, 'virtual_board', False))
 
 
 def input_channels(pattern: str) -> list[str]:
@@ -100,13 +131,23 @@ def input_channels(pattern: str) -> list[str]:
     return specs
 
 
+def applied_channels(pattern: str) -> list[str]:
+    """Bag channel specs of the currents applied to the excitation's coils (board runs).
+
+    As :func:`input_channels`, read from the driver's ``maglev/currents`` (header
+    stamps of the board's records), e.g. ``u_x=maglev/currents:effort[0]``.
+    """
+    return [spec.split('=')[0] + '=maglev/currents:effort' + spec[spec.index('['):]
+            for spec in input_channels(pattern)]
+
+
 def output_channels(sensors) -> list[str]:
     """Bag channel specs of the field components of ``sensors``."""
     return [f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}'
             for k in sensors for a in AXES]
 
 
-def load_data(bag: Path, sensors, pattern: str):
+def load_data(bag: Path, sensors, pattern: str, board: bool = False):
     """Read the recorded experiment into an identification data set.
 
     Parameters
@@ -117,6 +158,14 @@ def load_data(bag: Path, sensors, pattern: str):
         Sensors whose fields are the outputs.
     pattern : str
         Excitation pattern (chooses the inputs).
+    board : bool
+        A board run: inputs are the applied currents and the samples are the
+        board's records, paired by stamp (each field and the currents of its
+        record share one), in order, ``Ts`` the board's 200 us. The
+        converter's uniform time base is not used for the values: the
+        driver's board-clock mapping steps by tens to hundreds of us whenever
+        its offset estimate improves, which moves stamps off any uniform grid.
+        Its report (gaps: such steps or lost messages) is kept in the result.
 
     Returns
     -------
@@ -125,7 +174,55 @@ def load_data(bag: Path, sensors, pattern: str):
     """
     from maglev_ros.bags import read_bag
 
+    if board:
+        dataset = read_bag(bag, output_channels(sensors), applied_channels(pattern),
+                           Ts=BOARD_TS, allow_gaps=True)
+        return replace(dataset, data=board_records(bag, dataset))
     return read_bag(bag, output_channels(sensors), input_channels(pattern))
+
+
+def board_records(bag: Path, dataset):
+    """Return the records of a board run as a data set, one row per record.
+
+    Parameters
+    ----------
+    bag : Path
+        The bag directory.
+    dataset : maglev_ros.bags.BagDataset
+        The bag read by ``read_bag`` (channels, names and units).
+
+    Returns
+    -------
+    IdData
+        Outputs and inputs of every record present on all topics, in stamp order.
+    """
+    from maglev_ros.bags import BagReader
+    from maglev_ros.bags.extraction import read_topics
+    from maglev_ros.sysid import IdData
+
+    refs: dict[str, list] = {}
+    for chan in dataset.outputs + dataset.inputs:
+        for _, ref in chan.terms:
+            refs.setdefault(ref.topic, []).append(ref)
+    with BagReader(bag) as reader:
+        samples = read_topics(reader, refs)
+    stamps = None
+    for topic_samples in samples.values():
+        mine = topic_samples.stamps
+        stamps = mine if stamps is None else np.intersect1d(stamps, mine)
+    columns = {}
+    for topic, topic_samples in samples.items():
+        rows = np.searchsorted(topic_samples.stamps, stamps)
+        for k, ref in enumerate(refs[topic]):
+            columns[ref] = topic_samples.values[rows, k]
+
+    def combine(chans):
+        return np.column_stack([sum(coef * columns[ref] for coef, ref in chan.terms)
+                                for chan in chans])
+
+    data = dataset.data
+    return IdData(combine(dataset.outputs), combine(dataset.inputs), BOARD_TS,
+                  data.output_names, data.input_names, data.output_units, data.input_units)
 
 
 def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
@@ -162,11 +259,17 @@ def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
         est, val = est_all.select(outputs=[i]), val_all.select(outputs=[i])
         nu = data.nu
         model = arx(est, na, [[nb] * nu], [[nk] * nu])
+        try:
+            fits = [float(compare(model, d, ic='estimate').fit[0]) for d in (est, val)]
+            note = ''
+        except np.linalg.LinAlgError:
+            # e.g. noise-free data of a static plant (a fixed magnet on a virtual board):
+            # A is not identifiable and the model's simulation diverges
+            fits, note = [float('nan')] * 2, 'simulation diverged: try lower orders'
         rows.append({
             'output': name, 'model': model,
-            'fit_estimation': float(compare(model, est, ic='estimate').fit[0]),
-            'fit_validation': float(compare(model, val, ic='estimate').fit[0]),
-            'estimation': est, 'validation': val, 'note': '',
+            'fit_estimation': fits[0], 'fit_validation': fits[1],
+            'estimation': est, 'validation': val, 'note': note,
         })
     return rows
 
@@ -177,6 +280,10 @@ def _check(args: argparse.Namespace) -> None:
     for name in ('na', 'nb', 'length'):
         if getattr(args, name) < 1:
             raise UsageError(f'--{name} must be >= 1, got {getattr(args, name)}')
+    if args.nk is None:
+        args.nk = 0 if on_board(args) else 1
+    if args.board_sensors is not None and args.board_sensors < 1:
+        raise UsageError(f'--board-sensors must be >= 1, got {args.board_sensors}')
     if args.nk < 0 or args.delay < 0:
         raise UsageError('--nk and --delay must be >= 0')
     if not 0.0 <= args.band[0] < args.band[1] <= 1.0:
@@ -271,6 +378,163 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
         rclpy.try_shutdown(context=ctx)
 
 
+def start_virtual_board(params: str, magnet: str) -> tuple[subprocess.Popen, str]:
+    """Start ``maglev-virtual-board --plant physics`` in a child process.
+
+    Parameters
+    ----------
+    params : str
+        Parameter set of the physics plant.
+    magnet : str
+        Magnet mode (``free`` falls: nothing closes the loop here).
+
+    Returns
+    -------
+    tuple of (subprocess.Popen, str)
+        The child (stop it with SIGINT) and its device path.
+
+    Raises
+    ------
+    RuntimeError
+        If the board does not start (its error output is in the message).
+    """
+    cmd = [sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--plant', 'physics',
+           '--params', params, '--magnet', magnet, '--startup-delay', '0.2']
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    line = child.stdout.readline().strip()  # the device path, once the board runs
+    if not line:
+        child.wait(timeout=WAIT_S)
+        raise RuntimeError(f'the virtual board did not start: {child.stderr.read().strip()}')
+    return child, line
+
+
+def stop_child(child: subprocess.Popen) -> None:
+    """Stop a child process with SIGINT (SIGKILL after 10 s) and reap it."""
+    if child.poll() is None:
+        child.send_signal(signal.SIGINT)
+        try:
+            child.wait(timeout=10.0)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
+    for stream in (child.stdout, child.stderr):
+        if stream is not None:
+            stream.close()
+
+
+def board_sensors(args: argparse.Namespace) -> int:
+    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1."""
+    if args.board_sensors is not None:
+        return args.board_sensors
+    if args.virtual_board:
+        from maglev_ros.physics import make_model
+
+        try:
+            return make_model(args.params).n_outputs // 3
+        except (ValueError, OSError) as err:
+            raise UsageError(f'--params {args.params!r}: {err}') from None
+    return max(args.sensors) + 1
+
+
+def run_board_experiment(args: argparse.Namespace, bag: Path, port: str,
+                         n_sensors: int) -> dict:
+    """Run the driver (on ``port``), excitation (timer) and recorder on one executor.
+
+    Real time: the board sets the pace; recording lasts ``args.duration``
+    wall-clock seconds from the first sample after the graph is up.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed ``maglev-lab`` arguments.
+    bag : Path
+        Bag directory to create.
+    port : str
+        Serial device of the board.
+    n_sensors : int
+        Sensors per board record.
+
+    Returns
+    -------
+    dict
+        ``samples`` (currents messages recorded), ``simulated_s`` (their board
+        time), ``wall_s``, ``timeouts``, ``crashed`` (False), ``crash_reason``,
+        ``driver`` (the driver's counters).
+
+    Raises
+    ------
+    KeyboardInterrupt
+        On SIGINT/SIGTERM (the bag is finalised first).
+    """
+    import rclpy
+    from rclpy.context import Context
+    from rclpy.parameter import Parameter
+
+    from maglev_ros.nodes import contract
+    from maglev_ros.nodes.driver import DriverNode
+    from maglev_ros.nodes.excitation import ExcitationNode
+    from maglev_ros.nodes.recorder import RecorderNode
+
+    def overrides(**values):
+        return [Parameter(k, value=v) for k, v in values.items()]
+
+    topics = ([contract.field_topic(k) for k in args.sensors]
+              + [contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC])
+    currents_topic = '/' + contract.CURRENTS_TOPIC
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    nodes, spinner = [], None
+    try:
+        recorder = RecorderNode(context=ctx, parameter_overrides=overrides(
+            path=str(bag), storage=args.storage, topics=topics, metadata_node='maglev_driver'))
+        nodes.append(recorder)  # destroyed last: finalises the bag
+        driver = DriverNode(context=ctx, parameter_overrides=overrides(
+            port=port, n_sensors=n_sensors, start_enabled=True, command_timeout=1.0))
+        nodes.append(driver)
+        spinner = contract.Spinner(ctx, nodes)
+        _wait(lambda: len(recorder.subscribed) == len(topics) - 1 and recorder.metadata_complete
+              and driver.link_state == 'connected', ctx, 'the driver and the recorder')
+        # the excitation starts once everything listens: its first command is recorded
+        excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
+            signal=args.excitation, amplitude=args.amplitude, band=list(args.band),
+            pattern=args.pattern, seed=args.seed, length=args.length, trigger='timer',
+            sample_rate=args.command_rate))
+        nodes.append(excite)
+        spinner.add_node(excite)
+        _wait(lambda: len(recorder.subscribed) == len(topics)
+              and excite._pub.get_subscription_count() >= 2, ctx, 'the excitation')
+        start = recorder.counts[currents_topic]
+        wall = time.monotonic()
+        end = wall + args.duration
+        _wait(lambda: time.monotonic() >= end, ctx, 'the recording', timeout=args.duration + 1)
+        recorder.close()  # finalised; the driver zeroes the currents when destroyed
+        wall = time.monotonic() - wall
+        samples = recorder.counts[currents_topic] - start
+        return {'samples': samples, 'simulated_s': samples * BOARD_TS, 'wall_s': wall,
+                'timeouts': driver.counters['timeouts'], 'crashed': False, 'crash_reason': '',
+                'driver': dict(driver.counters)}
+    finally:
+        if spinner is not None:
+            spinner.close()
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown(context=ctx)
+
+
+def _run_board(args: argparse.Namespace, bag: Path) -> dict:
+    n_sensors = board_sensors(args)
+    if max(args.sensors) >= n_sensors or min(args.sensors) < 0:
+        raise UsageError(f'--sensors must be in 0 .. {n_sensors - 1} (the board has '
+                         f'{n_sensors}), got {args.sensors}')
+    if args.board:
+        return run_board_experiment(args, bag, args.board, n_sensors)
+    child, port = start_virtual_board(args.params, args.magnet)
+    try:
+        return run_board_experiment(args, bag, port, n_sensors)
+    finally:
+        stop_child(child)
+
+
 def _run(args: argparse.Namespace) -> int:
     _check(args)
     out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
@@ -278,23 +542,42 @@ def _run(args: argparse.Namespace) -> int:
     if bag.exists():
         raise UsageError(f'{bag} exists already; choose another --out')
     out.mkdir(parents=True, exist_ok=True)
-    print(f'{PROG}: {args.duration:g} s of {args.params}, magnet {args.magnet}, '
-          f'{args.excitation} {args.amplitude:g} A on {args.pattern}, coil dynamics '
-          f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
-          f'{args.noise:g} T, seed {args.seed}')
+    board = on_board(args)
+    if board:
+        where = (args.board if args.board else
+                 f'a virtual board ({args.params}, magnet {args.magnet}, physics plant)')
+        print(f'{PROG}: {args.duration:g} s (wall clock) on {where}, {args.excitation} '
+              f'{args.amplitude:g} A on {args.pattern} at {args.command_rate:g} commands/s, '
+              f'seed {args.seed}')
+    else:
+        print(f'{PROG}: {args.duration:g} s of {args.params}, magnet {args.magnet}, '
+              f'{args.excitation} {args.amplitude:g} A on {args.pattern}, coil dynamics '
+              f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
+              f'{args.noise:g} T, seed {args.seed}')
     try:
-        stats = run_experiment(args, bag)
+        stats = _run_board(args, bag) if board else run_experiment(args, bag)
     except KeyboardInterrupt:
         print(f'{PROG}: interrupted; bag finalised in {bag}', file=sys.stderr)
         return 130
-    rate = stats['simulated_s'] / max(stats['wall_s'], 1e-9)
-    print(f'recorded {stats["samples"]} samples ({stats["simulated_s"]:.3f} s simulated in '
-          f'{stats["wall_s"]:.1f} s, {rate:.2f} x real time; {stats["timeouts"]} command '
-          f'timeouts) -> {bag}')
+    if board:
+        print(f'recorded {stats["samples"]} board samples ({stats["simulated_s"]:.3f} s of '
+              f'board time in {stats["wall_s"]:.1f} s; {stats["timeouts"]} command timeouts, '
+              f'{stats["driver"]["resyncs"]} resyncs) -> {bag}')
+    else:
+        rate = stats['simulated_s'] / max(stats['wall_s'], 1e-9)
+        print(f'recorded {stats["samples"]} samples ({stats["simulated_s"]:.3f} s simulated '
+              f'in {stats["wall_s"]:.1f} s, {rate:.2f} x real time; {stats["timeouts"]} '
+              f'command timeouts) -> {bag}')
     if stats['crashed']:
         print(f'warning: the magnet crashed ({stats["crash_reason"]}); identifying the '
               f'samples before the crash', file=sys.stderr)
-    dataset = load_data(bag, args.sensors, args.pattern)
+    dataset = load_data(bag, args.sensors, args.pattern, board=board)
+    for gap in dataset.gaps:
+        print(f'gap: {gap.describe()}')
+    if board and dataset.gaps:
+        print('(board run: the samples are the records, paired by stamp; a gap above is a '
+              "step of the driver's clock mapping unless the driver counted resyncs or the "
+              'recorder lost messages)')
     data = dataset.data
     rows = identify(data, args.na, args.nb, args.nk, args.split)
     print(f'ARX na={args.na} nb={args.nb} nk={args.nk}, inputs {", ".join(data.input_names)}; '
@@ -303,7 +586,8 @@ def _run(args: argparse.Namespace) -> int:
     for row in rows:
         print(f'{row["output"]:<10} {row["fit_estimation"]:>11.2f} '
               f'{row["fit_validation"]:>11.2f}  {row["note"]}')
-    rows_fitted = [row for row in rows if row['model'] is not None]
+    rows_fitted = [row for row in rows
+                   if row['model'] is not None and np.isfinite(row['fit_validation'])]
     if not args.no_plots:
         from maglev_ros.sysid import compare_plot
 

@@ -1,0 +1,59 @@
+"""``maglev-lab`` against a board: the driver node on a virtual board instead of the simulator."""
+
+import itertools
+import json
+import math
+import os
+
+import pytest
+
+from maglev_ros.cli import lab
+
+# Fast DDS refuses domain ids above 232: 10 .. 18 here (1 .. 9: test_driver_recording.py)
+_DOMAINS = itertools.count(os.getpid())
+
+
+@pytest.fixture
+def domain(monkeypatch):
+    domain_id = 10 + next(_DOMAINS) % 9
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return domain_id
+
+
+def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capfd):
+    # physics plant, magnet fixed, no noise: the field is a static linear function of the
+    # applied currents (same record), so ARX 1 1 0 (nk 0 is the board default) fits it;
+    # higher orders are not identifiable on such noise-free data
+    out = tmp_path / 'lab'
+    status = lab.main(['--virtual-board', '--magnet', 'fixed', '--duration', '2',
+                       '--amplitude', '0.2', '--excitation', 'prbs', '--seed', '3',
+                       '--na', '1', '--nb', '1', '--out', str(out)])
+    captured = capfd.readouterr()
+    printed = captured.out
+    print(printed)
+    assert status == 0, captured.err
+    assert 'on a virtual board (maggy_v2, magnet fixed' in printed and 'fit val. %' in printed
+    summary = json.loads((out / 'models.json').read_text())
+    fits = {m['output']: m.get('fit_validation') for m in summary['models']}
+    assert all(math.isfinite(fits[k]) for k in ('Bx_0', 'By_0')), printed
+    assert fits['Bx_0'] >= 90.0 and fits['By_0'] >= 90.0, printed
+    assert summary['args']['nk'] == 0
+    run = summary['run']
+    assert run['samples'] >= 0.5 * 2 * 5000  # real time: the board sets the pace
+    assert run['driver']['resyncs'] == 0 and run['driver']['dropped_bytes'] == 0
+    meta = summary['metadata']
+    assert meta['maglev_driver.n_sensors'] == 3 and meta['maglev_driver.start_enabled'] is True
+    assert (out / 'compare_Bx_0.png').stat().st_size > 1000
+    assert (out / 'bag' / 'metadata.yaml').is_file()
+
+
+@pytest.mark.parametrize('argv, match', [
+    (['--board', '/dev/null', '--virtual-board'], 'not allowed with argument'),
+    (['--virtual-board', '--sensors', '5'], '--sensors must be in 0 .. 2'),
+    (['--board', '/dev/null', '--board-sensors', '0'], '--board-sensors must be >= 1'),
+])
+def test_bad_board_input_is_one_line_and_status_2(argv, match, tmp_path, capfd):
+    assert lab.main(argv + ['--out', str(tmp_path / 'o')]) == 2
+    err = capfd.readouterr().err
+    assert match in err and err.count('\n') == 1
