@@ -12,7 +12,10 @@ nodes from the board driver:
 * ``maglev/state/true`` (nav_msgs/Odometry: position, ZYX Euler angles as a
   quaternion, frame ``maglev_base``, child ``maglev_magnet``, twist in the
   child frame);
-* ``/clock`` (rosgraph_msgs/Clock), the simulated time of every sample;
+* ``/clock`` (rosgraph_msgs/Clock), the simulated time: of every sample in
+  lockstep (the recorder logs lockstep messages at it), once per burst of
+  samples in real time (every ``pace_period``, 1 ms by default: plenty for
+  ``use_sim_time`` and a fifth of the publishing cost);
 * ``maglev/markers`` (visualization_msgs/MarkerArray): base components and
   the magnet, for RViz, at ``marker_rate`` Hz of wall time;
 * ``/diagnostics``: mode, run state, simulated time, real-time factor,
@@ -402,6 +405,9 @@ class SimulatorNode(Node):
         if cfg.publish_clock:
             self._clock_pub = self.create_publisher(Clock, contract.CLOCK_TOPIC, qos)
             self._clock_raw = contract.clock_template()
+        # samples per /clock message: each one in lockstep, one per burst in real time
+        self._clock_stride = (1 if cfg.mode == 'lockstep' else
+                              max(1, int(round(cfg.pace_period * cfg.sample_rate))))
         self._diag_pub = self.create_publisher(
             contract.DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS)
         command_qos = (contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep'
@@ -455,7 +461,7 @@ class SimulatorNode(Node):
         """
         sim = self.sim
         t_ns = self._offset_ns + int(round(sim.samples * self._dt_ns))
-        if self._clock_pub is not None:
+        if self._clock_pub is not None and sim.samples % self._clock_stride == 0:
             self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
         values = reading[self._columns].tolist()
         for k, (handle, raw) in enumerate(zip(self._field_handles, self._field_raw,
