@@ -32,7 +32,7 @@ from .correlation import block_sizes, lag_gram
 from .dataset import IdData, as_experiments
 from .model import PolyModel
 from .orders import Orders, make_orders
-from .regression import arx_regressors, check_data, finish_model, join, stack_rows
+from .regression import arx_regressors, check_data, finish_model, fir_add, join, stack_rows
 
 __all__ = ['arx', 'least_squares']
 
@@ -277,12 +277,11 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
 def _residual(S: np.ndarray, blocks: np.ndarray, target: int, theta: np.ndarray,
               start: int) -> np.ndarray:
     """``signal[target](t) - phi(t)^T theta`` for ``t >= start`` by FIR filtering, (N - start,)."""
-    N = S.shape[1]
-    out = S[target, start:].copy()
+    fitted = np.zeros(S.shape[1])
     pos = 0
     for sig, first, count, sign in blocks:
         h = np.zeros(first + count)
         h[first:] = sign * theta[pos:pos + count]
         pos += count
-        out -= np.convolve(S[sig], h)[start:N]
-    return out
+        fir_add(h, S[sig], fitted)  # compiled FIR (regression.fir_add)
+    return S[target, start:] - fitted[start:]
