@@ -63,6 +63,7 @@ __all__ = [
     'make_executor',
     'Spinner',
     'run_nodes',
+    'declare_parameters',
     'spin',
     'field_topic',
     'odometry_message',
@@ -277,6 +278,10 @@ def spin(executor, context=None, stop=None) -> None:
             executor.spin_once(timeout_sec=0.1)
         except ExternalShutdownException:
             break
+        except Exception:  # noqa: BLE001 - re-raised unless the context is gone
+            if context.ok():
+                raise
+            break  # a callback raced the shutdown (SIGINT/SIGTERM): nothing left to do
 
 
 class Spinner:
@@ -313,6 +318,32 @@ class Spinner:
         self._stop.set()
         self._thread.join(timeout=10.0)
         self.executor.shutdown()
+
+
+def declare_parameters(node, table: Mapping[str, tuple[object, str]]) -> dict[str, object]:
+    """Declare a node's read-only parameters and return their values.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The node.
+    table : mapping
+        ``name -> (default, description)``; the default fixes the type (None
+        declares an untyped parameter that may stay unset).
+
+    Returns
+    -------
+    dict
+        ``name -> value`` (None for an unset parameter), for the node's validator.
+    """
+    from rcl_interfaces.msg import ParameterDescriptor
+    from rclpy.parameter import Parameter
+
+    for name, (default, text) in table.items():
+        node.declare_parameter(name, default,
+                               ParameterDescriptor(description=text, read_only=True))
+    return {name: node.get_parameter_or(name, Parameter(name, value=None)).value
+            for name in table}
 
 
 def run_nodes(factories, args: list[str] | None, name: str, errors: tuple) -> int:

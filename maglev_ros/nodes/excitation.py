@@ -28,7 +28,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -189,11 +188,7 @@ class ExcitationNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text) in _PARAMETERS.items():
-            self.declare_parameter(name, default,
-                                   ParameterDescriptor(description=text, read_only=True))
-        self.config = cfg = build_config(
-            {name: self.get_parameter(name).value for name in _PARAMETERS})
+        self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
         self.commands = commands_of(cfg)
         self._rest = [float(v) for v in cfg.offset]
         self._rows = self.commands.tolist()

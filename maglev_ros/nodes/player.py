@@ -17,7 +17,6 @@ import threading
 import time
 from pathlib import Path
 
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
@@ -60,10 +59,7 @@ class PlayerNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text) in _PARAMETERS.items():
-            self.declare_parameter(name, default,
-                                   ParameterDescriptor(description=text, read_only=True))
-        v = {name: self.get_parameter(name).value for name in _PARAMETERS}
+        v = contract.declare_parameters(self, _PARAMETERS)
         if not v['path'] or not Path(v['path']).exists():
             raise PlayerParameterError(f"path must be an existing bag, got {v['path']!r}")
         for name in ('rate', 'clock_period', 'start_delay'):

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
-from rcl_interfaces.msg import ParameterDescriptor, ParameterType
+from rcl_interfaces.msg import ParameterType
 from rcl_interfaces.srv import GetParameters, ListParameters
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -185,11 +185,7 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text) in _PARAMETERS.items():
-            self.declare_parameter(name, default,
-                                   ParameterDescriptor(description=text, read_only=True))
-        self.config = cfg = build_config(
-            {name: self.get_parameter(name).value for name in _PARAMETERS})
+        self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
         meta = {'maglev_ros.version': package_version(), 'recorder.storage': cfg.storage,
                 'recorder.topics': ' '.join(cfg.topics), 'recorder.log_clock': cfg.log_clock,
                 'recorder.started': time.strftime('%Y-%m-%dT%H:%M:%S%z')}

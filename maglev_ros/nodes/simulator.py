@@ -69,7 +69,6 @@ from dataclasses import dataclass
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Pose
-from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
@@ -361,12 +360,7 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text) in _PARAMETERS.items():
-            self.declare_parameter(name, default,
-                                   ParameterDescriptor(description=text, read_only=True))
-        values = {name: self.get_parameter_or(name, Parameter(name, value=None)).value
-                  for name in _PARAMETERS}
-        self.config = cfg = build_config(values)
+        self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
         self.sim = make_simulator(cfg)
         n_all = len(self.sim.model.params.sensors)
         self.sensors = cfg.sensors or tuple(range(n_all))
@@ -505,6 +499,8 @@ class SimulatorNode(Node):
 
     def publish_diagnostics(self) -> None:
         """Publish the run state and counters on ``/diagnostics``."""
+        if not self.context.ok():  # a signal is shutting the node down
+            return
         now = time.monotonic()
         then, samples = self._rate_mark
         self._rate_mark = (now, self.counters['samples'])
