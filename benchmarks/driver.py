@@ -14,7 +14,9 @@ processes at 5 kHz; the driver's CPU time (user + system, from
 records/s are read from ``/diagnostics`` to check that it kept up. Optionally
 (``--subscriber``) a third process subscribes to every field and current topic.
 
-Run: ``/tmp/venv/bin/python benchmarks/driver.py [--quick] [--part decoder|driver]``.
+Run: ``/tmp/venv/bin/python benchmarks/driver.py [--quick] [--part decoder|driver]``
+(driver part: ``--subscriber``, ``--sensors 1``, ``--windows N``,
+``--publication-mode ASYNCHRONOUS``, ``--driver-param read_interval:=0.002``).
 """
 
 from __future__ import annotations
@@ -161,7 +163,8 @@ except BaseException:
 
 
 def measure_driver(
-    n_sensors: int, window: float, windows: int, subscriber: bool, domain: int
+    n_sensors: int, window: float, windows: int, subscriber: bool, domain: int,
+    driver_env: dict | None = None, driver_params: tuple = (),
 ) -> dict:
     """Run board and driver processes; return the driver's CPU share and rates."""
     import rclpy
@@ -179,10 +182,12 @@ def measure_driver(
         try:
             board.stdout.readline()
             driver_cmd = [sys.executable, '-m', 'maglev_ros.nodes.driver', '--ros-args']
-            for param in (f'port:={link}', f'n_sensors:={n_sensors}', 'diagnostics_period:=1.0'):
+            for param in (f'port:={link}', f'n_sensors:={n_sensors}', 'diagnostics_period:=1.0',
+                          *driver_params):
                 driver_cmd += ['-p', param]
             driver = subprocess.Popen(
-                driver_cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL
+                driver_cmd, env=dict(env, **(driver_env or {})), stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
             )
             procs.append(driver)
             if subscriber:
@@ -232,8 +237,13 @@ def measure_driver(
     }
 
 
-def bench_driver(window: float, windows: int, subscriber: bool) -> None:
-    print(f'## Driver node CPU at 5 kHz ({windows} windows of {window:.0f} s, one core = 100 %)')
+def bench_driver(window: float, windows: int, subscriber: bool, sensors=(1, 3),
+                 driver_env: dict | None = None, subscriber_only: bool = False,
+                 driver_params: tuple = ()) -> None:
+    env_text = ' '.join([f'{k}={v}' for k, v in (driver_env or {}).items()]
+                        + list(driver_params)) or 'defaults'
+    print(f'## Driver node CPU at 5 kHz ({windows} windows of {window:.0f} s, one core = 100 %; '
+          f'driver: {env_text}; load average {os.getloadavg()[0]:.1f})')
     print()
     print(
         '| sensors | subscriber process | driver CPU median (min-max) | records/s '
@@ -241,15 +251,19 @@ def bench_driver(window: float, windows: int, subscriber: bool) -> None:
     )
     print('|---|---|---|---|---|---|---|')
     domain = 200 + os.getpid() % 20
-    cases = [(1, False), (3, False)] + ([(1, True), (3, True)] if subscriber else [])
+    subs = [True] if subscriber_only else ([False, True] if subscriber else [False])
+    cases = [(n, with_sub) for with_sub in subs for n in sensors]
     for n_sensors, with_sub in cases:
-        result = measure_driver(n_sensors, window, windows, with_sub, domain)
+        result = measure_driver(n_sensors, window, windows, with_sub, domain, driver_env,
+                                driver_params)
         cpu = 100 * np.array(result['cpu'])
         print(
             f'| {n_sensors} | {"yes" if with_sub else "no"} | {np.median(cpu):.1f} % '
             f'({cpu.min():.1f}-{cpu.max():.1f}) | {result["records_per_s"]:.0f} | '
-            f'{result["resyncs"]} | {result["dropped"]} | {100 * result["board_cpu"]:.1f} % |'
+            f'{result["resyncs"]} | {result["dropped"]} | {100 * result["board_cpu"]:.1f} % |',
+            flush=True,
         )
+    print(f'(load average at the end {os.getloadavg()[0]:.1f})')
     print()
 
 
@@ -258,12 +272,28 @@ def main() -> None:
     parser.add_argument('--quick', action='store_true', help='smaller data, fewer repeats')
     parser.add_argument('--part', choices=('decoder', 'driver', 'all'), default='all')
     parser.add_argument('--subscriber', action='store_true', help='also with a subscriber')
+    parser.add_argument('--subscriber-only', action='store_true',
+                        help='driver part: only the cases with a subscriber process')
+    parser.add_argument('--sensors', type=int, nargs='+', default=[1, 3],
+                        help='driver part: sensor counts (default 1 3)')
+    parser.add_argument('--windows', type=int, default=None,
+                        help='driver part: measurement windows per case (default 3, quick 1)')
+    parser.add_argument('--publication-mode', choices=('SYNCHRONOUS', 'ASYNCHRONOUS'),
+                        default=None, help="driver process: Fast DDS publication mode "
+                        "(RMW_FASTRTPS_PUBLICATION_MODE; default: the driver's own)")
+    parser.add_argument('--driver-param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='driver part: a driver parameter (repeatable), e.g. '
+                        'read_interval:=0.002')
     args = parser.parse_args()
     n_records, repeats = (30_000, 2) if args.quick else (100_000, 3)
     if args.part in ('decoder', 'all'):
         bench_decoder(n_records, repeats)
     if args.part in ('driver', 'all'):
-        bench_driver(3.0, 1 if args.quick else 3, args.subscriber)
+        windows = args.windows or (1 if args.quick else 3)
+        driver_env = ({'RMW_FASTRTPS_PUBLICATION_MODE': args.publication_mode}
+                      if args.publication_mode else None)
+        bench_driver(3.0, windows, args.subscriber, args.sensors, driver_env,
+                     args.subscriber_only, tuple(args.driver_param))
 
 
 if __name__ == '__main__':

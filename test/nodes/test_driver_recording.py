@@ -60,7 +60,7 @@ def overrides(**values):
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def record(ctx, board, bag):
+def record(ctx, board, bag, read_interval=0.0):
     """Run driver, excitation and recorder until RECORD_S of samples are in the bag."""
     topics = [contract.field_topic(0), contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC]
     nodes, spinner = [], None
@@ -70,7 +70,7 @@ def record(ctx, board, bag):
         nodes.append(recorder)
         driver = DriverNode(context=ctx, parameter_overrides=overrides(
             port=board.path, n_sensors=1, counts_per_ampere=COUNTS_PER_AMPERE,
-            start_enabled=True, command_timeout=5.0))
+            start_enabled=True, command_timeout=5.0, read_interval=read_interval))
         nodes.append(driver)
         excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
             trigger='timer', sample_rate=1000.0, signal='prbs', amplitude=AMPLITUDE,
@@ -93,12 +93,13 @@ def record(ctx, board, bag):
             node.destroy_node()
 
 
-def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path):
+@pytest.mark.parametrize('read_interval', [0.0, 0.005])  # every burst; 5 bursts per read
+def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path, read_interval):
     plant = LinearPlant.default(1)
     board = VirtualBoard(partial(V2xFirmware, plant, 1, startup_delay=0.2))
     bag = tmp_path / 'bag'
     with board:
-        counts, counters, stats = record(ctx, board, bag)
+        counts, counters, stats = record(ctx, board, bag, read_interval)
         written = board.firmware.records_written
     assert (bag / 'metadata.yaml').is_file()
     assert counts['/maglev/currents'] >= RECORD_S * 5000
