@@ -1,4 +1,3 @@
-import itertools
 import os
 import signal
 import subprocess
@@ -12,7 +11,6 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
@@ -28,7 +26,6 @@ from maglev_ros.hardware.virtual_board import VirtualBoard
 from maglev_ros.nodes.driver import DriverNode, DriverParameterError, build_config
 
 TIMEOUT = 15.0  # s, generous: the machine is shared
-_DOMAINS = itertools.count(os.getpid())  # mapped into 190 .. 232 below
 RELIABLE_DEEP = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
 
 
@@ -39,20 +36,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-@pytest.fixture
-def domain(monkeypatch):
-    domain_id = 190 + next(_DOMAINS) % 43  # apart from the simulator tests (100 .. 180)
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    return domain_id
-
-
-@pytest.fixture
-def ctx(domain):
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 class Harness:

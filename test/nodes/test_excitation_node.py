@@ -1,4 +1,3 @@
-import itertools
 import os
 import subprocess
 import sys
@@ -7,7 +6,6 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from rclpy.context import Context
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -22,7 +20,6 @@ from maglev_ros.nodes.excitation import (
 from maglev_ros.nodes.simulator import SimulatorNode
 
 TIMEOUT = 30.0
-_DOMAINS = itertools.count(60 + os.getpid() % 30)
 
 
 def wait_for(predicate, timeout=TIMEOUT, what='condition'):
@@ -31,16 +28,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         assert time.monotonic() < deadline, f'timed out waiting for {what}'
         time.sleep(0.005)
 
-
-@pytest.fixture
-def ctx(monkeypatch):
-    domain = next(_DOMAINS) % 230
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def params(**values):

@@ -1,20 +1,8 @@
-import itertools
 import json
-import os
 
 import pytest
 
 from maglev_ros.cli import lab
-
-_DOMAINS = itertools.count(180 + os.getpid() % 30)
-
-
-@pytest.fixture
-def domain(monkeypatch):
-    domain_id = next(_DOMAINS) % 230
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    return domain_id
 
 
 def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd):

@@ -1,4 +1,3 @@
-import itertools
 import os
 import signal
 import subprocess
@@ -8,7 +7,6 @@ import time
 import numpy as np
 import pytest
 import rclpy
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import MagneticField
@@ -22,7 +20,6 @@ from maglev_ros.nodes.recorder import RecorderNode, RecorderParameterError, buil
 from maglev_ros.nodes.simulator import SimulatorNode
 
 TIMEOUT = 30.0
-_DOMAINS = itertools.count(20 + os.getpid() % 30)
 
 
 def wait_for(predicate, timeout=TIMEOUT, what='condition'):
@@ -32,20 +29,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-@pytest.fixture
-def domain(monkeypatch):
-    domain_id = next(_DOMAINS) % 230
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    return domain_id
-
-
-@pytest.fixture
-def ctx(domain):
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def params(**values):

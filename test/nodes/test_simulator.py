@@ -1,4 +1,3 @@
-import itertools
 import os
 import signal
 import subprocess
@@ -11,7 +10,6 @@ import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
-from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
@@ -30,7 +28,6 @@ from maglev_ros.nodes.simulator import (
 )
 
 TIMEOUT = 30.0  # s, generous: the machine is shared
-_DOMAINS = itertools.count(100 + os.getpid() % 40)
 
 
 def wait_for(predicate, timeout=TIMEOUT, what='condition'):
@@ -40,20 +37,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-@pytest.fixture
-def domain(monkeypatch):
-    domain_id = next(_DOMAINS) % 230
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    return domain_id
-
-
-@pytest.fixture
-def ctx(domain):
-    context = Context()
-    rclpy.init(context=context, domain_id=domain)
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 class Peer:
