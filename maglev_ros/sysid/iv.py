@@ -249,11 +249,17 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
         results as the toolbox.  ``'extended'``: two-stage least squares with
         delayed-input instruments, then a weighted IV on noise-prefiltered data
         with the overdetermined instrument vector ``[x lags, u lags]`` (module
-        docstring).  Recommended at low signal-to-noise ratios: on the
-        benchmark's 7th-order system (25,000 samples, MA(2) colored noise,
-        15 noise realizations) the median relative parameter error is
-        0.59 vs 1.36 at 0 dB and 1.37e-2 vs 1.39e-2 at 30 dB, at about half
-        the cost (no ARX stage, one IV stage less).
+        docstring).  Recommended, in particular at low signal-to-noise
+        ratios: on the benchmark's 7th-order system (25,000 samples, MA(2)
+        colored noise, 15 noise realizations) the median relative parameter
+        error is 0.59 vs 1.36 at 0 dB and 1.37e-2 vs 1.39e-2 at 30 dB, in
+        about 25 % less time (no ARX stage, one IV stage less).  Not the
+        default, so that ``iv4`` matches MATLAB (and the ``oe``/``bj`` start).
+        With one output row and ``p`` parameters the start uses ``p`` delayed
+        inputs per input channel as instruments, the final stage those plus
+        ``na`` lags of the simulated output; the covariance is
+        ``lambda (R^T W R)^-1`` (``lambda``: variance of the prefiltered
+        equation error).
 
     Returns
     -------
