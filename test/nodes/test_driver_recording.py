@@ -8,15 +8,11 @@ back with :func:`maglev_ros.bags.read_bag`, inputs being the currents the
 driver reports as applied.
 """
 
-import itertools
-import os
 import time
 from functools import partial
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.context import Context
 from rclpy.parameter import Parameter
 
 from maglev_ros.bags import BagReader, load_bag_dataset, parse_channel, read_bag
@@ -29,9 +25,6 @@ from maglev_ros.nodes.excitation import ExcitationNode
 from maglev_ros.nodes.recorder import RecorderNode
 
 TIMEOUT = 20.0  # s, generous: the machine is shared
-# Fast DDS refuses domain ids above 232 (port numbers): 1 .. 9 here, 10 .. 18 in
-# test_lab_board.py, below the other node tests (20 .. 232)
-_DOMAINS = itertools.count(os.getpid())
 COUNTS_PER_AMPERE = 1000.0
 AMPLITUDE = 0.25  # A: 250 counts, well inside +-4096
 RECORD_S = 1.5  # board seconds to record
@@ -43,17 +36,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
     while not predicate():
         assert time.monotonic() < deadline, f'timed out waiting for {what}'
         time.sleep(0.01)
-
-
-@pytest.fixture
-def ctx(monkeypatch):
-    domain_id = 1 + next(_DOMAINS) % 9
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    context = Context()
-    rclpy.init(context=context, domain_id=domain_id, args=[])
-    yield context
-    rclpy.try_shutdown(context=context)
 
 
 def overrides(**values):

@@ -1,24 +1,14 @@
-"""``maglev-lab`` against a board: the driver node on a virtual board instead of the simulator."""
+"""``maglev-lab`` against a board: the driver node on a virtual board instead of the simulator.
 
-import itertools
+``domain``: ``conftest.py``.
+"""
+
 import json
 import math
-import os
 
 import pytest
 
 from maglev_ros.cli import lab
-
-# Fast DDS refuses domain ids above 232: 10 .. 18 here (1 .. 9: test_driver_recording.py)
-_DOMAINS = itertools.count(os.getpid())
-
-
-@pytest.fixture
-def domain(monkeypatch):
-    domain_id = 10 + next(_DOMAINS) % 9
-    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
-    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    return domain_id
 
 
 def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capfd):
