@@ -34,6 +34,7 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # keep the 
 
 import argparse  # noqa: E402
 import json  # noqa: E402
+import shutil  # noqa: E402
 import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
@@ -95,6 +96,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help='fraction of samples for estimation (default 0.5)')
     p.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
     p.add_argument('--out', default=None, help='output directory (default lab_<date>_<time>)')
+    p.add_argument('--overwrite', action='store_true',
+                   help="replace a previous session's results in --out (its bag/ is removed)")
     p.add_argument('--no-plots', action='store_true', help='write no plots')
     board = p.add_mutually_exclusive_group()
     board.add_argument('--board', metavar='PATH', default=None,
@@ -540,7 +543,11 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
     bag = out / 'bag'
     if bag.exists():
-        raise UsageError(f'{bag} exists already; choose another --out')
+        if not args.overwrite:
+            raise UsageError(f'{bag} exists already; choose another --out or add --overwrite')
+        if not (bag / 'metadata.yaml').is_file() and any(bag.iterdir()):
+            raise UsageError(f'{bag} is not a finished bag; not removing it')
+        shutil.rmtree(bag)
     out.mkdir(parents=True, exist_ok=True)
     board = on_board(args)
     if board:

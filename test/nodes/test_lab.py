@@ -34,3 +34,16 @@ def test_bad_input_is_one_line_and_status_2(argv, match, capfd):
     assert lab.main(argv) == 2
     err = capfd.readouterr().err
     assert match in err and err.count('\n') == 1
+
+
+def test_a_second_session_needs_overwrite(domain, tmp_path, capfd):
+    out = tmp_path / 'lab'
+    argv = ['--duration', '0.05', '--magnet', 'fixed', '--out', str(out), '--no-plots']
+    assert lab.main(argv) == 0
+    capfd.readouterr()
+    assert lab.main(argv) == 2
+    err = capfd.readouterr().err
+    assert 'exists already; choose another --out or add --overwrite' in err
+    assert err.count('\n') == 1
+    assert lab.main([*argv, '--overwrite']) == 0
+    assert (out / 'bag' / 'metadata.yaml').is_file()
