@@ -43,7 +43,7 @@ later). A loop closed on the PC that prefers latency can set it false (USB
 itself does not cut records; the decoder still resynchronises after any
 damage). ``read_interval`` > 0 reads the port at most that often (several
 1 ms bursts decoded and published per read): less CPU per record, up to that
-much more latency (``docs/benchmarks-driver.md``).
+much more latency (``docs/benchmarks.md``, driver section).
 
 QoS: sensor fields and currents are RELIABLE, KEEP_LAST 1000 (every sample
 must arrive for identification; 1000 samples = 0.2 s at 5 kHz); the command
