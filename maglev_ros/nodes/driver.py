@@ -65,7 +65,6 @@ from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
@@ -77,18 +76,16 @@ from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
 from maglev_ros.hardware.v2x_stream import DecoderStats, RecordDecoder
 from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
+from maglev_ros.nodes.contract import (  # shared with the simulator
+    COIL_NAMES,
+    COMMAND_QOS,
+    SENSOR_QOS,
+)
 
 __all__ = ['DriverConfig', 'DriverNode', 'DriverParameterError', 'main']
 
 NODE_NAME = 'maglev_driver'
-COIL_NAMES = ['x+', 'x-', 'y+', 'y-']
 DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
-SENSOR_QOS = QoSProfile(
-    depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
-)
-COMMAND_QOS = QoSProfile(
-    depth=10, reliability=ReliabilityPolicy.BEST_EFFORT, history=HistoryPolicy.KEEP_LAST
-)
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
 _ZERO = np.zeros(4)
