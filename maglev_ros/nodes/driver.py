@@ -59,10 +59,8 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
@@ -80,6 +78,7 @@ from maglev_ros.nodes.contract import (  # shared with the simulator
     COIL_NAMES,
     COMMAND_QOS,
     SENSOR_QOS,
+    run_nodes,
 )
 
 __all__ = ['DriverConfig', 'DriverNode', 'DriverParameterError', 'main']
@@ -816,22 +815,7 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = DriverNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except DriverParameterError as err:
-        rclpy.logging.get_logger(NODE_NAME).error(str(err))
-        return 2
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
-
+    return run_nodes([DriverNode], args, NODE_NAME, (DriverParameterError,))
 
 if __name__ == '__main__':
     raise SystemExit(main())
