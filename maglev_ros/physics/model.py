@@ -285,6 +285,16 @@ class MaggyModel:
                                            sol.turns[j] * current[j])
         return out
 
+    @property
+    def magnet_loop_current(self) -> float:
+        """Current of the fast model's loop for the levitating magnet's own field, A.
+
+        ``-J l / (2 mu0)``: half the magnet's equivalent current, as published
+        (the accurate/filament models use the full sheet current ``-J l / mu0``).
+        """
+        m = self.params.magnet
+        return -m.polarization * m.thickness / (2.0 * MU0)
+
     def magnet_field_at(self, points, x) -> np.ndarray:
         """Field of the levitating magnet at world points, T, shape (n, 3).
 
@@ -298,7 +308,7 @@ class MaggyModel:
         local = (pts - state[:3]) @ r  # rows: R^T (s - p)
         m = self.params.magnet
         if self.options.field == 'fast':
-            b_local = loop_field(local, m.radius, -m.polarization * m.thickness / (2 * MU0))
+            b_local = loop_field(local, m.radius, self.magnet_loop_current)
         else:
             b_local = sheet_field(local, m.radius, m.thickness,
                                   -m.polarization * m.thickness / MU0)
@@ -435,7 +445,7 @@ class MaggyModel:
             k = len(self.params.sensors)
             sens = np.hstack([self._sensor_pos, self._sensor_rot.reshape(k, 9),
                               self._sensor_gain, self._sensor_offset]).reshape(k, 18)
-            mag = np.array([m.radius, -m.polarization * m.thickness / (2.0 * MU0)])
+            mag = np.array([m.radius, self.magnet_loop_current])
             self._measurement_args = (src, coil, np.ascontiguousarray(sens), mag,
                                       self._workspace())
         return self._measurement_args
