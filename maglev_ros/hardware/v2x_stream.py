@@ -30,9 +30,11 @@ step bounds also exclude the step a stream shifted by whole timestamp
 bytes shows (about 0 or 51 200 us for a record period of 200 us), so a
 misaligned run cannot lock even when the fields are constant.
 
-Once locked, records are decoded with ``numpy.frombuffer`` over aligned
-chunks; only after a record breaks an invariant does the decoder search
-byte by byte (vectorised over all offsets). With ``confirm=True`` (the
+Once locked, records are viewed with ``numpy.frombuffer`` over aligned
+chunks and checked, and their timestamps unwrapped, by compiled loops
+(:mod:`maglev_ros.hardware.v2x_kernels`: one call per burst instead of a
+dozen numpy calls); only after a record breaks an invariant does the
+decoder search byte by byte (vectorised over all offsets). With ``confirm=True`` (the
 default) the newest record is held back until the next record confirms
 its end: a record whose tail was cut off (its bytes overlap the next valid
 record) is then dropped instead of emitted with foreign bytes. This costs
@@ -53,6 +55,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from .packet import PWM_FULL_SCALE
+from .v2x_kernels import first_bad_record, unwrap_run
 
 __all__ = [
     'BURST_RECORDS',
@@ -251,8 +254,6 @@ class RecordDecoder:
         self._size = self._dtype.itemsize
         # |B| <= max_field_mT compared on float32 bit patterns (monotonic for |B|).
         self._field_bits = int(np.float32(self.bounds.max_field_mT).view(np.uint32))
-        self._scratch_records = 0
-        self._grow_scratch(64)
         self.reset()
 
     def reset(self) -> None:
@@ -322,44 +323,6 @@ class RecordDecoder:
 
     # -- internals --------------------------------------------------------------
 
-    def _block_plausible(self, words: np.ndarray, n: int) -> bool:
-        """Whether n aligned records (flat uint32 words) satisfy the field and PWM invariants.
-
-        Works on the flat, contiguous words and halves of the block with
-        cached masks (a per-column loop over strided views is several times
-        slower): field words keep their magnitude bits, other words become 0;
-        PWM halves are multiplied by 1, other halves by 0.
-        """
-        width = self._size // 4
-        if n > self._scratch_records:
-            self._grow_scratch(max(n, 2 * self._scratch_records))
-        masked = np.bitwise_and(
-            words, self._field_mask[: n * width], out=self._word_scratch[: n * width]
-        )
-        if masked.max() > self._field_bits:  # |B| > max, NaN or infinite
-            return False
-        halves = words.view('<i2')
-        pwm = np.multiply(
-            halves, self._pwm_mask[: 2 * n * width], out=self._half_scratch[: 2 * n * width]
-        )
-        # -4096 <= p <= 4096 as one unsigned comparison: (p + 4096) mod 2**16 <= 8192
-        shifted = pwm.view(np.uint16)
-        shifted += np.uint16(PWM_FULL_SCALE)
-        return bool(shifted.max() <= 2 * PWM_FULL_SCALE)
-
-    def _grow_scratch(self, n: int) -> None:
-        """Allocate masks and scratch space for blocks of up to n records."""
-        width = self._size // 4
-        field_row = np.zeros(width, np.uint32)
-        field_row[1 : 1 + 3 * self.n_sensors] = 0x7FFF_FFFF  # drop the sign bit
-        pwm_row = np.zeros(2 * width, np.int16)
-        pwm_row[-4:] = 1
-        self._field_mask = np.tile(field_row, n)
-        self._pwm_mask = np.tile(pwm_row, n)
-        self._word_scratch = np.empty(n * width, np.uint32)
-        self._half_scratch = np.empty(2 * n * width, np.int16)
-        self._scratch_records = n
-
     def _views(self, buf: bytes, n: int, words: np.ndarray | None = None) -> _Run:
         """Timestamp (n,), field (n, N, 3) and PWM (n, 4) views of n aligned records."""
         width = self._size // 4
@@ -385,31 +348,12 @@ class RecordDecoder:
         bounds = self.bounds
         words = np.frombuffer(buf, '<u4', count=n * self._size // 4)
         ts, field, pwm = self._views(buf, n, words)
-        step = ts[1:] - ts[:-1]  # uint32: the true step even across a wrap
-        first_ok = True
-        if not start:
-            step0 = (int(ts[0]) - self._prev_ts) & _CLOCK_MASK
-            first_ok = bounds.min_step_us <= step0 <= bounds.max_step_us
-        # min <= step <= max as one unsigned comparison (uint32 arithmetic wraps)
-        ok = (
-            first_ok
-            and (
-                n == 1
-                or (step - np.uint32(bounds.min_step_us)).max()
-                <= bounds.max_step_us - bounds.min_step_us
-            )
-            and self._block_plausible(words, n)
+        bad = first_bad_record(
+            words.reshape(n, self._size // 4), start, self._prev_ts, 3 * self.n_sensors,
+            bounds.min_step_us, bounds.max_step_us, self._field_bits, PWM_FULL_SCALE,
         )
-        if ok:
-            last = n - 1
-        else:  # find the first record that breaks an invariant
-            floats = field.reshape(n, 3 * self.n_sensors)
-            bad = ~np.all(np.abs(floats) <= bounds.max_field_mT, axis=1)  # NaN -> bad
-            bad |= np.any((pwm < -PWM_FULL_SCALE) | (pwm > PWM_FULL_SCALE), axis=1)
-            bad[1:] |= (step < bounds.min_step_us) | (step > bounds.max_step_us)
-            bad[0] |= not first_ok
-            bad[:start] = False
-            last = int(np.argmax(bad)) - 1  # index of the last accepted record, -1 if none
+        ok = bad == n
+        last = bad - 1  # index of the last accepted record, -1 if none
         failed = not ok
         emit_end = last if self.confirm else last + 1
         if emit_end > 0:
@@ -518,33 +462,13 @@ class RecordDecoder:
             )
         times = []
         for ts, _, _ in out:
-            first = int(ts[0])
-            if self._last_emit_ts is None:
-                self._last_time_us = first
-                step0 = 0
-            else:
-                step0 = (first - self._last_emit_ts) & _CLOCK_MASK
-                if step0 >= _HALF_WRAP:  # backwards: the board's clock restarted
-                    self._restarts += 1
-                    step0 = SAMPLE_PERIOD_US
-                elif first < self._last_emit_ts:
-                    self._wraps += 1
-            t0 = self._last_time_us + step0
-            # Steps inside a run are validated (0 < step <= max_step_us); if the
-            # run spans less than 2**31 us, the uint32 difference to the first
-            # record is the true elapsed time, even across a wrap.
-            if ts.shape[0] * self.bounds.max_step_us < _HALF_WRAP:
-                time_us = (ts - ts.dtype.type(first)).astype(np.int64)
-                time_us += t0
-            else:  # a run that may span more than 2**31 us: sum the steps
-                time_us = np.empty(ts.shape[0], np.int64)
-                time_us[0] = t0
-                (ts[1:] - ts[:-1]).cumsum(dtype=np.int64, out=time_us[1:])
-                time_us[1:] += t0
-            last_time = int(time_us[-1])
-            self._wraps += ((first + last_time - t0) >> 32) - (first >> 32)
+            last_raw = -1 if self._last_emit_ts is None else self._last_emit_ts
+            time_us, restarts, wraps = unwrap_run(ts, last_raw, self._last_time_us,
+                                                  SAMPLE_PERIOD_US)
+            self._restarts += restarts
+            self._wraps += wraps
             self._last_emit_ts = int(ts[-1])
-            self._last_time_us = last_time
+            self._last_time_us = int(time_us[-1])
             self._records += ts.shape[0]
             times.append(time_us)
         if len(out) == 1:
