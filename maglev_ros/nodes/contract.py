@@ -37,6 +37,8 @@ from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
 
+from maglev_ros.nodes.scheduling import relax_event_threads
+
 __all__ = [
     'BASE_FRAME',
     'CLOCK_TOPIC',
@@ -299,6 +301,7 @@ class Spinner:
         import threading
 
         self.context = context
+        relax_event_threads()
         self.executor = make_executor(context)
         for node in nodes:
             self.executor.add_node(node)
@@ -371,6 +374,7 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple) -> in
     try:
         for factory in factories:
             nodes.append(factory())
+        relax_event_threads()  # DDS timer wake-ups must not preempt the publishers
         executor = make_executor()
         for node in nodes:
             executor.add_node(node)
