@@ -1,4 +1,4 @@
-"""Put the samples of several topics on one uniform time base.
+"""Put the samples of several topics on one time base of uniform sample spacing.
 
 Stamps
     A message's time is its ``header.stamp`` if the message has a header (and
@@ -6,19 +6,26 @@ Stamps
     (``std_msgs/Float64MultiArray``) carry no header.
 
 The rule
-    The first output topic defines the time base: ``t_k = t_0 + k Ts``, with
-    ``t_0`` its first stamp and ``Ts`` given or estimated from its stamps (the
-    median stamp difference, refined over the whole record so that no drift
-    builds up).  A topic whose stamps fall on the base within ``tolerance * Ts``
-    (default 5 %) is taken sample by sample, unchanged (*exact* match: in a
-    lockstep run all topics share the simulator's clock, and the data set is
-    exactly the published sequence).  Otherwise outputs are resampled by linear
-    interpolation and inputs by zero-order hold: the input at ``t_k`` is the
-    last input stamped at or before ``t_k`` (within the tolerance), which is the
-    value the plant was holding.  Samples where some topic has no data yet (or
-    any more: an input counts for one of its own periods after its last
-    message, to the end if it has only one) are trimmed from the start and the
-    end.
+    The first output topic defines the time base.  ``Ts`` is given or estimated
+    from its stamps (the median stamp difference, refined over the whole record
+    so that no drift builds up).  If its stamps are uniform sample to sample
+    (every stamp difference within ``tolerance * Ts`` of ``Ts``, default 5 %,
+    hence no gaps), the time base is that topic's own samples: sample ``k`` at
+    its own stamp ``t_k``.  Otherwise it is the grid ``t_k = t_0 + k Ts``, with
+    ``t_0`` the topic's first stamp.  A topic whose stamps coincide one to one
+    with the time base's ``t_k`` within ``tolerance * Ts`` (its period within
+    the tolerance of ``Ts``, every message within the tolerance of its nearest
+    ``t_k``, no two at the same one) is taken sample by sample, unchanged
+    (*exact* match: in a lockstep run all topics share the
+    simulator's clock, exactly on the grid; a board driver stamps the field and
+    currents of one record alike, uniform but slowly drifting against any fixed
+    grid; either way the data set is exactly the published sequence).
+    Otherwise outputs are resampled by linear interpolation at the ``t_k`` and
+    inputs by zero-order hold: the input at ``t_k`` is the last input stamped at
+    or before ``t_k`` (within the tolerance), which is the value the plant was
+    holding.  Samples where some topic has no data yet (or any more: an input
+    counts for one of its own periods after its last message, to the end if it
+    has only one) are trimmed from the start and the end.
 
 Gaps
     Each topic is checked against its own sample period (estimated as for
@@ -152,6 +159,9 @@ class Alignment:
         Per source, how it was aligned.
     trimmed : tuple of int
         Samples of the base trimmed at the start and at the end.
+    base : {'grid', 'stamps'}
+        The time base: the uniform grid ``t_0 + k Ts``, or the first output's own
+        (uniform) stamps.
     """
 
     t0_ns: int
@@ -159,6 +169,7 @@ class Alignment:
     values: tuple[np.ndarray, ...]
     reports: tuple[SourceReport, ...]
     trimmed: tuple[int, int]
+    base: str = 'grid'
 
     @property
     def N(self) -> int:  # noqa: N802 - sample count, as IdData
@@ -256,7 +267,7 @@ def _first_gap_error(gaps: Sequence[Gap]) -> BagError:
 
 def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool = False,
           tolerance: float = TOLERANCE) -> Alignment:
-    """Align topics on the uniform time base of the first output (see the module docstring).
+    """Align topics on the time base of the first output (see the module docstring).
 
     Parameters
     ----------
@@ -300,8 +311,13 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
         raise BagError(f'Ts must be a positive sample time in s, got {Ts!r}')
     ts_ns, tol_ns = Ts * 1e9, tolerance * Ts * 1e9
     t0 = int(base_stamps[0])
-    count = int(np.floor((int(base_stamps[-1]) - t0 + tol_ns) / ts_ns)) + 1
-    grid = t0 + np.rint(np.arange(count) * ts_ns).astype(np.int64)
+    own = bool(np.all(np.abs(np.diff(base_stamps) - ts_ns) <= tol_ns))
+    if own:  # uniform sample to sample: the base is the topic's own samples
+        grid = base_stamps
+    else:
+        count = int(np.floor((int(base_stamps[-1]) - t0 + tol_ns) / ts_ns)) + 1
+        grid = t0 + np.rint(np.arange(count) * ts_ns).astype(np.int64)
+    count = int(grid.size)
 
     gaps_all: list[Gap] = []
     first_ok, last_ok = 0, count - 1
@@ -338,24 +354,36 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
                                     int(source.stamps.size) - dups, period, method, dups, filled))
     values = tuple(np.ascontiguousarray(r[0][window]) for r in results)
     return Alignment(int(grid[first_ok]), Ts, values, tuple(reports),
-                     (first_ok, count - 1 - last_ok))
+                     (first_ok, count - 1 - last_ok), 'stamps' if own else 'grid')
+
+
+def _nearest(grid: np.ndarray, stamps: np.ndarray) -> np.ndarray:
+    """Index of the time base sample nearest to each stamp (both increasing, int64 ns)."""
+    if grid.size == 1:
+        return np.zeros(stamps.size, dtype=np.int64)
+    right = np.clip(np.searchsorted(grid, stamps), 1, grid.size - 1)
+    left = right - 1
+    return np.where(stamps - grid[left] <= grid[right] - stamps, left, right)
 
 
 def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray,
                           ts_ns: float, tol_ns: float, period: float
                           ) -> tuple[np.ndarray, str, int, int]:
-    """Output: exact sample match if every message is on the grid, else linear interpolation.
+    """Output: exact sample match if every message is on the time base, else linear.
 
-    A topic at another rate whose messages happen to lie on grid points (1 kHz
-    on a 5 kHz base) is reported as ``'linear'``: most of its samples are
+    ``grid`` (int64 ns, increasing) is the time base, uniform or the first
+    output's own stamps. Every message within the base's span must lie within
+    ``tol_ns`` of its nearest base sample, one message per base sample. A topic
+    at another rate whose messages happen to lie on base samples (1 kHz on a
+    5 kHz base) is reported as ``'linear'``: most of its samples are
     interpolated.
     """
     first = int(np.searchsorted(grid, stamps[0] - tol_ns, side='left'))
     last = int(np.searchsorted(grid, stamps[-1] + tol_ns, side='right')) - 1
-    k = np.rint((stamps - grid[0]) / ts_ns).astype(np.int64)
-    inside = (k >= 0) & (k < grid.size)
-    k_in = k[inside]
-    on_grid = bool(np.all(np.abs(stamps[inside] - grid[k_in]) <= tol_ns))
+    inside = (stamps >= grid[0] - 0.5 * ts_ns) & (stamps < grid[-1] + 0.5 * ts_ns)
+    k_in = _nearest(grid, stamps[inside])
+    on_grid = bool(np.all(np.abs(stamps[inside] - grid[k_in]) <= tol_ns)
+                   and np.all(np.diff(k_in) > 0))
     t = (stamps - stamps[0]).astype(float)
     tg = (grid - stamps[0]).astype(float)
     out = np.empty((grid.size, values.shape[1]))
@@ -364,7 +392,7 @@ def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarr
     same_rate = abs(period * 1e9 - ts_ns) <= tol_ns
     if not (on_grid and same_rate):
         return out, 'linear', first, last
-    # every message sits on its grid point: take it unchanged; only dropped samples
+    # every message sits on its base sample: take it unchanged; only dropped samples
     # (gaps) keep the interpolated value
     out[k_in] = values[inside]
     return out, 'exact', first, last

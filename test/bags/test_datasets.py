@@ -45,6 +45,7 @@ def test_lockstep_run_gives_back_the_exact_sequence(lockstep_bag, run):
     assert [(r.topic, r.clock, r.method) for r in ds.alignment.reports] == [
         (SENSOR, 'header', 'exact'), (CURRENTS, 'header', 'exact'), (COMMAND, 'log', 'exact')]
     assert ds.gaps == () and ds.alignment.trimmed == (0, 0)
+    assert ds.alignment.base == 'stamps'  # uniform: the sensor's own stamps, on the grid
     assert ds.metadata == METADATA
     est, val = ds.split(0.5)
     assert est.N == val.N == 500
@@ -121,6 +122,7 @@ def test_period_estimate_does_not_drift_at_3khz():
     al = align([Source('/y', stamps, np.arange(30000.0), 'output')])
     assert al.Ts == pytest.approx(1 / 3000, rel=1e-9)
     assert al.reports[0].method == 'exact' and al.N == 30000
+    assert al.base == 'stamps' and al.t0_ns == 0
 
 
 def test_unknown_topic_field_and_bad_specs(lockstep_bag):
