@@ -257,7 +257,12 @@ class RecorderNode(Node):
             if is_clock:
                 sec, nanosec = _CLOCK.unpack_from(data, 4)
                 self._clock_ns = sec * 1_000_000_000 + nanosec
-            stamp = self._clock_ns if by_topic else clock.now().nanoseconds
+            if by_topic:
+                stamp = self._clock_ns
+            elif clock.ros_time_is_active:  # use_sim_time: the newest /clock
+                stamp = clock.now().nanoseconds
+            else:  # system time, as clock.now() gives it, without its Time object (3 us)
+                stamp = time.time_ns()
             try:
                 write(handle, stamp, data)
             except BagError:  # closed while this message was in flight
