@@ -323,15 +323,10 @@ class RecordDecoder:
 
     # -- internals --------------------------------------------------------------
 
-    def _views(self, buf: bytes, n: int, words: np.ndarray | None = None) -> _Run:
+    def _views(self, buf: bytes, n: int) -> _Run:
         """Timestamp (n,), field (n, N, 3) and PWM (n, 4) views of n aligned records."""
-        width = self._size // 4
-        if words is None:
-            words = np.frombuffer(buf, '<u4', count=n * width)
-        rows = words.reshape(n, width)
-        field = rows.view('<f4')[:, 1 : 1 + 3 * self.n_sensors].reshape(n, self.n_sensors, 3)
-        pwm = rows.view('<i2')[:, -4:]
-        return rows[:, 0], field, pwm
+        records = np.frombuffer(buf, self._dtype, count=n)
+        return records['timestamp'], records['field'], records['pwm']
 
     def _run_locked(self, out: list[_Run]) -> bool:
         """Decode aligned records; return True if the boundary was lost."""
@@ -346,10 +341,10 @@ class RecordDecoder:
                 self._head = False
             return False
         bounds = self.bounds
-        words = np.frombuffer(buf, '<u4', count=n * self._size // 4)
-        ts, field, pwm = self._views(buf, n, words)
+        ts, field, pwm = self._views(buf, n)
         bad = first_bad_record(
-            words.reshape(n, self._size // 4), start, self._prev_ts, 3 * self.n_sensors,
+            np.frombuffer(buf, '<u4', count=n * size // 4).reshape(n, size // 4), start,
+            self._prev_ts, 3 * self.n_sensors,
             bounds.min_step_us, bounds.max_step_us, self._field_bits, PWM_FULL_SCALE,
         )
         ok = bad == n
