@@ -15,10 +15,12 @@ QoS (as the driver's docstring states it):
   the excitation node's, is then required);
 * markers: RELIABLE, KEEP_LAST 1 (RViz's default); diagnostics: KEEP_LAST 10.
 
-Message builders come in two kinds: plain ones returning message objects
-(tests, slow paths) and :class:`RawTemplate`, which serialises a message once
-and then only patches the stamp and the varying float64 fields into the CDR
-bytes, for publishing at 5 kHz with ``publish(bytes)``.
+Message builders come in three kinds: plain ones returning message objects
+(tests, slow paths); :class:`RawTemplate`, which serialises a message once and
+then only patches the stamp and the varying float64 fields into the CDR bytes,
+for publishing at 5 kHz with ``publish(bytes)``; and batch serialisers
+(``*_batch``, :mod:`maglev_ros.nodes.cdr_batch`) that do the same for a burst
+of samples at once.
 """
 
 from __future__ import annotations
@@ -33,10 +35,10 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from nav_msgs.msg import Odometry
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
-from rclpy.serialization import serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
 
+from maglev_ros.nodes.cdr_batch import RawMessageBatch, cdr_layout
 from maglev_ros.nodes.scheduling import relax_event_threads
 
 __all__ = [
@@ -56,10 +58,12 @@ __all__ = [
     'TRUE_STATE_TOPIC',
     'RawTemplate',
     'clock_template',
+    'currents_batch',
     'currents_message',
     'currents_template',
     'diagnostic_array',
     'euler_to_quaternion',
+    'field_batch',
     'field_message',
     'field_template',
     'make_executor',
@@ -68,6 +72,7 @@ __all__ = [
     'declare_parameters',
     'spin',
     'field_topic',
+    'odometry_batch',
     'odometry_message',
     'odometry_template',
     'odometry_values',
@@ -429,27 +434,9 @@ class RawTemplate:
         n_values: int,
         stamp: Callable | None = None,
     ) -> None:
-        stamp_of = stamp or (lambda m: m.header.stamp)
-        time = stamp_of(template)
-        time.sec = 0x1234_5678
-        time.nanosec = 0x2345_6789
-        sentinels = [1.2345678901234567e-300 * (j + 3) for j in range(n_values)]
-        if n_values:
-            set_values(template, sentinels)
-        raw = serialize_message(template)
-        if raw[:2] != b'\x00\x01':
-            raise ValueError(f'unexpected CDR encapsulation {raw[:4].hex()}')
-
-        def find(pattern: bytes) -> int:
-            offset = raw.find(pattern)
-            if offset < 0 or raw.find(pattern, offset + 1) >= 0:
-                raise ValueError('cannot locate a field in the serialised template')
-            return offset
-
-        self._stamp_at = find(struct.pack('<i', 0x1234_5678))
-        if find(struct.pack('<I', 0x2345_6789)) != self._stamp_at + 4:
-            raise ValueError('stamp sec and nanosec are not adjacent')
-        offsets = [find(struct.pack('<d', v)) for v in sentinels]
+        layout = cdr_layout(template, set_values, n_values, stamp)
+        self._stamp_at = layout.stamp_offset
+        offsets = layout.value_offsets
         self._runs: list[tuple[int, int, struct.Struct]] = []  # (offset, first, packer)
         j = 0
         while j < n_values:
@@ -458,10 +445,10 @@ class RawTemplate:
                 end += 1
             self._runs.append((offsets[j], j, struct.Struct(f'<{end - j}d')))
             j = end
-        self._template = bytes(raw)
+        self._template = layout.template
         self._stamp_packer = struct.Struct('<iI')
         self.n_values = n_values
-        self.size = len(raw)
+        self.size = len(layout.template)
 
     def serialise(self, t_ns: int, values: Sequence[float] = ()) -> bytes:
         """CDR bytes of one message stamped ``t_ns`` (ns) with ``values`` (n_values,)."""
@@ -491,6 +478,26 @@ def odometry_template() -> RawTemplate:
     msg.header.frame_id = BASE_FRAME
     msg.child_frame_id = MAGNET_FRAME
     return RawTemplate(msg, _set_odometry, 13)
+
+
+def field_batch(frame: str) -> RawMessageBatch:
+    """Batch serialiser of a MagneticField in frame ``frame`` (3 values, T)."""
+    msg = MagneticField()
+    msg.header.frame_id = frame
+    return RawMessageBatch(msg, _set_field, 3)
+
+
+def currents_batch() -> RawMessageBatch:
+    """Batch serialiser of the currents JointState (4 efforts, A)."""
+    return RawMessageBatch(JointState(name=list(COIL_NAMES), effort=[0.0] * 4), _set_effort, 4)
+
+
+def odometry_batch() -> RawMessageBatch:
+    """Batch serialiser of the true-state Odometry (13 values of :func:`odometry_values`)."""
+    msg = Odometry()
+    msg.header.frame_id = BASE_FRAME
+    msg.child_frame_id = MAGNET_FRAME
+    return RawMessageBatch(msg, _set_odometry, 13)
 
 
 def clock_template() -> RawTemplate:

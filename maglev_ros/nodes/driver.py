@@ -63,7 +63,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
@@ -74,10 +73,12 @@ from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
 from maglev_ros.hardware.v2x_stream import DecoderStats, RecordDecoder
 from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
+from maglev_ros.nodes.cdr_batch import SampleSerialiser
 from maglev_ros.nodes.contract import (  # shared with the simulator
-    COIL_NAMES,
     COMMAND_QOS,
     SENSOR_QOS,
+    currents_batch,
+    field_batch,
     run_nodes,
 )
 
@@ -88,172 +89,6 @@ DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
 _ZERO = np.zeros(4)
-
-
-class RawMessageBatch:
-    """Serialise many messages of one type that differ only in stamp and doubles.
-
-    Publishing a message object costs a Python-to-C conversion per message;
-    publishing serialised bytes (``Publisher.publish(bytes)``) does not. A
-    template is serialised once with sentinel values; the byte offsets of
-    the stamp and of each varying float64 are found from the sentinels, and
-    a batch of messages is then filled in with numpy.
-
-    Parameters
-    ----------
-    template : message
-        A message with the constant parts (frame id, names, array lengths)
-        set; it is modified (sentinels written).
-    set_values : callable
-        ``set_values(msg, values)`` writes a sequence of k floats into the
-        message (the varying float64 fields).
-    n_values : int
-        k, the number of varying float64 fields.
-    """
-
-    def __init__(self, template, set_values, n_values: int) -> None:
-        template.header.stamp.sec = 0x1234_5678
-        template.header.stamp.nanosec = 0x2345_6789
-        sentinels = [1.2345678901234567e-300 * (j + 3) for j in range(n_values)]
-        set_values(template, sentinels)
-        raw = serialize_message(template)
-        if raw[:2] != b'\x00\x01':  # not little-endian CDR: not supported
-            raise ValueError(f'unexpected CDR encapsulation {raw[:4].hex()}')
-
-        def find(pattern: bytes) -> int:
-            offset = raw.find(pattern)
-            if offset < 0 or raw.find(pattern, offset + 1) >= 0:
-                raise ValueError('cannot locate a field in the serialised template')
-            return offset
-
-        doubles = [find(np.float64(v).tobytes()) for v in sentinels]
-        names = ['sec', 'nanosec']
-        formats = ['<i4', '<u4']
-        offsets = [find(np.int32(0x1234_5678).tobytes()), find(np.uint32(0x2345_6789).tobytes())]
-        if doubles == list(range(doubles[0], doubles[0] + 8 * n_values, 8)):
-            names.append('values')  # contiguous (x, y, z; effort): one assignment
-            formats.append(('<f8', (n_values,)))
-            offsets.append(doubles[0])
-        else:
-            names += [f'v{j}' for j in range(n_values)]
-            formats += ['<f8'] * n_values
-            offsets += doubles
-        # A structured view of one serialised message: numpy writes the
-        # (possibly unaligned) stamp and float64 fields in place.
-        self._dtype = np.dtype(
-            {'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': len(raw)}
-        )
-        self._template = np.frombuffer(raw, dtype=np.uint8)
-        self.size = len(raw)
-
-    def serialise(self, sec: np.ndarray, nanosec: np.ndarray, values: np.ndarray) -> list[bytes]:
-        """Serialise n messages.
-
-        Parameters
-        ----------
-        sec, nanosec : ndarray of int, shape (n,)
-            Header stamps.
-        values : ndarray of float, shape (n, k)
-            The varying float64 fields, in the order of ``set_values``.
-
-        Returns
-        -------
-        list of bytes
-            n serialised messages.
-        """
-        n = sec.shape[0]
-        rows = np.empty(n, dtype=self._dtype)
-        rows.view(np.uint8).reshape(n, self.size)[:] = self._template
-        rows['sec'] = sec
-        rows['nanosec'] = nanosec
-        if 'values' in self._dtype.names:
-            rows['values'] = values
-        else:
-            for j in range(values.shape[1]):
-                rows[f'v{j}'] = values[:, j]
-        data = rows.tobytes()
-        size = self.size
-        return [data[i : i + size] for i in range(0, n * size, size)]
-
-
-class SampleSerialiser:
-    """Serialise, per sample, one message of each of several layouts in one go.
-
-    Parameters
-    ----------
-    parts : list of RawMessageBatch
-        The message layouts of one sample (e.g. the field of each sensor,
-        then the currents); all share the sample's stamp.
-    """
-
-    def __init__(self, parts: list[RawMessageBatch]) -> None:
-        names, formats, offsets = [], [], []
-        base = 0
-        self._fields = []
-        for p, part in enumerate(parts):
-            layout = part._dtype
-            for name in layout.names:
-                fmt, offset = layout.fields[name][:2]
-                names.append(f'{p}:{name}')
-                formats.append(fmt)
-                offsets.append(base + offset)
-            self._fields.append([f'{p}:{name}' for name in layout.names])
-            base += part.size
-        self._dtype = np.dtype(
-            {'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': base}
-        )
-        self._template = np.concatenate([part._template for part in parts])
-        self._sizes = [part.size for part in parts]
-        self.size = base
-        self._rows: dict[int, np.ndarray] = {}  # per n: rows holding the template (reused)
-        self._bounds: dict[int, list[tuple[int, int]]] = {}  # per n: (start, end) of messages
-
-    def serialise(
-        self, sec: np.ndarray, nanosec: np.ndarray, values: list[np.ndarray]
-    ) -> list[bytes]:
-        """Serialise n samples.
-
-        Parameters
-        ----------
-        sec, nanosec : ndarray of int, shape (n,)
-            Header stamps.
-        values : list of ndarray, one per part, shape (n, k_part)
-            The varying float64 fields of each part.
-
-        Returns
-        -------
-        list of bytes
-            n * len(parts) messages, sample by sample, parts in order.
-        """
-        n = sec.shape[0]
-        rows = self._rows.get(n)
-        if rows is None:
-            # the template's constant bytes are written once; every call overwrites all
-            # varying fields (stamps, values), so the rows can be reused
-            rows = np.empty(n, dtype=self._dtype)
-            rows.view(np.uint8).reshape(n, self.size)[:] = self._template
-            ends = np.cumsum(np.tile(self._sizes, n)).tolist()
-            self._bounds[n] = list(zip([0] + ends[:-1], ends, strict=True))
-            if len(self._rows) < 64:  # bursts have a few typical lengths
-                self._rows[n] = rows
-        for fields, part_values in zip(self._fields, values, strict=True):
-            rows[fields[0]] = sec
-            rows[fields[1]] = nanosec
-            if len(fields) == 3:
-                rows[fields[2]] = part_values
-            else:
-                for j, name in enumerate(fields[2:]):
-                    rows[name] = part_values[:, j]
-        data = rows.tobytes()
-        return [data[start:end] for start, end in self._bounds[n]]
-
-
-def _set_field(msg: MagneticField, values) -> None:
-    msg.magnetic_field.x, msg.magnetic_field.y, msg.magnetic_field.z = values
-
-
-def _set_effort(msg: JointState, values) -> None:
-    msg.effort = list(values)
 
 
 class DriverParameterError(ValueError):
@@ -494,16 +329,9 @@ class DriverNode(Node):
             self.create_publisher(MagneticField, f'maglev/sensor_{k}/field', SENSOR_QOS)
             for k in range(cfg.n_sensors)
         ]
-        parts = []
-        for frame in cfg.sensor_frames:
-            template = MagneticField()
-            template.header.frame_id = frame
-            parts.append(RawMessageBatch(template, _set_field, 3))
         self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
-        parts.append(
-            RawMessageBatch(JointState(name=list(COIL_NAMES), effort=[0.0] * 4), _set_effort, 4)
-        )
-        self._serialiser = SampleSerialiser(parts)
+        self._serialiser = SampleSerialiser(
+            [field_batch(frame) for frame in cfg.sensor_frames] + [currents_batch()])
         # per sample: the field of each sensor, then the currents (SampleSerialiser order)
         self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]
         self._publish_calls: dict[int, list] = {}  # per burst length: bound publish_raw calls

@@ -495,35 +495,6 @@ def test_main_exits_2_on_invalid_parameters(domain):
     assert "firmware must be 'v2x' or 'v4x', got 'v9x'" in out
 
 
-def test_raw_message_batch_matches_rclpy_serialisation():
-    from rclpy.serialization import deserialize_message, serialize_message
-
-    from maglev_ros.nodes.driver import COIL_NAMES, RawMessageBatch, _set_effort, _set_field
-
-    rng = np.random.default_rng(0)
-    sec = rng.integers(0, 2**31 - 1, 50)
-    nanosec = rng.integers(0, 10**9, 50)
-    values = rng.normal(0, 0.05, (50, 4))
-    template = MagneticField()
-    template.header.frame_id = 'maglev_sensor_11'
-    fields = RawMessageBatch(template, _set_field, 3).serialise(sec, nanosec, values[:, :3])
-    currents = RawMessageBatch(
-        JointState(name=list(COIL_NAMES), effort=[0.0] * 4), _set_effort, 4
-    ).serialise(sec, nanosec, values)
-    for i in range(50):
-        expected = MagneticField()
-        expected.header.frame_id = 'maglev_sensor_11'
-        expected.header.stamp.sec = int(sec[i])
-        expected.header.stamp.nanosec = int(nanosec[i])
-        _set_field(expected, values[i, :3])
-        got = deserialize_message(fields[i], MagneticField)
-        assert got == expected
-        assert len(fields[i]) == len(serialize_message(expected))
-        joint = deserialize_message(currents[i], JointState)
-        assert joint.name == COIL_NAMES and list(joint.effort) == list(values[i])
-        assert (joint.header.stamp.sec, joint.header.stamp.nanosec) == (sec[i], nanosec[i])
-
-
 def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypatch):
     board, _ = v2x_board()
     with board:

@@ -1,0 +1,87 @@
+"""Messages serialised by patching CDR bytes equal rclpy's own serialisation.
+
+Compared after deserialisation, with equal lengths: rclpy leaves the alignment
+padding after a string uninitialised, so those bytes differ from run to run.
+"""
+
+import numpy as np
+import pytest
+from nav_msgs.msg import Odometry
+from rclpy.serialization import deserialize_message, serialize_message
+from sensor_msgs.msg import JointState, MagneticField
+
+from maglev_ros.nodes import contract
+from maglev_ros.nodes.cdr_batch import SampleSerialiser, cdr_layout
+
+N = 50
+
+
+@pytest.fixture
+def stamps():
+    rng = np.random.default_rng(0)
+    return rng.integers(0, 2**31 - 1, N), rng.integers(0, 10**9, N)
+
+
+def check(messages, cls, build):
+    """Each serialised message deserialises to ``build(i)`` and has its length."""
+    for i, raw in enumerate(messages):
+        expected = build(i)
+        assert deserialize_message(raw, cls) == expected
+        assert len(raw) == len(serialize_message(expected))
+
+
+def test_batches_equal_message_objects(stamps):
+    sec, nanosec = stamps
+    rng = np.random.default_rng(1)
+    field = rng.normal(0.0, 0.05, (N, 3))
+    currents = rng.normal(0.0, 1.0, (N, 4))
+    states = rng.normal(0.0, 0.01, (N, 12))
+    odometry = np.array([contract.odometry_values(x) for x in states])
+    t_ns = [int(s) * 1_000_000_000 + int(ns) for s, ns in zip(sec, nanosec, strict=True)]
+    check(contract.field_batch(contract.sensor_frame(11)).serialise(sec, nanosec, field),
+          MagneticField, lambda i: contract.field_message(11, t_ns[i], field[i]))
+    check(contract.currents_batch().serialise(sec, nanosec, currents),
+          JointState, lambda i: contract.currents_message(t_ns[i], currents[i]))
+    check(contract.odometry_batch().serialise(sec, nanosec, odometry),
+          Odometry, lambda i: contract.odometry_message(t_ns[i], states[i]))
+
+
+def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
+    sec, nanosec = stamps
+    rng = np.random.default_rng(2)
+    fields = rng.normal(0.0, 0.05, (N, 2, 3))
+    currents = rng.normal(0.0, 1.0, (N, 4))
+    serialiser = SampleSerialiser([contract.field_batch(contract.sensor_frame(0)),
+                                   contract.field_batch(contract.sensor_frame(1)),
+                                   contract.currents_batch()])
+    for n in (N, 5, N):  # reused rows per burst length keep nothing from earlier calls
+        messages = serialiser.serialise(sec[:n], nanosec[:n], [fields[:n, 0], fields[:n, 1],
+                                                               currents[:n]])
+        assert len(messages) == 3 * n
+        for i in range(n):
+            t_ns = int(sec[i]) * 1_000_000_000 + int(nanosec[i])
+            for k in range(2):
+                got = deserialize_message(messages[3 * i + k], MagneticField)
+                assert got == contract.field_message(k, t_ns, fields[i, k])
+            joint = deserialize_message(messages[3 * i + 2], JointState)
+            assert joint == contract.currents_message(t_ns, currents[i])
+
+
+def test_raw_template_equals_message_objects():
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        t_ns = int(rng.integers(0, 2_000_000_000 * 10**9))  # sec within int32
+        x = rng.normal(0.0, 0.01, 12)
+        got = contract.odometry_template().serialise(t_ns, contract.odometry_values(x).tolist())
+        expected = contract.odometry_message(t_ns, x)
+        check([got], Odometry, lambda i, expected=expected: expected)
+
+
+def test_layout_refuses_an_ambiguous_template():
+    msg = JointState(name=['a'], effort=[0.0, 0.0])
+
+    def same_twice(m, values):  # both efforts get one sentinel: not locatable
+        m.effort = [values[0], values[0]]
+
+    with pytest.raises(ValueError, match='cannot locate'):
+        cdr_layout(msg, same_twice, 1)
