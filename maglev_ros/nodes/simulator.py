@@ -78,6 +78,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.cdr_batch import SampleSerialiser
 from maglev_ros.physics import (
     FIELD_MODELS,
     KINEMATICS,
@@ -423,6 +424,16 @@ class SimulatorNode(Node):
         self._current_handle = self._current_pub.handle
         self._state_handle = None if self._state_pub is None else self._state_pub.handle
         self._clock_handle = None if self._clock_pub is None else self._clock_pub.handle
+        # real time: a burst of samples serialised at once, published sample by sample
+        parts = [contract.field_batch(contract.sensor_frame(k)) for k in self.sensors]
+        publishers = list(self._field_handles)
+        if self._state_handle is not None:
+            parts.append(contract.odometry_batch())
+            publishers.append(self._state_handle)
+        parts.append(contract.currents_batch())
+        publishers.append(self._current_handle)
+        self._burst_serialiser = SampleSerialiser(parts)
+        self._burst_publishers = [handle.publish_raw for handle in publishers]
         self._first_reading = self.sim.reset()
         self._stop = threading.Event()
         self._closed = False
@@ -544,6 +555,85 @@ class SimulatorNode(Node):
         self._publish_sample(reading)
         return True
 
+    def _step_burst(self, count: int) -> int:
+        """Real time: step up to ``count`` samples with the held command, publish them.
+
+        The caller holds the lock, so a command or a reset arriving meanwhile
+        takes effect from the next burst on; the samples are published
+        together (one serialisation, then the messages sample by sample).
+
+        Returns
+        -------
+        int
+            The number of samples stepped (``count`` unless paused or crashed).
+        """
+        sim = self.sim
+        indices, readings, states, currents = [], [], [], []
+        crashed = False
+        for _ in range(count):
+            if self.paused or sim.crashed:
+                break
+            if self._got_command and self._steps_since_command >= 1:
+                self.counters['held_samples'] += 1
+            self._steps_since_command += 1
+            reading = sim.step(self._command)
+            if sim.crashed:
+                crashed = True
+                break
+            indices.append(sim.samples)
+            readings.append(reading)
+            states.append(sim.state)
+            currents.append(sim.currents)
+        if indices:
+            self._publish_burst(indices, np.array(readings), states, np.array(currents))
+        if crashed:
+            self._on_crash()
+        return len(indices) + crashed
+
+    def _publish_burst(self, indices: list[int], readings: np.ndarray,
+                       states: list[np.ndarray], currents: np.ndarray) -> None:
+        """Publish n samples at once, the messages :meth:`_publish_sample` would publish.
+
+        Parameters
+        ----------
+        indices : list of int, length n
+            Sample numbers (``Simulator.samples`` after each step).
+        readings : ndarray, shape (n, 3 k_all)
+            Sensor readings, T.
+        states : list of ndarray, shape (12,) each
+            States after each step.
+        currents : ndarray, shape (n, 4)
+            Coil currents, A.
+
+        The ``/clock`` messages of the burst go first; the rest is serialised
+        in one go and published sample by sample.
+        """
+        n = len(indices)
+        stamps = self._offset_ns + np.rint(np.array(indices) * self._dt_ns).astype(np.int64)
+        if self._clock_pub is not None:
+            for index, t_ns in zip(indices, stamps.tolist(), strict=True):
+                if index % self._clock_stride == 0:
+                    self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
+        values = [readings[:, self._columns[3 * j : 3 * j + 3]]
+                  for j in range(len(self.sensors))]
+        if self._state_pub is not None:
+            odometry = np.empty((n, 13))
+            for i, state in enumerate(states):
+                key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
+                if key != self._odom_state:
+                    self._odom_cache = contract.odometry_values(state).tolist()
+                    self._odom_state = key
+                odometry[i] = self._odom_cache
+            values.append(odometry)
+        values.append(currents)
+        sec, nanosec = np.divmod(stamps, 1_000_000_000)
+        messages = self._burst_serialiser.serialise(sec, nanosec, values)
+        for publish, message in zip(self._burst_publishers * n, messages, strict=True):
+            publish(message)
+        self._last_state = states[-1]
+        self.last_stamp_ns = int(stamps[-1])
+        self.counters['samples'] += n
+
     def _on_crash(self) -> None:
         sim = self.sim
         self.counters['crashes'] += 1
@@ -632,15 +722,8 @@ class SimulatorNode(Node):
                 base, done = now - dt, 0
                 due = 1
             try:
-                for _ in range(due):
-                    with self._lock:
-                        if self.paused or self.sim.crashed:
-                            break
-                        if self._got_command and self._steps_since_command >= 1:
-                            self.counters['held_samples'] += 1
-                        self._steps_since_command += 1
-                        self._step(self._command)
-                    done += 1
+                with self._lock:
+                    done += self._step_burst(due)
             except Exception:  # publishing fails once the context shuts down (signal)
                 if self.context.ok() and not self._stop.is_set():
                     raise

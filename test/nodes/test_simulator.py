@@ -244,6 +244,49 @@ def test_crash_is_reported_and_reset_recovers(make_peer):
     assert stamps[before] == stamps[before - 1] + 200_000
 
 
+def euler_of(q):
+    """ZYX Euler angles (alpha, beta, gamma) of a geometry_msgs Quaternion."""
+    w, x, y, z = q.w, q.x, q.y, q.z
+    return (np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+            np.arcsin(2 * (w * y - z * x)),
+            np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+def test_realtime_bursts_publish_the_core_h_until_the_crash(make_peer):
+    # real time steps and publishes in bursts (1 ms, 5 samples): every sample of the
+    # free, falling magnet arrives, its fields are h(x, i) of its own published state,
+    # /clock comes once per burst, and the burst that crashes publishes up to the crash
+    x0 = [0.001, 0.0, 0.0365] + [0.0] * 9
+    peer = make_peer(lockstep=False, initial_state=x0, coil_dynamics=False, sensor_delay=0,
+                     marker_rate=0.0, diagnostics_period=0.2)
+    sim = peer.sim
+    peer.call(peer.pause_client, SetBool.Request(data=False))
+    wait_for(lambda: sim.counters['crashes'] == 1, what='the crash')
+    time.sleep(0.5)  # samples in flight
+    n = len(peer.currents)
+    stamps = np.array([stamp_ns(m) for m in peer.currents])
+    assert n > 100 and np.all(np.diff(stamps) == 200_000)  # none lost, none repeated
+    assert stamps[-1] < sim.sim.crash_time * 1e9
+    by_stamp = {k: {stamp_ns(m): m for m in peer.fields[k]} for k in sim.sensors}
+    states = {stamp_ns(m): m for m in peer.states}
+    model = sim.sim.model
+    for msg in peer.currents:
+        t_ns = stamp_ns(msg)
+        pose = states[t_ns].pose.pose
+        x = np.zeros(12)
+        x[0:3] = pose.position.x, pose.position.y, pose.position.z
+        x[3:6] = euler_of(pose.orientation)
+        h = model.measurement(x, np.array(msg.effort))
+        for j, k in enumerate(sim.sensors):
+            field = by_stamp[k][t_ns].magnetic_field
+            np.testing.assert_allclose([field.x, field.y, field.z], h[3 * j : 3 * j + 3],
+                                       rtol=1e-9, atol=1e-15)
+    assert np.ptp([states[t].pose.pose.position.x for t in stamps]) > 1e-4  # it moved
+    clock = np.array([stamp_ns(m) for m in peer.clock])
+    clock = clock[(clock >= stamps[0]) & (clock <= stamps[-1])]
+    np.testing.assert_array_equal(clock, stamps[stamps % 1_000_000 == 0])  # one per burst
+
+
 def test_lockstep_timeout_holds_the_last_command(make_peer):
     peer = make_peer([[0.2, 0.0, 0.0, 0.0]], coil_dynamics=False, command_timeout=0.1,
                      marker_rate=0.0)
