@@ -102,17 +102,20 @@ class CurrentScaling:
         counts = np.rint(amps * self.counts_per_ampere)
         return np.clip(counts, -PWM_FULL_SCALE, PWM_FULL_SCALE).astype(np.int64)
 
-    def to_current(self, counts: ArrayLike) -> NDArray[np.float64]:
+    def to_current(self, counts: ArrayLike, out: NDArray[np.float64] | None = None
+                   ) -> NDArray[np.float64]:
         """Convert PWM counts to the steady-state coil currents they imply.
 
         Parameters
         ----------
         counts : array_like of int, any shape
             PWM counts.
+        out : ndarray of float64, same shape, optional
+            Where to write the result.
 
         Returns
         -------
         ndarray of float64, same shape
-            Currents in ampere.
+            Currents in ampere (``out`` if given).
         """
-        return np.asarray(counts, dtype=float) / self.counts_per_ampere
+        return np.divide(counts, self.counts_per_ampere, out=out, dtype=np.float64)

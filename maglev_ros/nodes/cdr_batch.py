@@ -9,10 +9,10 @@ stamp and of each varying float64 are found from the sentinels
 (:func:`cdr_layout`), and messages are made by patching those bytes:
 
 * one at a time with ``struct`` (:class:`maglev_ros.nodes.contract.RawTemplate`);
-* a burst of samples at once with numpy (:class:`RawMessageBatch` for one
-  message type, :class:`SampleSerialiser` for several per sample, e.g. the
-  field of each sensor and the currents), what the driver and the real-time
-  simulator publish every millisecond.
+* a burst of samples at once in compiled code (:func:`fill_messages`;
+  :class:`RawMessageBatch` for one message type, :class:`SampleSerialiser`
+  for several per sample, e.g. the field of each sensor and the currents),
+  what the driver and the real-time simulator publish every millisecond.
 """
 
 from __future__ import annotations
@@ -22,9 +22,10 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from rclpy.serialization import serialize_message
 
-__all__ = ['CdrLayout', 'RawMessageBatch', 'SampleSerialiser', 'cdr_layout']
+__all__ = ['CdrLayout', 'RawMessageBatch', 'SampleSerialiser', 'cdr_layout', 'fill_messages']
 
 _SEC, _NANOSEC = 0x1234_5678, 0x2345_6789  # stamp sentinels
 
@@ -96,8 +97,46 @@ def cdr_layout(template, set_values: Callable, n_values: int,
     return CdrLayout(raw, stamp_offset, tuple(find(struct.pack('<d', v)) for v in sentinels))
 
 
+@njit(cache=True)
+def fill_messages(out: np.ndarray, template: np.ndarray, stamp_offsets: np.ndarray,
+                  value_offsets: np.ndarray, stamps_ns: np.ndarray, bits: np.ndarray) -> None:
+    """Write n samples' messages into ``out``: template bytes, stamps, float64 values.
+
+    Parameters
+    ----------
+    out : ndarray of uint8, shape (n * S,)
+        Output; sample i occupies ``out[i * S:(i + 1) * S]``.
+    template : ndarray of uint8, shape (S,)
+        The serialised messages of one sample, back to back.
+    stamp_offsets : ndarray of int64, shape (P,)
+        Offset of each message's stamp (int32 sec, uint32 nanosec) in a sample.
+    value_offsets : ndarray of int64, shape (V,)
+        Offset of each varying float64 in a sample.
+    stamps_ns : ndarray of int64, shape (n,)
+        Stamp of each sample, ns (>= 0).
+    bits : ndarray of uint64, shape (n, V)
+        The float64 values, as their bit patterns (``values.view(np.uint64)``).
+    """
+    size = template.shape[0]
+    for i in range(stamps_ns.shape[0]):
+        base = i * size
+        out[base : base + size] = template
+        sec = stamps_ns[i] // 1_000_000_000
+        nanosec = stamps_ns[i] - sec * 1_000_000_000
+        for offset in stamp_offsets:
+            at = base + offset
+            for b in range(4):
+                out[at + b] = (sec >> (8 * b)) & 0xFF
+                out[at + 4 + b] = (nanosec >> (8 * b)) & 0xFF
+        for v in range(value_offsets.shape[0]):
+            at = base + value_offsets[v]
+            word = bits[i, v]
+            for b in range(8):
+                out[at + b] = (word >> np.uint64(8 * b)) & np.uint64(0xFF)
+
+
 class RawMessageBatch:
-    """Serialise many messages of one type that differ only in stamp and float64s.
+    """The serialised layout of one message type whose stamp and k float64s vary.
 
     Parameters
     ----------
@@ -112,36 +151,18 @@ class RawMessageBatch:
     """
 
     def __init__(self, template, set_values: Callable, n_values: int) -> None:
-        layout = cdr_layout(template, set_values, n_values)
-        doubles = list(layout.value_offsets)
-        names = ['sec', 'nanosec']
-        formats = ['<i4', '<u4']
-        offsets = [layout.stamp_offset, layout.stamp_offset + 4]
-        if doubles == list(range(doubles[0], doubles[0] + 8 * n_values, 8)):
-            names.append('values')  # contiguous (x, y, z; effort): one assignment
-            formats.append(('<f8', (n_values,)))
-            offsets.append(doubles[0])
-        else:
-            names += [f'v{j}' for j in range(n_values)]
-            formats += ['<f8'] * n_values
-            offsets += doubles
-        # A structured view of one serialised message: numpy writes the
-        # (possibly unaligned) stamp and float64 fields in place.
-        self._dtype = np.dtype(
-            {'names': names, 'formats': formats, 'offsets': offsets,
-             'itemsize': len(layout.template)}
-        )
-        self._template = np.frombuffer(layout.template, dtype=np.uint8)
-        self.size = len(layout.template)
+        self.layout = cdr_layout(template, set_values, n_values)
+        self.n_values = n_values
+        self.size = len(self.layout.template)
         self._alone: SampleSerialiser | None = None  # for serialise()
 
-    def serialise(self, sec: np.ndarray, nanosec: np.ndarray, values: np.ndarray) -> list[bytes]:
+    def serialise(self, stamps_ns: np.ndarray, values: np.ndarray) -> list[bytes]:
         """Serialise n messages.
 
         Parameters
         ----------
-        sec, nanosec : ndarray of int, shape (n,)
-            Header stamps.
+        stamps_ns : ndarray of int, shape (n,)
+            Header stamps, ns.
         values : ndarray of float, shape (n, k)
             The varying float64 fields, in the order of ``set_values``.
 
@@ -152,11 +173,16 @@ class RawMessageBatch:
         """
         if self._alone is None:
             self._alone = SampleSerialiser([self])
-        return self._alone.serialise(sec, nanosec, [values])
+        return self._alone.serialise(stamps_ns, values)
 
 
 class SampleSerialiser:
     """Serialise, per sample, one message of each of several layouts in one go.
+
+    Per burst: one compiled call writes every message's bytes (template,
+    stamp, values), then the bytes are cut into messages at precomputed
+    bounds; about 10 us for a 5-sample burst of two messages a sample,
+    several times less than numpy field assignments.
 
     Parameters
     ----------
@@ -166,62 +192,53 @@ class SampleSerialiser:
     """
 
     def __init__(self, parts: list[RawMessageBatch]) -> None:
-        names, formats, offsets = [], [], []
+        stamps, values = [], []
         base = 0
-        self._fields = []
-        for p, part in enumerate(parts):
-            layout = part._dtype
-            for name in layout.names:
-                fmt, offset = layout.fields[name][:2]
-                names.append(f'{p}:{name}')
-                formats.append(fmt)
-                offsets.append(base + offset)
-            self._fields.append([f'{p}:{name}' for name in layout.names])
+        for part in parts:
+            stamps.append(base + part.layout.stamp_offset)
+            values += [base + offset for offset in part.layout.value_offsets]
             base += part.size
-        self._dtype = np.dtype(
-            {'names': names, 'formats': formats, 'offsets': offsets, 'itemsize': base}
-        )
-        self._template = np.concatenate([part._template for part in parts])
+        self._template = np.frombuffer(b''.join(p.layout.template for p in parts), np.uint8)
+        self._stamp_offsets = np.array(stamps, dtype=np.int64)
+        self._value_offsets = np.array(values, dtype=np.int64)
         self._sizes = [part.size for part in parts]
+        self.n_values = len(values)
         self.size = base
-        self._rows: dict[int, np.ndarray] = {}  # per n: rows holding the template (reused)
         self._bounds: dict[int, list[tuple[int, int]]] = {}  # per n: (start, end) of messages
 
-    def serialise(
-        self, sec: np.ndarray, nanosec: np.ndarray, values: list[np.ndarray]
-    ) -> list[bytes]:
+    def serialise(self, stamps_ns: np.ndarray, values) -> list[bytes]:
         """Serialise n samples.
 
         Parameters
         ----------
-        sec, nanosec : ndarray of int, shape (n,)
-            Header stamps.
-        values : list of ndarray, one per part, shape (n, k_part)
-            The varying float64 fields of each part.
+        stamps_ns : ndarray of int, shape (n,)
+            Header stamps, ns (>= 0).
+        values : ndarray of float, shape (n, V), or list of ndarray, shape (n, k_part)
+            The varying float64 fields of all parts, part after part (V is
+            the sum of the parts' k).
 
         Returns
         -------
         list of bytes
             n * len(parts) messages, sample by sample, parts in order.
         """
-        n = sec.shape[0]
-        rows = self._rows.get(n)
-        if rows is None:
-            # the template's constant bytes are written once; every call overwrites all
-            # varying fields (stamps, values), so the rows can be reused
-            rows = np.empty(n, dtype=self._dtype)
-            rows.view(np.uint8).reshape(n, self.size)[:] = self._template
+        stamps = np.ascontiguousarray(stamps_ns, dtype=np.int64)
+        n = stamps.shape[0]
+        if isinstance(values, list | tuple):
+            values = np.concatenate([np.asarray(v, dtype=np.float64).reshape(n, -1)
+                                     for v in values], axis=1)
+        values = np.ascontiguousarray(values, dtype=np.float64)
+        if values.shape != (n, self.n_values):
+            raise ValueError(f'values must have shape ({n}, {self.n_values}), '
+                             f'got {values.shape}')
+        out = np.empty(n * self.size, np.uint8)
+        fill_messages(out, self._template, self._stamp_offsets, self._value_offsets, stamps,
+                      values.view(np.uint64))
+        bounds = self._bounds.get(n)
+        if bounds is None:
             ends = np.cumsum(np.tile(self._sizes, n)).tolist()
-            self._bounds[n] = list(zip([0] + ends[:-1], ends, strict=True))
-            if len(self._rows) < 64:  # bursts have a few typical lengths
-                self._rows[n] = rows
-        for fields, part_values in zip(self._fields, values, strict=True):
-            rows[fields[0]] = sec
-            rows[fields[1]] = nanosec
-            if len(fields) == 3:
-                rows[fields[2]] = part_values
-            else:
-                for j, name in enumerate(fields[2:]):
-                    rows[name] = part_values[:, j]
-        data = rows.tobytes()
-        return [data[start:end] for start, end in self._bounds[n]]
+            bounds = list(zip([0] + ends[:-1], ends, strict=True))
+            if len(self._bounds) < 64:  # bursts have a few typical lengths
+                self._bounds[n] = bounds
+        data = out.tobytes()
+        return [data[start:end] for start, end in bounds]

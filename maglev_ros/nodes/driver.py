@@ -527,9 +527,12 @@ class DriverNode(Node):
             if len(batch):
                 self._board_clock.observe(int(batch.time_us[-1]), host_ns)
                 stamps = self._board_clock.to_host(batch.time_us)
-                field_t = batch.field_mT.astype(np.float64) * 1e-3  # mT -> T
-                currents = self.config.scaling.to_current(batch.pwm)
-                self._publish(stamps, field_t, currents)
+                n = len(batch)
+                values = np.empty((n, self._serialiser.n_values))  # each field (T), currents (A)
+                np.multiply(batch.field_mT.reshape(n, -1), 1e-3, out=values[:, :-4],
+                            dtype=np.float64)  # mT -> T
+                self.config.scaling.to_current(batch.pwm, out=values[:, -4:])
+                self._publish(stamps, values)
             return
         samples = []
         for item in self._telemetry.feed(data):
@@ -548,21 +551,19 @@ class DriverNode(Node):
             stamps = self._board_clock.to_host(board_us)
             field_t = np.stack([s.field_mT for s in samples]) * 1e-3
             currents = np.stack([s.current for s in samples])
-            self._publish(stamps, field_t, currents)
+            self._publish(stamps, np.hstack([field_t.reshape(len(samples), -1), currents]))
 
-    def _publish(self, stamps: np.ndarray, field_t: np.ndarray, currents: np.ndarray) -> None:
-        """Publish n samples: stamps (n,) ns, fields (n, N, 3) T, currents (n, 4) A.
+    def _publish(self, stamps: np.ndarray, values: np.ndarray) -> None:
+        """Publish n samples: stamps (n,) ns; values (n, 3 N + 4): each field (T), currents (A).
 
         Messages are serialised in one go (``SampleSerialiser``) and published
         as bytes; per sample, sensor fields first, then the currents.
         """
-        sec, nanosec = np.divmod(stamps, 1_000_000_000)
-        values = [field_t[:, k, :] for k in range(field_t.shape[1])] + [currents]
-        messages = self._serialiser.serialise(sec, nanosec, values)
+        n = stamps.shape[0]
+        messages = self._serialiser.serialise(stamps, values)
         # Publisher.publish(bytes) checks the type and guards the handle per
         # message; the raw handles are safe here: the node destroys its
         # publishers only after close() has joined this thread.
-        n = len(stamps)
         publishers = self._publish_calls.get(n)
         if publishers is None:  # per sample: each field, then the currents
             publishers = [handle.publish_raw for handle in self._handles] * n

@@ -626,8 +626,7 @@ class SimulatorNode(Node):
                 odometry[i] = self._odom_cache
             values.append(odometry)
         values.append(currents)
-        sec, nanosec = np.divmod(stamps, 1_000_000_000)
-        messages = self._burst_serialiser.serialise(sec, nanosec, values)
+        messages = self._burst_serialiser.serialise(stamps, values)
         for publish, message in zip(self._burst_publishers * n, messages, strict=True):
             publish(message)
         self._last_state = states[-1]

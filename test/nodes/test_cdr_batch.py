@@ -19,7 +19,9 @@ N = 50
 @pytest.fixture
 def stamps():
     rng = np.random.default_rng(0)
-    return rng.integers(0, 2**31 - 1, N), rng.integers(0, 10**9, N)
+    t_ns = rng.integers(0, 2**31 - 1, N) * 1_000_000_000 + rng.integers(0, 10**9, N)
+    t_ns[:2] = 0, 2**31 * 1_000_000_000 - 1  # the extremes of an int32 sec
+    return t_ns
 
 
 def check(messages, cls, build):
@@ -31,23 +33,21 @@ def check(messages, cls, build):
 
 
 def test_batches_equal_message_objects(stamps):
-    sec, nanosec = stamps
     rng = np.random.default_rng(1)
     field = rng.normal(0.0, 0.05, (N, 3))
     currents = rng.normal(0.0, 1.0, (N, 4))
     states = rng.normal(0.0, 0.01, (N, 12))
     odometry = np.array([contract.odometry_values(x) for x in states])
-    t_ns = [int(s) * 1_000_000_000 + int(ns) for s, ns in zip(sec, nanosec, strict=True)]
-    check(contract.field_batch(contract.sensor_frame(11)).serialise(sec, nanosec, field),
+    t_ns = stamps.tolist()
+    check(contract.field_batch(contract.sensor_frame(11)).serialise(stamps, field),
           MagneticField, lambda i: contract.field_message(11, t_ns[i], field[i]))
-    check(contract.currents_batch().serialise(sec, nanosec, currents),
+    check(contract.currents_batch().serialise(stamps, currents),
           JointState, lambda i: contract.currents_message(t_ns[i], currents[i]))
-    check(contract.odometry_batch().serialise(sec, nanosec, odometry),
+    check(contract.odometry_batch().serialise(stamps, odometry),
           Odometry, lambda i: contract.odometry_message(t_ns[i], states[i]))
 
 
 def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
-    sec, nanosec = stamps
     rng = np.random.default_rng(2)
     fields = rng.normal(0.0, 0.05, (N, 2, 3))
     currents = rng.normal(0.0, 1.0, (N, 4))
@@ -55,11 +55,11 @@ def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
                                    contract.field_batch(contract.sensor_frame(1)),
                                    contract.currents_batch()])
     for n in (N, 5, N):  # reused rows per burst length keep nothing from earlier calls
-        messages = serialiser.serialise(sec[:n], nanosec[:n], [fields[:n, 0], fields[:n, 1],
-                                                               currents[:n]])
+        messages = serialiser.serialise(stamps[:n], [fields[:n, 0], fields[:n, 1],
+                                                     currents[:n]])
         assert len(messages) == 3 * n
         for i in range(n):
-            t_ns = int(sec[i]) * 1_000_000_000 + int(nanosec[i])
+            t_ns = int(stamps[i])
             for k in range(2):
                 got = deserialize_message(messages[3 * i + k], MagneticField)
                 assert got == contract.field_message(k, t_ns, fields[i, k])
@@ -85,3 +85,16 @@ def test_layout_refuses_an_ambiguous_template():
 
     with pytest.raises(ValueError, match='cannot locate'):
         cdr_layout(msg, same_twice, 1)
+
+
+def test_values_as_one_matrix_and_wrong_shapes(stamps):
+    serialiser = SampleSerialiser([contract.field_batch('f'), contract.currents_batch()])
+    values = np.random.default_rng(4).normal(size=(N, 7))
+    as_matrix = serialiser.serialise(stamps, values)
+    as_parts = serialiser.serialise(stamps, [values[:, :3], values[:, 3:]])
+    assert [deserialize_message(m, JointState if i % 2 else MagneticField)
+            for i, m in enumerate(as_matrix)] == [
+        deserialize_message(m, JointState if i % 2 else MagneticField)
+        for i, m in enumerate(as_parts)]
+    with pytest.raises(ValueError, match=r'values must have shape \(50, 7\)'):
+        serialiser.serialise(stamps, values[:, :6])
