@@ -8,14 +8,22 @@ clock running at rate ``1 + d`` against the host clock,
 
 so the lower envelope of ``h - 1000 b`` is a line whose intercept is the
 offset and whose slope is the drift. ``BoardClock`` keeps the minimum of
-``h - 1000 b`` per bucket of board time (default 1 s), fits a line through
-the minima of the last complete buckets (default 30) once three are
-complete, and maps board times through that line (the *target*). The
-current bucket's minimum joins the fit once it lies below that line (its
-first reads are typical, not fast ones: counted at once, they would tilt the
-line up at every new bucket, by up to 0.1 ms). Before three buckets are
-complete the offset is the minimum seen so far and the drift 0. The fit is
-done relative to the newest minimum, so epoch-sized offsets (1.7e18 ns) keep
+``h - 1000 b`` per bucket of board time (default 1 s) and, once three
+buckets are complete, fits the lower envelope of the minima of the last
+complete buckets (default 30): the line below all of them that is highest at
+their mean board time (the edge of their lower convex hull over the mean,
+the linear-programming estimate of offset and skew). Minima above the
+envelope do not move it: a bucket whose reads were all late (the host
+stalled, then read a backlog) is ignored, where a least-squares line would
+tilt by up to a percent and jump by the stall. A hull edge can still run to
+such a minimum at the end of a short window; so a minimum higher than
+another by more than ``max_drift`` (default 0.5 %) of their distance plus
+1 ms is left out. The current bucket's minimum
+joins the fit once it lies below the line of the complete ones (its first
+reads are typical, not fast ones). Board times are mapped through that line
+(the *target*). Before three buckets are complete the offset is the minimum
+seen so far and the drift 0. The hull is found in integer arithmetic and the
+line passes through a minimum exactly: epoch-sized offsets (1.7e18 ns) keep
 their ns.
 
 Slewing
@@ -33,7 +41,8 @@ Slewing
 Jumps
     A correction larger than ``max_slew`` (default 50 ms: the board was reset
     or replugged without a reconnect, which slewing would take seconds to
-    absorb) is applied at once.
+    absorb) is applied at once: forwards the stamps jump, backwards they are
+    held back (below).
 Monotonic
     Stamps are forced to increase strictly (by at least 1 ns), also across
     calls: only a backward jump beyond ``max_slew`` or board times that do not
@@ -50,6 +59,7 @@ from numpy.typing import ArrayLike, NDArray
 __all__ = ['BoardClock']
 
 _SCALAR_MAX = 16  # samples; up to here a Python loop beats numpy's per-call overhead
+_STALL_MARGIN_NS = 1_000_000  # spread of the bucket minima beyond drift before a stall
 
 
 class BoardClock:
@@ -68,10 +78,15 @@ class BoardClock:
     max_slew : float, optional
         Corrections larger than this (s, > 0; default 0.05) are applied at once
         instead of slewed.
+    max_drift : float, optional
+        Largest plausible clock rate error (dimensionless, in (0, 0.1]; default
+        0.005, a ceramic resonator): a bucket minimum higher than another one by
+        more than this drift over their distance plus 1 ms is a stall, left out
+        of the fit.
     """
 
     def __init__(self, bucket: float = 1.0, buckets: int = 30, slew: float = 0.02,
-                 max_slew: float = 0.05) -> None:
+                 max_slew: float = 0.05, max_drift: float = 0.005) -> None:
         if not bucket > 0:
             raise ValueError(f'bucket must be > 0 s, got {bucket!r}')
         if buckets < 3:
@@ -80,6 +95,8 @@ class BoardClock:
             raise ValueError(f'slew must be a fraction in [1e-6, 0.1], got {slew!r}')
         if not max_slew > 0:
             raise ValueError(f'max_slew must be > 0 s, got {max_slew!r}')
+        if not 0 < max_drift <= 0.1:
+            raise ValueError(f'max_drift must be in (0, 0.1], got {max_drift!r}')
         self._bucket_us = int(round(bucket * 1e6))
         self._buckets = buckets
         # (board us, h - 1000 b) of the last `buckets` complete buckets and the current one
@@ -92,6 +109,7 @@ class BoardClock:
         self._slew_ppm = int(round(slew * 1e6))  # ps of correction per us of board time
         self._max_slew = float(max_slew)
         self._max_slew_ps = int(round(max_slew * 1e12))
+        self._max_drift = float(max_drift)
         self._mapped_us: int | None = None  # latest board time mapped
         self._error_ps = 0  # target minus applied offset at _mapped_us, ps
         self._last_stamp_ns: int | None = None
@@ -101,7 +119,7 @@ class BoardClock:
     def reset(self) -> None:
         """Forget all observations (new board or new power-up)."""
         self.__init__(self._bucket_us * 1e-6, self._buckets,  # type: ignore[misc]
-                      self._slew, self._max_slew)
+                      self._slew, self._max_slew, self._max_drift)
 
     @property
     def drift(self) -> float:
@@ -154,10 +172,9 @@ class BoardClock:
     def _fit(self) -> None:
         """Fit the target line to the complete buckets, and to the current one if lower.
 
-        The current bucket's minimum is still falling (its first read is a typical
-        one, not a fast one); at the end of the window it would tilt the line up
-        every time a bucket starts. It counts once complete, or as soon as it lies
-        below the line of the complete buckets.
+        The current bucket's minimum is still falling (its first read is a
+        typical one, not a fast one); it counts once the bucket is complete, or
+        as soon as it lies below the line of the complete buckets.
         """
         *complete, current = self._minima
         if len(complete) < 3:
@@ -170,15 +187,39 @@ class BoardClock:
             self._line(self._minima)
 
     def _line(self, minima) -> None:
-        ref_us, ref_ns = minima[-1]
-        # relative to the newest minimum: an epoch-sized offset (1.7e18 ns) in float64
-        # would be rounded to 256 ns
-        x = np.array([m[0] - ref_us for m in minima], dtype=np.float64)
-        y = np.array([m[1] - ref_ns for m in minima], dtype=np.float64)
-        slope, intercept = np.polyfit(x, y, 1)
-        self._ref_us = ref_us
-        self._slope = float(slope)
-        self._intercept_ns = ref_ns + int(round(intercept))
+        """Fit the lower envelope: the line below every minimum, highest at their mean.
+
+        The line under all points ``(x_i, y_i)`` that minimises ``sum(y_i -
+        line(x_i))`` is the lower convex hull's edge over the mean ``x`` (the
+        linear-programming estimate of clock offset and skew). Unlike least
+        squares it ignores minima above the envelope: a bucket whose reads
+        were all late (the host stalled and caught up) does not tilt the line.
+        Integer arithmetic for the hull: no rounding of epoch-sized offsets.
+        """
+        # a minimum above another by more than max_drift allows (plus a margin for
+        # the latency's spread) is a stall: its reads all came late
+        rate = 1000.0 * self._max_drift  # ns per us
+        minima = [(x, y) for x, y in minima
+                  if all(y - y2 <= rate * abs(x - x2) + _STALL_MARGIN_NS for x2, y2 in minima)]
+        hull: list[tuple[int, int]] = []
+        for x, y in sorted(minima):
+            while len(hull) >= 2:
+                (x0, y0), (x1, y1) = hull[-2], hull[-1]
+                if (x1 - x0) * (y - y0) - (y1 - y0) * (x - x0) > 0:
+                    break  # a left turn: (x1, y1) stays on the lower hull
+                hull.pop()
+            hull.append((x, y))
+        if len(hull) == 1:  # all minima at one board time
+            self._ref_us, self._intercept_ns, self._slope = hull[0][0], hull[0][1], 0.0
+            return
+        n, total = len(minima), sum(m[0] for m in minima)
+        # the edge [x_k, x_k+1] with x_k <= mean x < x_k+1 (the last one if at the end)
+        k = 0
+        while k + 2 < len(hull) and hull[k + 1][0] * n <= total:
+            k += 1
+        (x0, y0), (x1, y1) = hull[k], hull[k + 1]
+        self._ref_us, self._intercept_ns = x0, y0
+        self._slope = (y1 - y0) / (x1 - x0)
 
     def _target_ns(self, board_us: int) -> int:
         """Offset of the fitted line at one board time (host ns minus 1000 board us)."""
