@@ -25,7 +25,8 @@ The rule
     or before ``t_k`` (within the tolerance), which is the value the plant was
     holding.  Samples where some topic has no data yet (or any more: an input
     counts for one of its own periods after its last message, to the end if it
-    has only one) are trimmed from the start and the end.
+    has only one, except an input taken exactly, which ends with its last
+    message) are trimmed from the start and the end.
 
 Gaps
     Each topic is checked against its own sample period (estimated as for
@@ -327,7 +328,7 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
         gaps = find_gaps(source.topic, stamps, period, t0)
         gaps_all.extend(gaps)
         if source.role == 'input':
-            out, method, first, last = _hold(stamps, values, grid, tol_ns, period)
+            out, method, first, last = _hold(stamps, values, grid, ts_ns, tol_ns, period)
         else:
             out, method, first, last = _match_or_interpolate(stamps, values, grid, ts_ns,
                                                               tol_ns, period)
@@ -398,13 +399,15 @@ def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarr
     return out, 'exact', first, last
 
 
-def _hold(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, tol_ns: float,
-          period: float) -> tuple[np.ndarray, str, int, int]:
-    """Input: zero-order hold of the last sample at or before each grid time.
+def _hold(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, ts_ns: float,
+          tol_ns: float, period: float) -> tuple[np.ndarray, str, int, int]:
+    """Input: zero-order hold of the last sample at or before each base time.
 
     Held for one of its own periods after its last message (a topic that stopped
     publishing is not extended), to the end if it has a single message (a set-point
-    sent once).
+    sent once). An input at the base's rate with a message within ``tol_ns`` of
+    every base sample it covers is taken exactly and covers up to its last
+    message only: a sample after it would be held, not published.
     """
     j = np.searchsorted(stamps, grid + tol_ns, side='right') - 1
     first = int(np.searchsorted(j, 0, side='left'))
@@ -414,6 +417,11 @@ def _hold(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, tol_ns: floa
         last = grid.size - 1
     jj = np.clip(j, 0, stamps.size - 1)
     out = values[jj]
-    covered = slice(first, last + 1)
     exact = np.abs(stamps[jj] - grid) <= tol_ns
-    return out, 'exact' if np.all(exact[covered]) else 'zoh', first, last
+    if np.all(exact[first:last + 1]):
+        return out, 'exact', first, last
+    last_message = int(np.searchsorted(grid, stamps[-1] + tol_ns, side='right')) - 1
+    same_rate = abs(period * 1e9 - ts_ns) <= tol_ns
+    if same_rate and first <= last_message and np.all(exact[first:last_message + 1]):
+        return out, 'exact', first, last_message
+    return out, 'zoh', first, last

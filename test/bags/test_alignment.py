@@ -143,3 +143,15 @@ def test_a_base_off_its_period_uses_the_grid():
         align([y, u])
     al = align([y, u], allow_gaps=True)
     assert al.base == 'grid' and [r.method for r in al.reports] == ['linear', 'zoh']
+
+
+def test_an_input_cut_one_sample_short_is_exact_and_trims_the_end():
+    # the recorder closed between a record's field and its currents message
+    stamps = slewed_stamps(3_000, seed=8)
+    y, u = record(stamps)
+    cut = Source(u.topic, stamps[:-1], np.asarray(u.values)[:-1], 'input')
+    al = align([y, cut])
+    assert [r.method for r in al.reports] == ['exact', 'exact']
+    assert al.trimmed == (0, 1) and al.N == 2_999  # the last field has no currents
+    np.testing.assert_array_equal(al.values[0], np.asarray(y.values)[:-1])
+    np.testing.assert_array_equal(al.values[1], np.asarray(u.values)[:-1])
