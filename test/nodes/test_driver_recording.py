@@ -18,6 +18,7 @@ from rclpy.parameter import Parameter
 from maglev_ros.bags import BagReader, load_bag_dataset, parse_channel, read_bag
 from maglev_ros.bags.extraction import read_topics
 from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware
+from maglev_ros.hardware.v2x_stream import RecordDecoder
 from maglev_ros.hardware.virtual_board import VirtualBoard
 from maglev_ros.nodes import contract
 from maglev_ros.nodes.driver import DriverNode
@@ -29,6 +30,22 @@ COUNTS_PER_AMPERE = 1000.0
 AMPLITUDE = 0.25  # A: 250 counts, well inside +-4096
 RECORD_S = 1.5  # board seconds to record
 AXES = 'xyz'
+
+
+@pytest.fixture(scope='module', autouse=True)
+def compiled_kernels():
+    """Initialise numba in this process before the nodes run.
+
+    The decoder's kernels are numba functions: the first call in a process
+    loads numba's compiler context (about 0.5 s, more on a busy machine). In
+    the driver's I/O thread, mid-recording, that stall holds the GIL: the
+    board's backlog then arrives as one burst, the publishers' history (1000
+    samples) overflows and the bag loses messages. A driver started once per
+    process pays this at start-up; here every test would.
+    """
+    firmware = V2xFirmware(LinearPlant.default(1), 1, startup_delay=0.0)
+    batch = RecordDecoder(1).feed(firmware.advance_to(10_000))
+    assert len(batch) > 0
 
 
 def wait_for(predicate, timeout=TIMEOUT, what='condition'):
@@ -100,11 +117,12 @@ def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path, read_in
 
     outputs = [f'B{a}=maglev/sensor_0/field:magnetic_field.{a}' for a in AXES]
     inputs = [f'i{j}=maglev/currents:effort[{j}]' for j in range(4)]
-    # the board's stamps are 200 us apart (the driver maps them with offset and drift,
-    # both constant between steps); Ts is given: estimated from the stamps it is off by
-    # the held-back samples of the steps below (about 1 % over a 1.5 s run)
-    assert np.median(np.diff(fields.stamps)) == pytest.approx(200_000, abs=100)
-    dataset = read_bag(bag, outputs, inputs, Ts=200e-6, allow_gaps=True)
+    # the board's stamps are 200 us apart: the driver maps them with offset and drift and
+    # slews offset corrections (at most 2 % of the spacing), it never steps
+    spacing = np.diff(fields.stamps)
+    assert np.median(spacing) == pytest.approx(200_000, abs=100)
+    assert np.abs(spacing - 200_000).max() <= 0.02 * 200_000 + 100  # + drift, rounding
+    dataset = read_bag(bag, outputs, inputs, Ts=200e-6)  # strict: a gap is an error
     data = dataset.data
     assert data.Ts == 200e-6
     assert data.N >= RECORD_S * 5000 - 10
@@ -116,23 +134,23 @@ def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path, read_in
     assert dataset.metadata['maglev_driver.port'] == board.path
     assert dataset.metadata['maglev_driver.counts_per_ampere'] == COUNTS_PER_AMPERE
 
-    # gaps: nothing was lost between board and bag (all stamps are there, see above); a
-    # "gap" is a step of the driver's board-clock mapping (a new minimum of the read
-    # latency lowers the offset line; stamps are then held back 1 ns apart until the
-    # line catches up): the converter reports each step, and nothing else
-    for samples, report in zip((fields, currents), dataset.alignment.reports, strict=True):
-        diffs = np.diff(samples.stamps)
-        assert len(report.gaps) == np.count_nonzero(diffs > 1.5 * report.period * 1e9)
-        held = np.count_nonzero(diffs < 0.5 * report.period * 1e9)
-        assert sum(g.missing for g in report.gaps) <= held + len(report.gaps)
-    steps = np.abs(np.diff(fields.stamps) - 200_000) > 10_000  # beyond the 5 % tolerance
+    # nothing was lost between board and bag (all stamps are there, see above) and the
+    # stamps never step: no gaps, the field and currents of a record share their stamp,
+    # so both topics are taken sample by sample on the fields' own stamps
     methods = [r.method for r in dataset.alignment.reports]
     print('converter report:', [g.describe() for g in dataset.gaps] or 'no gaps', methods,
-          f'{np.count_nonzero(steps)} stamp steps')
-    assert methods == (['linear', 'zoh'] if steps.any() else ['exact', 'exact'])
-    if not steps.any():  # every sample on the grid, taken unchanged
-        pwm = np.rint(np.asarray(data.u) * COUNTS_PER_AMPERE)
-        np.testing.assert_array_equal(np.asarray(data.y), expected_tesla(plant, pwm))
+          f'max spacing deviation {np.abs(spacing - 200_000).max()} ns')
+    assert dataset.gaps == ()
+    assert methods == ['exact', 'exact'] and dataset.alignment.base == 'stamps'
+    pwm = np.rint(np.asarray(data.u) * COUNTS_PER_AMPERE)  # every sample as the board sent it
+    np.testing.assert_array_equal(np.asarray(data.y), expected_tesla(plant, pwm))
+    # Ts estimated from the stamps: the same samples (the estimate includes the offset
+    # corrections slewed during this short record: 0.1-0.2 % here, at most 2 %)
+    estimated = read_bag(bag, outputs, inputs)
+    assert estimated.data.Ts == pytest.approx(200e-6, rel=0.01)
+    assert [r.method for r in estimated.alignment.reports] == ['exact', 'exact']
+    np.testing.assert_array_equal(np.asarray(estimated.data.y), np.asarray(data.y))
+    np.testing.assert_array_equal(np.asarray(estimated.data.u), np.asarray(data.u))
 
     # inputs: the applied currents follow the excitation (antisymmetric pairs, +-AMPLITUDE)
     u = np.asarray(data.u)
