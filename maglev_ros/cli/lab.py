@@ -39,7 +39,6 @@ import signal  # noqa: E402
 import subprocess  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
-from dataclasses import replace  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -162,13 +161,12 @@ def load_data(bag: Path, sensors, pattern: str, board: bool = False):
     pattern : str
         Excitation pattern (chooses the inputs).
     board : bool
-        A board run: inputs are the applied currents and the samples are the
-        board's records, paired by stamp (each field and the currents of its
-        record share one), in order, ``Ts`` the board's 200 us. The
-        converter's uniform time base is not used for the values: the
-        driver's board-clock mapping steps by tens to hundreds of us whenever
-        its offset estimate improves, which moves stamps off any uniform grid.
-        Its report (gaps: such steps or lost messages) is kept in the result.
+        A board run: the inputs are the applied currents, ``Ts`` is the
+        board's 200 us, and gaps (records lost between board and bag: resyncs
+        or messages the recorder missed) are filled and reported instead of
+        refused. The driver stamps the fields and currents of one record alike
+        (uniform, slewed board clock), so the converter takes every record
+        unchanged, as it takes a lockstep simulator run.
 
     Returns
     -------
@@ -178,54 +176,9 @@ def load_data(bag: Path, sensors, pattern: str, board: bool = False):
     from maglev_ros.bags import read_bag
 
     if board:
-        dataset = read_bag(bag, output_channels(sensors), applied_channels(pattern),
-                           Ts=BOARD_TS, allow_gaps=True)
-        return replace(dataset, data=board_records(bag, dataset))
+        return read_bag(bag, output_channels(sensors), applied_channels(pattern),
+                        Ts=BOARD_TS, allow_gaps=True)
     return read_bag(bag, output_channels(sensors), input_channels(pattern))
-
-
-def board_records(bag: Path, dataset):
-    """Return the records of a board run as a data set, one row per record.
-
-    Parameters
-    ----------
-    bag : Path
-        The bag directory.
-    dataset : maglev_ros.bags.BagDataset
-        The bag read by ``read_bag`` (channels, names and units).
-
-    Returns
-    -------
-    IdData
-        Outputs and inputs of every record present on all topics, in stamp order.
-    """
-    from maglev_ros.bags import BagReader
-    from maglev_ros.bags.extraction import read_topics
-    from maglev_ros.sysid import IdData
-
-    refs: dict[str, list] = {}
-    for chan in dataset.outputs + dataset.inputs:
-        for _, ref in chan.terms:
-            refs.setdefault(ref.topic, []).append(ref)
-    with BagReader(bag) as reader:
-        samples = read_topics(reader, refs)
-    stamps = None
-    for topic_samples in samples.values():
-        mine = topic_samples.stamps
-        stamps = mine if stamps is None else np.intersect1d(stamps, mine)
-    columns = {}
-    for topic, topic_samples in samples.items():
-        rows = np.searchsorted(topic_samples.stamps, stamps)
-        for k, ref in enumerate(refs[topic]):
-            columns[ref] = topic_samples.values[rows, k]
-
-    def combine(chans):
-        return np.column_stack([sum(coef * columns[ref] for coef, ref in chan.terms)
-                                for chan in chans])
-
-    data = dataset.data
-    return IdData(combine(dataset.outputs), combine(dataset.inputs), BOARD_TS,
-                  data.output_names, data.input_names, data.output_units, data.input_units)
 
 
 def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
@@ -582,9 +535,8 @@ def _run(args: argparse.Namespace) -> int:
     for gap in dataset.gaps:
         print(f'gap: {gap.describe()}')
     if board and dataset.gaps:
-        print('(board run: the samples are the records, paired by stamp; a gap above is a '
-              "step of the driver's clock mapping unless the driver counted resyncs or the "
-              'recorder lost messages)')
+        print('(board run: a gap above is records lost between board and bag, resyncs or '
+              'messages the recorder missed; filled: fields linearly, currents held)')
     data = dataset.data
     rows = identify(data, args.na, args.nb, args.nk, args.split)
     print(f'ARX na={args.na} nb={args.nb} nk={args.nk}, inputs {", ".join(data.input_names)}; '
