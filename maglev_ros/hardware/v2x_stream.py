@@ -458,8 +458,11 @@ class RecordDecoder:
         times = []
         for ts, _, _ in out:
             last_raw = -1 if self._last_emit_ts is None else self._last_emit_ts
-            time_us, restarts, wraps = unwrap_run(ts, last_raw, self._last_time_us,
-                                                  SAMPLE_PERIOD_US)
+            # a contiguous, writable copy: one compiled signature for every run (a
+            # one-record view counts as contiguous to numpy, a longer one not, and a new
+            # signature would compile mid-stream)
+            time_us, restarts, wraps = unwrap_run(ts.copy(), last_raw,
+                                                  self._last_time_us, SAMPLE_PERIOD_US)
             self._restarts += restarts
             self._wraps += wraps
             self._last_emit_ts = int(ts[-1])

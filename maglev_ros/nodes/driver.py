@@ -71,7 +71,13 @@ from maglev_ros.hardware.board_clock import BoardClock
 from maglev_ros.hardware.packet import encode_command
 from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
-from maglev_ros.hardware.v2x_stream import DecoderStats, RecordDecoder
+from maglev_ros.hardware.v2x_stream import (
+    BURST_RECORDS,
+    SAMPLE_PERIOD_US,
+    DecoderStats,
+    RecordDecoder,
+    pack_records,
+)
 from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
 from maglev_ros.nodes.cdr_batch import SampleSerialiser
 from maglev_ros.nodes.contract import (  # shared with the simulator
@@ -348,10 +354,25 @@ class DriverNode(Node):
             f'{cfg.scaling.counts_per_ampere:.1f} counts/A, limit {cfg.current_limit:.3f} A, '
             f'{"enabled" if self._enabled else "disabled"}'
         )
+        self._load_compiled_paths()
         self._stop = threading.Event()
         self._closed = False
         self._io = threading.Thread(target=self._io_loop, name='maglev-driver-io', daemon=True)
         self._io.start()
+
+    def _load_compiled_paths(self) -> None:
+        """Run the decoder and the serialiser once on made-up records, before any I/O.
+
+        Their numba kernels load (or compile) on first use, 0.5 to 1.5 s
+        holding the GIL; in the I/O thread that stall would overflow the
+        publishers' history with the backlog of the board's records.
+        """
+        n = self.config.n_sensors
+        decoder = RecordDecoder(n, confirm=self.config.confirm_records)
+        stamps = SAMPLE_PERIOD_US * np.arange(2 * BURST_RECORDS)
+        decoder.feed(pack_records(stamps, np.zeros((stamps.size, n, 3)),
+                                  np.zeros((stamps.size, 4))))
+        self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, 3 * n + 4)))
 
     # -- parameters -------------------------------------------------------------
 

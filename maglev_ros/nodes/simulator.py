@@ -433,6 +433,9 @@ class SimulatorNode(Node):
         parts.append(contract.currents_batch())
         publishers.append(self._current_handle)
         self._burst_serialiser = SampleSerialiser(parts)
+        # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
+        self._burst_serialiser.serialise(np.zeros(1, np.int64),
+                                         np.zeros((1, self._burst_serialiser.n_values)))
         self._burst_publishers = [handle.publish_raw for handle in publishers]
         self._first_reading = self.sim.reset()
         self._stop = threading.Event()

@@ -78,3 +78,25 @@ def test_unwrap_run_continues_across_wraps_and_restarts():
     times, restarts, wraps = unwrap_run(again, int(nxt[-1]), int(times[-1]), 200)
     np.testing.assert_array_equal(times, [2 ** 32 + 1300, 2 ** 32 + 1500])
     assert (restarts, wraps) == (1, 0)
+
+
+def test_one_compiled_signature_whatever_the_stream():
+    # a new signature compiles in the middle of a stream (up to a second, holding the
+    # GIL); the decoder passes one array type whatever the runs look like
+    from maglev_ros.hardware.v2x_stream import RecordDecoder
+
+    rng = np.random.default_rng(0)
+    n = 400
+    data = pack_records(200 * np.arange(n), rng.normal(0.0, 10.0, (n, 1, 3)),
+                        rng.integers(-100, 100, (n, 4)))
+    size = record_size(1)
+    decoder = RecordDecoder(1)
+    for start in range(0, 100 * size, 5 * size):  # bursts
+        decoder.feed(data[start : start + 5 * size])
+    decoder.feed(b'\xff' * 37)  # garbage, then single records and odd chunks
+    for start in range(100 * size, 200 * size, size):
+        decoder.feed(data[start : start + size])
+    decoder.feed(data[200 * size + 3 : 300 * size])
+    decoder.flush()
+    assert len(first_bad_record.signatures) == 1
+    assert len(unwrap_run.signatures) == 1
