@@ -34,6 +34,7 @@ def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capf
     assert run['driver']['resyncs'] == 0 and run['driver']['dropped_bytes'] == 0
     meta = summary['metadata']
     assert meta['maglev_driver.n_sensors'] == 3 and meta['maglev_driver.start_enabled'] is True
+    assert meta['maglev_driver.read_interval'] == lab.BOARD_READ_INTERVAL  # open loop: batched
     assert (out / 'compare_Bx_0.png').stat().st_size > 1000
     assert (out / 'bag' / 'metadata.yaml').is_file()
 
