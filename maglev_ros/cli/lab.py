@@ -536,6 +536,9 @@ def _run(args: argparse.Namespace) -> int:
         print(f'warning: the magnet crashed ({stats["crash_reason"]}); identifying the '
               f'samples before the crash', file=sys.stderr)
     dataset = load_data(bag, args.sensors, args.pattern, board=board)
+    alignment = dataset.alignment
+    methods = ', '.join(f'{r.topic} {r.method}' for r in alignment.reports)
+    print(f'alignment: time base {alignment.base}; {methods}')
     for gap in dataset.gaps:
         print(f'gap: {gap.describe()}')
     if board and dataset.gaps:
@@ -562,6 +565,8 @@ def _run(args: argparse.Namespace) -> int:
     summary = {
         'run': stats, 'args': {k: v for k, v in vars(args).items()},
         'metadata': {k: v for k, v in dataset.metadata.items()},
+        'alignment': {'base': alignment.base,
+                      'methods': {r.topic: r.method for r in alignment.reports}},
         'models': [{
             'output': r['output'], 'fit_estimation': r['fit_estimation'],
             'fit_validation': r['fit_validation'], 'note': r['note'],

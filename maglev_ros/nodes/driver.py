@@ -8,7 +8,9 @@ simulator node:
   sensor k in tesla, frame from ``sensor_frames``, stamped with the board's
   sample time mapped to ROS time (``hardware.board_clock``: offset and drift
   against the host's system clock estimated, stamps strictly increasing; the
-  system clock is the ROS time of nodes without ``use_sim_time``). V2x fields are the raw sensor
+  system clock is the ROS time of nodes without ``use_sim_time``; after a
+  (re)connection, samples are published once the link has caught up with any
+  backlog, all of them, stamped with the caught-up clock). V2x fields are the raw sensor
   fields (what the model predicts); V4x fields are after the board's own
   baseline and feedthrough removal (reported in ``/diagnostics``).
 * ``maglev/currents`` (sensor_msgs/JointState, names x+ x- y+ y-): effort
@@ -94,6 +96,8 @@ NODE_NAME = 'maglev_driver'
 DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
+BURST_PERIOD_S = 0.001  # s between the board's bursts (V2x; V4x lines come at most as often)
+MAX_HELD_RECORDS = 25_000  # 5 s at 5 kHz: a link that never looks caught up publishes anyway
 _ZERO = np.zeros(4)
 
 
@@ -304,6 +308,12 @@ class DriverNode(Node):
         self._decoder = RecordDecoder(cfg.n_sensors, confirm=cfg.confirm_records)
         self._telemetry = TelemetryStream(cfg.n_sensors)
         self._board_clock = BoardClock()
+        self._catching_up = True  # after (re)connecting, until a read brings no backlog
+        self._held: list[tuple[np.ndarray, np.ndarray]] = []  # samples kept meanwhile
+        # records a read brings when the link keeps up: the bursts of one read interval
+        # (at least one 1 ms burst) and one more for timing jitter, and the held-back record
+        self._caught_up_records = BURST_RECORDS * (
+            max(1, math.ceil(cfg.read_interval / BURST_PERIOD_S - 1e-9)) + 1) + 1
         self._lock = threading.Lock()  # command state
         self._enabled = cfg.start_enabled
         self._last_command_ns: int | None = None
@@ -528,6 +538,8 @@ class DriverNode(Node):
         self._decoder = RecordDecoder(self.config.n_sensors, confirm=self.config.confirm_records)
         self._telemetry = TelemetryStream(self.config.n_sensors)
         self._board_clock = BoardClock()  # the board may have been power-cycled
+        self._catching_up = True  # see _deliver
+        self._held.clear()
         self.link_state = 'connected'
         self.get_logger().info(f'connected to {self.config.port}')
         with self._lock:
@@ -546,14 +558,12 @@ class DriverNode(Node):
         if self._v2x:
             batch = self._decoder.feed(data)
             if len(batch):
-                self._board_clock.observe(int(batch.time_us[-1]), host_ns)
-                stamps = self._board_clock.to_host(batch.time_us)
                 n = len(batch)
                 values = np.empty((n, self._serialiser.n_values))  # each field (T), currents (A)
                 np.multiply(batch.field_mT.reshape(n, -1), 1e-3, out=values[:, :-4],
                             dtype=np.float64)  # mT -> T
                 self.config.scaling.to_current(batch.pwm, out=values[:, -4:])
-                self._publish(stamps, values)
+                self._deliver(batch.time_us, values, host_ns)
             return
         samples = []
         for item in self._telemetry.feed(data):
@@ -568,11 +578,44 @@ class DriverNode(Node):
                 samples.append(item)
         if samples:
             board_us = np.array([round(s.time * 1e6) for s in samples], dtype=np.int64)
-            self._board_clock.observe(int(board_us[-1]), host_ns)
-            stamps = self._board_clock.to_host(board_us)
             field_t = np.stack([s.field_mT for s in samples]) * 1e-3
             currents = np.stack([s.current for s in samples])
-            self._publish(stamps, np.hstack([field_t.reshape(len(samples), -1), currents]))
+            self._deliver(board_us, np.hstack([field_t.reshape(len(samples), -1), currents]),
+                          host_ns)
+
+    def _deliver(self, board_us: np.ndarray, values: np.ndarray, host_ns: int) -> None:
+        """Observe the board clock, stamp the samples and publish them.
+
+        After a (re)connection the first reads may bring a backlog (the board
+        streamed while this thread was not reading yet: a busy start-up, a
+        stale OS buffer). The newest record of such a read is old, so its
+        observation would put the clock's first offset late by the backlog's
+        age, and correcting that later would hold stamps back. Until a read
+        brings no more than the records a read normally brings (the link has
+        caught up), samples are therefore kept, not stamped; then all of them
+        are stamped with the caught-up clock and published. Nothing is lost,
+        the first stamps are right, the catch-up costs latency only once.
+
+        Parameters
+        ----------
+        board_us : ndarray of int64, shape (n,)
+            Board time of each sample, us (unwrapped).
+        values : ndarray of float64, shape (n, 3 N + 4)
+            Each sensor's field (T), then the currents (A).
+        host_ns : int
+            Host time of the read, ns.
+        """
+        self._board_clock.observe(int(board_us[-1]), host_ns)
+        if self._catching_up:
+            self._held.append((board_us, values))
+            held = sum(len(b) for b, _ in self._held)
+            if len(board_us) > self._caught_up_records and held < MAX_HELD_RECORDS:
+                return
+            self._catching_up = False
+            board_us = np.concatenate([b for b, _ in self._held])
+            values = np.concatenate([v for _, v in self._held])
+            self._held.clear()
+        self._publish(self._board_clock.to_host(board_us), values)
 
     def _publish(self, stamps: np.ndarray, values: np.ndarray) -> None:
         """Publish n samples: stamps (n,) ns; values (n, 3 N + 4): each field (T), currents (A).

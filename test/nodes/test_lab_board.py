@@ -29,6 +29,9 @@ def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capf
     assert all(math.isfinite(fits[k]) for k in ('Bx_0', 'By_0')), printed
     assert fits['Bx_0'] >= 90.0 and fits['By_0'] >= 90.0, printed
     assert summary['args']['nk'] == 0
+    # every record taken unchanged: the driver's stamps are uniform and shared
+    assert summary['alignment']['base'] == 'stamps', printed
+    assert set(summary['alignment']['methods'].values()) == {'exact'}, printed
     run = summary['run']
     assert run['samples'] >= 0.5 * 2 * 5000  # real time: the board sets the pace
     assert run['driver']['resyncs'] == 0 and run['driver']['dropped_bytes'] == 0
