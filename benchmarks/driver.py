@@ -293,7 +293,11 @@ def bench_driver(window: float, windows: int, subscriber: bool, sensors=(1, 3),
                                 driver_params, subscriber_kind)
         cpu = 100 * np.array(result['cpu'])
         target = 25.0 if n_sensors == 1 else 50.0
-        verdict = 'met' if np.median(cpu) < target else 'NOT met'
+        below = np.median(cpu) < target
+        # the target is the driver against the virtual board; a subscriber
+        # process adds the middleware's delivery cost: shown against it for reference
+        verdict = (('met' if below else 'NOT met') if not with_sub
+                   else f'{"below" if below else "above"} (reference only)')
         share = result['recorded']
         print(
             f'| {n_sensors} | {subscriber_kind if with_sub else "none"} | '
