@@ -617,8 +617,7 @@ class SimulatorNode(Node):
             for index, t_ns in zip(indices, stamps.tolist(), strict=True):
                 if index % self._clock_stride == 0:
                     self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
-        values = [readings[:, self._columns[3 * j : 3 * j + 3]]
-                  for j in range(len(self.sensors))]
+        values = [readings[:, self._columns]]  # each published sensor's x y z, in order
         if self._state_pub is not None:
             odometry = np.empty((n, 13))
             for i, state in enumerate(states):
