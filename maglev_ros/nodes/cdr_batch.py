@@ -1,100 +1,27 @@
-"""Serialised messages without message objects: the layout of a message's CDR bytes.
+"""Serialising a burst of samples' messages at once, in compiled code.
 
-Publishing a message object costs a Python-to-C conversion and a
-serialisation per message; publishing bytes (``Publisher.publish(bytes)``)
-costs neither. The messages on the Maggy graph that go out at 5 kHz differ
-from sample to sample only in their stamp and a few float64 fields, so a
-template is serialised once with sentinel values, the byte offsets of the
-stamp and of each varying float64 are found from the sentinels
-(:func:`cdr_layout`), and messages are made by patching those bytes:
-
-* one at a time with ``struct`` (:class:`maglev_ros.nodes.contract.RawTemplate`);
-* a burst of samples at once in compiled code (:func:`fill_messages`;
-  :class:`RawMessageBatch` for one message type, :class:`SampleSerialiser`
-  for several per sample, e.g. the field of each sensor and the currents),
-  what the driver and the real-time simulator publish every millisecond.
+The messages on the Maggy graph that go out at 5 kHz differ from sample to
+sample only in their stamp and a few float64 fields. A template is
+serialised once and its varying fields located
+(:func:`maglev_ros.nodes.contract.raw_layout`); a burst's messages are then
+made by patching copies of those bytes in one compiled call
+(:func:`fill_messages`): :class:`RawMessageBatch` for one message type,
+:class:`SampleSerialiser` for several per sample (e.g. the field of each
+sensor and the currents), what the driver and the real-time simulator
+publish every millisecond.
 """
 
 from __future__ import annotations
 
-import struct
-from collections.abc import Callable
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from numba import njit
-from rclpy.serialization import serialize_message
 
-__all__ = ['CdrLayout', 'RawMessageBatch', 'SampleSerialiser', 'cdr_layout', 'fill_messages']
+if TYPE_CHECKING:
+    from maglev_ros.nodes.contract import RawLayout
 
-_SEC, _NANOSEC = 0x1234_5678, 0x2345_6789  # stamp sentinels
-
-
-@dataclass(frozen=True)
-class CdrLayout:
-    """Where the varying parts of a message sit in its CDR bytes.
-
-    Attributes
-    ----------
-    template : bytes
-        The serialised template (4-byte little-endian CDR encapsulation first).
-    stamp_offset : int
-        Byte offset of the stamp's ``sec`` (int32); ``nanosec`` (uint32) follows.
-    value_offsets : tuple of int
-        Byte offset of each varying float64, in the order of ``set_values``.
-    """
-
-    template: bytes
-    stamp_offset: int
-    value_offsets: tuple[int, ...]
-
-
-def cdr_layout(template, set_values: Callable, n_values: int,
-               stamp: Callable | None = None) -> CdrLayout:
-    """Serialise ``template`` with sentinels and locate its stamp and varying float64s.
-
-    Parameters
-    ----------
-    template : message
-        A message with the constant parts (frame ids, names, array lengths)
-        set; it is modified (sentinels written).
-    set_values : callable
-        ``set_values(msg, values)`` writes ``n_values`` floats into the message.
-    n_values : int
-        Number of varying float64 fields (>= 0).
-    stamp : callable, optional
-        ``stamp(msg)`` returns the ``builtin_interfaces/Time`` that varies
-        (default ``msg.header.stamp``).
-
-    Returns
-    -------
-    CdrLayout
-
-    Raises
-    ------
-    ValueError
-        If the bytes are not little-endian CDR, or a field cannot be located
-        unambiguously.
-    """
-    time = (stamp or (lambda m: m.header.stamp))(template)
-    time.sec, time.nanosec = _SEC, _NANOSEC
-    sentinels = [1.2345678901234567e-300 * (j + 3) for j in range(n_values)]
-    if n_values:
-        set_values(template, sentinels)
-    raw = bytes(serialize_message(template))
-    if raw[:2] != b'\x00\x01':  # not little-endian CDR: not supported
-        raise ValueError(f'unexpected CDR encapsulation {raw[:4].hex()}')
-
-    def find(pattern: bytes) -> int:
-        offset = raw.find(pattern)
-        if offset < 0 or raw.find(pattern, offset + 1) >= 0:
-            raise ValueError('cannot locate a field in the serialised template')
-        return offset
-
-    stamp_offset = find(struct.pack('<i', _SEC))
-    if find(struct.pack('<I', _NANOSEC)) != stamp_offset + 4:
-        raise ValueError('stamp sec and nanosec are not adjacent')
-    return CdrLayout(raw, stamp_offset, tuple(find(struct.pack('<d', v)) for v in sentinels))
+__all__ = ['RawMessageBatch', 'SampleSerialiser', 'fill_messages']
 
 
 @njit(cache=True)
@@ -136,24 +63,19 @@ def fill_messages(out: np.ndarray, template: np.ndarray, stamp_offsets: np.ndarr
 
 
 class RawMessageBatch:
-    """The serialised layout of one message type whose stamp and k float64s vary.
+    """A burst serialiser for one message type whose stamp and k float64s vary.
 
     Parameters
     ----------
-    template : message
-        A message with the constant parts (frame id, names, array lengths)
-        set; it is modified (sentinels written).
-    set_values : callable
-        ``set_values(msg, values)`` writes a sequence of k floats into the
-        message (the varying float64 fields).
-    n_values : int
-        k, the number of varying float64 fields.
+    layout : maglev_ros.nodes.contract.RawLayout
+        The serialised template and the offsets of its stamp and k values
+        (e.g. ``contract.field_layout(frame)``).
     """
 
-    def __init__(self, template, set_values: Callable, n_values: int) -> None:
-        self.layout = cdr_layout(template, set_values, n_values)
-        self.n_values = n_values
-        self.size = len(self.layout.template)
+    def __init__(self, layout: RawLayout) -> None:
+        self.layout = layout
+        self.n_values = len(layout.value_offsets)
+        self.size = len(layout.template)
         self._alone: SampleSerialiser | None = None  # for serialise()
 
     def serialise(self, stamps_ns: np.ndarray, values: np.ndarray) -> list[bytes]:
@@ -164,7 +86,7 @@ class RawMessageBatch:
         stamps_ns : ndarray of int, shape (n,)
             Header stamps, ns.
         values : ndarray of float, shape (n, k)
-            The varying float64 fields, in the order of ``set_values``.
+            The varying float64 fields, in the order of the layout's values.
 
         Returns
         -------

@@ -81,12 +81,12 @@ from maglev_ros.hardware.v2x_stream import (
     pack_records,
 )
 from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
-from maglev_ros.nodes.cdr_batch import SampleSerialiser
+from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
     SENSOR_QOS,
-    currents_batch,
-    field_batch,
+    currents_layout,
+    field_layout,
     run_nodes,
 )
 
@@ -347,7 +347,8 @@ class DriverNode(Node):
         ]
         self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
         self._serialiser = SampleSerialiser(
-            [field_batch(frame) for frame in cfg.sensor_frames] + [currents_batch()])
+            [RawMessageBatch(field_layout(frame)) for frame in cfg.sensor_frames]
+            + [RawMessageBatch(currents_layout())])
         # per sample: the field of each sensor, then the currents (SampleSerialiser order)
         self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]
         self._publish_calls: dict[int, list] = {}  # per burst length: bound publish_raw calls

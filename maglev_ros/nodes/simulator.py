@@ -78,7 +78,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
 from maglev_ros.nodes import contract
-from maglev_ros.nodes.cdr_batch import SampleSerialiser
+from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.physics import (
     FIELD_MODELS,
     KINEMATICS,
@@ -425,14 +425,14 @@ class SimulatorNode(Node):
         self._state_handle = None if self._state_pub is None else self._state_pub.handle
         self._clock_handle = None if self._clock_pub is None else self._clock_pub.handle
         # real time: a burst of samples serialised at once, published sample by sample
-        parts = [contract.field_batch(contract.sensor_frame(k)) for k in self.sensors]
+        layouts = [contract.field_layout(contract.sensor_frame(k)) for k in self.sensors]
         publishers = list(self._field_handles)
         if self._state_handle is not None:
-            parts.append(contract.odometry_batch())
+            layouts.append(contract.odometry_layout())
             publishers.append(self._state_handle)
-        parts.append(contract.currents_batch())
+        layouts.append(contract.currents_layout())
         publishers.append(self._current_handle)
-        self._burst_serialiser = SampleSerialiser(parts)
+        self._burst_serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
         # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
         self._burst_serialiser.serialise(np.zeros(1, np.int64),
                                          np.zeros((1, self._burst_serialiser.n_values)))

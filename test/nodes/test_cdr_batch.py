@@ -4,6 +4,8 @@ Compared after deserialisation, with equal lengths: rclpy leaves the alignment
 padding after a string uninitialised, so those bytes differ from run to run.
 """
 
+import struct
+
 import numpy as np
 import pytest
 from nav_msgs.msg import Odometry
@@ -11,7 +13,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from sensor_msgs.msg import JointState, MagneticField
 
 from maglev_ros.nodes import contract
-from maglev_ros.nodes.cdr_batch import SampleSerialiser, cdr_layout
+from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
 
 N = 50
 
@@ -39,11 +41,12 @@ def test_batches_equal_message_objects(stamps):
     states = rng.normal(0.0, 0.01, (N, 12))
     odometry = np.array([contract.odometry_values(x) for x in states])
     t_ns = stamps.tolist()
-    check(contract.field_batch(contract.sensor_frame(11)).serialise(stamps, field),
-          MagneticField, lambda i: contract.field_message(11, t_ns[i], field[i]))
-    check(contract.currents_batch().serialise(stamps, currents),
+    fields = RawMessageBatch(contract.field_layout(contract.sensor_frame(11)))
+    check(fields.serialise(stamps, field), MagneticField,
+          lambda i: contract.field_message(11, t_ns[i], field[i]))
+    check(RawMessageBatch(contract.currents_layout()).serialise(stamps, currents),
           JointState, lambda i: contract.currents_message(t_ns[i], currents[i]))
-    check(contract.odometry_batch().serialise(stamps, odometry),
+    check(RawMessageBatch(contract.odometry_layout()).serialise(stamps, odometry),
           Odometry, lambda i: contract.odometry_message(t_ns[i], states[i]))
 
 
@@ -51,9 +54,9 @@ def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
     rng = np.random.default_rng(2)
     fields = rng.normal(0.0, 0.05, (N, 2, 3))
     currents = rng.normal(0.0, 1.0, (N, 4))
-    serialiser = SampleSerialiser([contract.field_batch(contract.sensor_frame(0)),
-                                   contract.field_batch(contract.sensor_frame(1)),
-                                   contract.currents_batch()])
+    serialiser = SampleSerialiser(
+        [RawMessageBatch(contract.field_layout(contract.sensor_frame(k))) for k in (0, 1)]
+        + [RawMessageBatch(contract.currents_layout())])
     for n in (N, 5, N):  # reused rows per burst length keep nothing from earlier calls
         messages = serialiser.serialise(stamps[:n], [fields[:n, 0], fields[:n, 1],
                                                      currents[:n]])
@@ -77,18 +80,32 @@ def test_raw_template_equals_message_objects():
         check([got], Odometry, lambda i, expected=expected: expected)
 
 
-def test_layout_refuses_an_ambiguous_template():
+@pytest.mark.parametrize('values', [
+    [('effort', 2)],  # beyond the two efforts of this template
+    [('no_such_field',)],
+    [('header', 'stamp', 'sec')],  # an int32, not a float64
+])
+def test_layout_refuses_what_it_cannot_locate(values):
     msg = JointState(name=['a'], effort=[0.0, 0.0])
-
-    def same_twice(m, values):  # both efforts get one sentinel: not locatable
-        m.effort = [values[0], values[0]]
-
     with pytest.raises(ValueError, match='cannot locate'):
-        cdr_layout(msg, same_twice, 1)
+        contract.raw_layout(msg, values)
+
+
+def test_layout_offsets_match_the_walked_bytes():
+    layout = contract.currents_layout()
+    raw = bytearray(layout.template)
+    for j, offset in enumerate(layout.value_offsets):
+        struct.pack_into('<d', raw, offset, j + 0.5)
+    struct.pack_into('<iI', raw, layout.stamp_offset, 7, 9)
+    msg = deserialize_message(bytes(raw), JointState)
+    assert list(msg.effort) == [0.5, 1.5, 2.5, 3.5]
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (7, 9)
+    assert list(msg.name) == contract.COIL_NAMES
 
 
 def test_values_as_one_matrix_and_wrong_shapes(stamps):
-    serialiser = SampleSerialiser([contract.field_batch('f'), contract.currents_batch()])
+    serialiser = SampleSerialiser([RawMessageBatch(contract.field_layout('f')),
+                                   RawMessageBatch(contract.currents_layout())])
     values = np.random.default_rng(4).normal(size=(N, 7))
     as_matrix = serialiser.serialise(stamps, values)
     as_parts = serialiser.serialise(stamps, [values[:, :3], values[:, 3:]])
