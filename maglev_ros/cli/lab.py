@@ -257,6 +257,13 @@ def _wait(predicate, ctx, what: str, timeout: float = WAIT_S) -> None:
         time.sleep(0.01)
 
 
+def overrides(**values) -> list:
+    """Return ROS parameter overrides ``name=value`` for a node built in this process."""
+    from rclpy.parameter import Parameter
+
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
 def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
     """Run simulator (lockstep), excitation and recorder on one executor.
 
@@ -279,15 +286,11 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
     """
     import rclpy
     from rclpy.context import Context
-    from rclpy.parameter import Parameter
 
     from maglev_ros.nodes import contract
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
     from maglev_ros.nodes.simulator import SimulatorNode
-
-    def overrides(**values):
-        return [Parameter(k, value=v) for k, v in values.items()]
 
     topics = ([contract.field_topic(k) for k in args.sensors]
               + [contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC, contract.TRUE_STATE_TOPIC,
@@ -425,15 +428,11 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str,
     """
     import rclpy
     from rclpy.context import Context
-    from rclpy.parameter import Parameter
 
     from maglev_ros.nodes import contract
     from maglev_ros.nodes.driver import DriverNode
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
-
-    def overrides(**values):
-        return [Parameter(k, value=v) for k, v in values.items()]
 
     topics = ([contract.field_topic(k) for k in args.sensors]
               + [contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC])
