@@ -67,7 +67,8 @@ setup(
             'pytest-timeout>=2',
             'magpylib>=5',
             'colcon-common-extensions',
-            'ruff',
+            # pinned: the formatter's output changes between minor versions
+            'ruff==0.17.6',
         ],
     },
     entry_points={'console_scripts': console_scripts},

@@ -184,17 +184,27 @@ def recorded_share(bag: str) -> float:
     from maglev_ros.nodes.contract import CURRENTS_TOPIC
 
     with BagReader(bag) as reader:
-        stamps = np.array([sec * 1_000_000_000 + nanosec for _, _, data in
-                           reader.messages(['/' + CURRENTS_TOPIC])
-                           for sec, nanosec in [STAMP.unpack_from(data, 4)]])
+        stamps = np.array(
+            [
+                sec * 1_000_000_000 + nanosec
+                for _, _, data in reader.messages(['/' + CURRENTS_TOPIC])
+                for sec, nanosec in [STAMP.unpack_from(data, 4)]
+            ]
+        )
     if stamps.size < 2:
         return float('nan')
     return stamps.size / (round((stamps[-1] - stamps[0]) / 200_000) + 1)
 
 
 def measure_driver(
-    n_sensors: int, window: float, windows: int, subscriber: bool, domain: int,
-    driver_env: dict | None = None, driver_params: tuple = (), subscriber_kind: str = 'recorder',
+    n_sensors: int,
+    window: float,
+    windows: int,
+    subscriber: bool,
+    domain: int,
+    driver_env: dict | None = None,
+    driver_params: tuple = (),
+    subscriber_kind: str = 'recorder',
 ) -> dict:
     """Run board and driver processes; return the driver's CPU share and rates."""
     import rclpy
@@ -212,11 +222,17 @@ def measure_driver(
         try:
             board.stdout.readline()
             driver_cmd = [sys.executable, '-m', 'maglev_ros.nodes.driver', '--ros-args']
-            for param in (f'port:={link}', f'n_sensors:={n_sensors}', 'diagnostics_period:=1.0',
-                          *driver_params):
+            for param in (
+                f'port:={link}',
+                f'n_sensors:={n_sensors}',
+                'diagnostics_period:=1.0',
+                *driver_params,
+            ):
                 driver_cmd += ['-p', param]
             driver = subprocess.Popen(
-                driver_cmd, env=dict(env, **(driver_env or {})), stdout=subprocess.DEVNULL,
+                driver_cmd,
+                env=dict(env, **(driver_env or {})),
+                stdout=subprocess.DEVNULL,
                 stderr=subprocess.DEVNULL,
             )
             procs.append(driver)
@@ -258,8 +274,9 @@ def measure_driver(
             for proc in reversed(procs):  # subscriber first (SIGTERM: the recorder closes its bag)
                 proc.terminate()
                 proc.wait(timeout=30)
-        share = (recorded_share(bag) if subscriber and subscriber_kind == 'recorder'
-                 else float('nan'))
+        share = (
+            recorded_share(bag) if subscriber and subscriber_kind == 'recorder' else float('nan')
+        )
     last = rates[-1][1] if rates else {}
     return {
         'cpu': shares,
@@ -271,14 +288,25 @@ def measure_driver(
     }
 
 
-def bench_driver(window: float, windows: int, subscriber: bool, sensors=(1, 3),
-                 driver_env: dict | None = None, subscriber_only: bool = False,
-                 driver_params: tuple = (), subscriber_kind: str = 'recorder') -> None:
-    env_text = ' '.join([f'{k}={v}' for k, v in (driver_env or {}).items()]
-                        + list(driver_params)) or 'defaults'
-    print(f'## Driver node CPU at 5 kHz ({windows} windows of {window:.0f} s, one core = 100 %; '
-          f'driver: {env_text}; subscriber: {subscriber_kind}; '
-          f'load average {os.getloadavg()[0]:.1f})')
+def bench_driver(
+    window: float,
+    windows: int,
+    subscriber: bool,
+    sensors=(1, 3),
+    driver_env: dict | None = None,
+    subscriber_only: bool = False,
+    driver_params: tuple = (),
+    subscriber_kind: str = 'recorder',
+) -> None:
+    env_text = (
+        ' '.join([f'{k}={v}' for k, v in (driver_env or {}).items()] + list(driver_params))
+        or 'defaults'
+    )
+    print(
+        f'## Driver node CPU at 5 kHz ({windows} windows of {window:.0f} s, one core = 100 %; '
+        f'driver: {env_text}; subscriber: {subscriber_kind}; '
+        f'load average {os.getloadavg()[0]:.1f})'
+    )
     print()
     print(
         '| sensors | subscriber process | driver CPU median (min-max) | target | records/s '
@@ -289,15 +317,26 @@ def bench_driver(window: float, windows: int, subscriber: bool, sensors=(1, 3),
     subs = [True] if subscriber_only else ([False, True] if subscriber else [False])
     cases = [(n, with_sub) for with_sub in subs for n in sensors]
     for n_sensors, with_sub in cases:
-        result = measure_driver(n_sensors, window, windows, with_sub, domain, driver_env,
-                                driver_params, subscriber_kind)
+        result = measure_driver(
+            n_sensors,
+            window,
+            windows,
+            with_sub,
+            domain,
+            driver_env,
+            driver_params,
+            subscriber_kind,
+        )
         cpu = 100 * np.array(result['cpu'])
         target = 25.0 if n_sensors == 1 else 50.0
         below = np.median(cpu) < target
         # the issue's target is the driver against the virtual board; a subscriber
         # process adds the middleware's delivery cost: shown against it for reference
-        verdict = (('met' if below else 'NOT met') if not with_sub
-                   else f'{"below" if below else "above"} (reference only)')
+        verdict = (
+            ('met' if below else 'NOT met')
+            if not with_sub
+            else f'{"below" if below else "above"} (reference only)'
+        )
         share = result['recorded']
         print(
             f'| {n_sensors} | {subscriber_kind if with_sub else "none"} | '
@@ -316,30 +355,65 @@ def main() -> None:
     parser.add_argument('--quick', action='store_true', help='smaller data, fewer repeats')
     parser.add_argument('--part', choices=('decoder', 'driver', 'all'), default='all')
     parser.add_argument('--subscriber', action='store_true', help='also with a subscriber')
-    parser.add_argument('--subscriber-only', action='store_true',
-                        help='driver part: only the cases with a subscriber process')
-    parser.add_argument('--subscriber-kind', choices=('recorder', 'spin'), default='recorder',
-                        help='driver part: the subscriber process (default: the recorder node)')
-    parser.add_argument('--sensors', type=int, nargs='+', default=[1, 3],
-                        help='driver part: sensor counts (default 1 3)')
-    parser.add_argument('--windows', type=int, default=None,
-                        help='driver part: measurement windows per case (default 3, quick 1)')
-    parser.add_argument('--publication-mode', choices=('SYNCHRONOUS', 'ASYNCHRONOUS'),
-                        default=None, help="driver process: Fast DDS publication mode "
-                        "(RMW_FASTRTPS_PUBLICATION_MODE; default: the driver's own)")
-    parser.add_argument('--driver-param', action='append', default=[], metavar='NAME:=VALUE',
-                        help='driver part: a driver parameter (repeatable), e.g. '
-                        'read_interval:=0.002')
+    parser.add_argument(
+        '--subscriber-only',
+        action='store_true',
+        help='driver part: only the cases with a subscriber process',
+    )
+    parser.add_argument(
+        '--subscriber-kind',
+        choices=('recorder', 'spin'),
+        default='recorder',
+        help='driver part: the subscriber process (default: the recorder node)',
+    )
+    parser.add_argument(
+        '--sensors',
+        type=int,
+        nargs='+',
+        default=[1, 3],
+        help='driver part: sensor counts (default 1 3)',
+    )
+    parser.add_argument(
+        '--windows',
+        type=int,
+        default=None,
+        help='driver part: measurement windows per case (default 3, quick 1)',
+    )
+    parser.add_argument(
+        '--publication-mode',
+        choices=('SYNCHRONOUS', 'ASYNCHRONOUS'),
+        default=None,
+        help='driver process: Fast DDS publication mode '
+        "(RMW_FASTRTPS_PUBLICATION_MODE; default: the driver's own)",
+    )
+    parser.add_argument(
+        '--driver-param',
+        action='append',
+        default=[],
+        metavar='NAME:=VALUE',
+        help='driver part: a driver parameter (repeatable), e.g. read_interval:=0.002',
+    )
     args = parser.parse_args()
     n_records, repeats = (30_000, 2) if args.quick else (100_000, 3)
     if args.part in ('decoder', 'all'):
         bench_decoder(n_records, repeats)
     if args.part in ('driver', 'all'):
         windows = args.windows or (1 if args.quick else 3)
-        driver_env = ({'RMW_FASTRTPS_PUBLICATION_MODE': args.publication_mode}
-                      if args.publication_mode else None)
-        bench_driver(3.0, windows, args.subscriber, args.sensors, driver_env,
-                     args.subscriber_only, tuple(args.driver_param), args.subscriber_kind)
+        driver_env = (
+            {'RMW_FASTRTPS_PUBLICATION_MODE': args.publication_mode}
+            if args.publication_mode
+            else None
+        )
+        bench_driver(
+            3.0,
+            windows,
+            args.subscriber,
+            args.sensors,
+            driver_env,
+            args.subscriber_only,
+            tuple(args.driver_param),
+            args.subscriber_kind,
+        )
 
 
 if __name__ == '__main__':

@@ -42,8 +42,9 @@ RATE_HZ = 5000.0
 TARGET_RATIO = 0.8
 TOPICS = ('/maglev/sensor_0/field', '/maglev/currents', '/maglev/currents/command')
 OUTPUTS = [f'maglev/sensor_0/field:magnetic_field.{a}' for a in 'xyz']
-INPUTS = ([f'maglev/currents:effort[{i}]' for i in range(4)]
-          + [f'maglev/currents/command:data[{i}]' for i in range(4)])
+INPUTS = [f'maglev/currents:effort[{i}]' for i in range(4)] + [
+    f'maglev/currents/command:data[{i}]' for i in range(4)
+]
 
 
 def build_bag(path: Path, seconds: float, storage: str) -> int:
@@ -61,18 +62,29 @@ def build_bag(path: Path, seconds: float, storage: str) -> int:
     t0, step = 1_700_000_000_000_000_000, int(round(1e9 / RATE_HZ))
     cov, names = np.zeros(9), ['x+', 'x-', 'y+', 'y-']
     with BagWriter(path, storage=storage, metadata={'benchmark': 'lab.py'}) as bag:
-        handles = [bag.add_topic(TOPICS[0], 'sensor_msgs/msg/MagneticField'),
-                   bag.add_topic(TOPICS[1], 'sensor_msgs/msg/JointState'),
-                   bag.add_topic(TOPICS[2], 'std_msgs/msg/Float64MultiArray')]
+        handles = [
+            bag.add_topic(TOPICS[0], 'sensor_msgs/msg/MagneticField'),
+            bag.add_topic(TOPICS[1], 'sensor_msgs/msg/JointState'),
+            bag.add_topic(TOPICS[2], 'std_msgs/msg/Float64MultiArray'),
+        ]
         for k in range(n):
             stamp = t0 + k * step
-            header = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9),
-                            frame_id='maglev_sensor_0')
-            msgs = (Field(header=header, magnetic_field=Vector3(*field[k]),
-                          magnetic_field_covariance=cov),
-                    Joints(header=header, name=names, position=np.zeros(0),
-                           velocity=np.zeros(0), effort=current[k]),
-                    Array(layout=Layout(dim=[], data_offset=0), data=current[k]))
+            header = Header(
+                stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id='maglev_sensor_0'
+            )
+            msgs = (
+                Field(
+                    header=header, magnetic_field=Vector3(*field[k]), magnetic_field_covariance=cov
+                ),
+                Joints(
+                    header=header,
+                    name=names,
+                    position=np.zeros(0),
+                    velocity=np.zeros(0),
+                    effort=current[k],
+                ),
+                Array(layout=Layout(dim=[], data_offset=0), data=current[k]),
+            )
             for handle, msg in zip(handles, msgs, strict=True):
                 bag.write(handle, stamp + 1000, bytes(store.serialize_cdr(msg, handle.msgtype)))
     return 3 * n
@@ -122,29 +134,41 @@ def measure_bag2data(seconds: float, repeat: int) -> list[dict]:
                     *times[f, k], result = timed(func, path)
                     assert func is bare_loop or result == messages // 3, (result, messages)
             (cpu_bare, wall_bare), (cpu_ours, wall_ours), (cpu_slow, _) = times.min(axis=1)
-            rows.append({'storage': storage, 'messages': messages,
-                         'bare_msgs_per_s': messages / cpu_bare,
-                         'bag2data_msgs_per_s': messages / cpu_ours,
-                         'ratio': cpu_bare / cpu_ours, 'wall_ratio': wall_bare / wall_ours,
-                         'deserializing_msgs_per_s': messages / cpu_slow,
-                         'deserializing_ratio': cpu_bare / cpu_slow})
+            rows.append(
+                {
+                    'storage': storage,
+                    'messages': messages,
+                    'bare_msgs_per_s': messages / cpu_bare,
+                    'bag2data_msgs_per_s': messages / cpu_ours,
+                    'ratio': cpu_bare / cpu_ours,
+                    'wall_ratio': wall_bare / wall_ours,
+                    'deserializing_msgs_per_s': messages / cpu_slow,
+                    'deserializing_ratio': cpu_bare / cpu_slow,
+                }
+            )
     return rows
 
 
 def report_bag2data(rows: list[dict], seconds: float) -> None:
     """Print the bag2data table."""
     print(f'bag2data: {seconds:g} s of 5 kHz lockstep data (sensor + currents + commands)')
-    print('throughput in messages per CPU second (best of the repeats); ratio = bag2data '
-          f'/ bare, target >= {TARGET_RATIO}')
-    print('| storage | messages | bare rosbags loop (msg/s) | bag2data (msg/s) | ratio (CPU) '
-          '| ratio (wall) | bag2data deserialising (msg/s) | its ratio (CPU) |')
+    print(
+        'throughput in messages per CPU second (best of the repeats); ratio = bag2data '
+        f'/ bare, target >= {TARGET_RATIO}'
+    )
+    print(
+        '| storage | messages | bare rosbags loop (msg/s) | bag2data (msg/s) | ratio (CPU) '
+        '| ratio (wall) | bag2data deserialising (msg/s) | its ratio (CPU) |'
+    )
     print('|---|---|---|---|---|---|---|---|')
     for r in rows:
         verdict = 'met' if r['ratio'] >= TARGET_RATIO else 'MISSED'
-        print(f"| {r['storage']} | {r['messages']:,} | {r['bare_msgs_per_s']:,.0f} | "
-              f"{r['bag2data_msgs_per_s']:,.0f} | {r['ratio']:.2f} ({verdict}) | "
-              f"{r['wall_ratio']:.2f} | {r['deserializing_msgs_per_s']:,.0f} | "
-              f"{r['deserializing_ratio']:.2f} |")
+        print(
+            f'| {r["storage"]} | {r["messages"]:,} | {r["bare_msgs_per_s"]:,.0f} | '
+            f'{r["bag2data_msgs_per_s"]:,.0f} | {r["ratio"]:.2f} ({verdict}) | '
+            f'{r["wall_ratio"]:.2f} | {r["deserializing_msgs_per_s"]:,.0f} | '
+            f'{r["deserializing_ratio"]:.2f} |'
+        )
 
 
 def measure_writer(messages: int) -> list[dict]:
@@ -153,10 +177,18 @@ def measure_writer(messages: int) -> list[dict]:
     field = store.types['sensor_msgs/msg/MagneticField']
     header = store.types['std_msgs/msg/Header'](
         stamp=store.types['builtin_interfaces/msg/Time'](sec=0, nanosec=0),
-        frame_id='maglev_sensor_0')
-    raw = bytes(store.serialize_cdr(field(header=header, magnetic_field=store.types[
-        'geometry_msgs/msg/Vector3'](0.0, 0.0, 0.05), magnetic_field_covariance=np.zeros(9)),
-        'sensor_msgs/msg/MagneticField'))
+        frame_id='maglev_sensor_0',
+    )
+    raw = bytes(
+        store.serialize_cdr(
+            field(
+                header=header,
+                magnetic_field=store.types['geometry_msgs/msg/Vector3'](0.0, 0.0, 0.05),
+                magnetic_field_covariance=np.zeros(9),
+            ),
+            'sensor_msgs/msg/MagneticField',
+        )
+    )
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for storage in ('mcap', 'sqlite3'):
@@ -168,8 +200,14 @@ def measure_writer(messages: int) -> list[dict]:
                 cpu = time.process_time() - cpu
                 close = time.process_time()
             close = time.process_time() - close
-            rows.append({'storage': storage, 'messages': messages,
-                         'msgs_per_s': messages / cpu, 'close_s': close})
+            rows.append(
+                {
+                    'storage': storage,
+                    'messages': messages,
+                    'msgs_per_s': messages / cpu,
+                    'close_s': close,
+                }
+            )
     return rows
 
 
@@ -179,8 +217,9 @@ def report_writer(rows: list[dict]) -> None:
     print('| storage | messages | write (msg/s) | close (CPU s) |')
     print('|---|---|---|---|')
     for r in rows:
-        print(f"| {r['storage']} | {r['messages']:,} | {r['msgs_per_s']:,.0f} | "
-              f"{r['close_s']:.3f} |")
+        print(
+            f'| {r["storage"]} | {r["messages"]:,} | {r["msgs_per_s"]:,.0f} | {r["close_s"]:.3f} |'
+        )
 
 
 # --------------------------------------------------------------------------- simulator node
@@ -218,16 +257,35 @@ def measure_simulator_rtf(seconds: float, topics: str) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         bag = Path(tmp) / 'rtf'
         recorder = subprocess.Popen(
-            [sys.executable, '-m', 'maglev_ros.nodes.recorder', '--ros-args', '-p',
-             f'path:={bag}', '-p', f'topics:={topics}', '-p', 'metadata_node:=""'],
-            env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-            start_new_session=True)
+            [
+                sys.executable,
+                '-m',
+                'maglev_ros.nodes.recorder',
+                '--ros-args',
+                '-p',
+                f'path:={bag}',
+                '-p',
+                f'topics:={topics}',
+                '-p',
+                'metadata_node:=""',
+            ],
+            env=env,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+            start_new_session=True,
+        )
         ctx = Context()
         rclpy.init(context=ctx, domain_id=domain)
-        sim = SimulatorNode(context=ctx, parameter_overrides=[
-            Parameter('mode', value='realtime'), Parameter('sensors', value=[0]),
-            Parameter('magnet', value='fixed'), Parameter('start_paused', value=True),
-            Parameter('marker_rate', value=0.0)])
+        sim = SimulatorNode(
+            context=ctx,
+            parameter_overrides=[
+                Parameter('mode', value='realtime'),
+                Parameter('sensors', value=[0]),
+                Parameter('magnet', value='fixed'),
+                Parameter('start_paused', value=True),
+                Parameter('marker_rate', value=0.0),
+            ],
+        )
         spinner = contract.Spinner(ctx, [sim])
         try:
             deadline = time.monotonic() + 60.0
@@ -259,9 +317,16 @@ def measure_simulator_rtf(seconds: float, topics: str) -> dict:
                 recorder.wait()
         with BagReader(bag) as reader:
             recorded = sum(1 for _ in reader.messages(['/maglev/currents']))
-    return {'topics': topics, 'rtf': (s1 - s0) / (t1 - t0), 'samples': samples, 'wall_s': t1 - t0,
-            'cpu_per_sample_us': (c1 - c0) / max(samples, 1) * 1e6, 'overruns': overruns,
-            'published': published, 'recorded': recorded}
+    return {
+        'topics': topics,
+        'rtf': (s1 - s0) / (t1 - t0),
+        'samples': samples,
+        'wall_s': t1 - t0,
+        'cpu_per_sample_us': (c1 - c0) / max(samples, 1) * 1e6,
+        'overruns': overruns,
+        'published': published,
+        'recorded': recorded,
+    }
 
 
 SIMULATOR_RECORDINGS = (
@@ -272,23 +337,28 @@ SIMULATOR_RECORDINGS = (
 
 def report_simulator(rows: list[dict]) -> None:
     print('\n## Simulator node real-time factor (5 kHz, 1 sensor, recorder in a 2nd process)\n')
-    print('| recorded topics | real-time factor (target >= 1.0) | samples | wall (s) | '
-          'simulator-process CPU / sample (us) | headroom (200 us / CPU per sample) | '
-          'overruns | recorded / published currents |')
+    print(
+        '| recorded topics | real-time factor (target >= 1.0) | samples | wall (s) | '
+        'simulator-process CPU / sample (us) | headroom (200 us / CPU per sample) | '
+        'overruns | recorded / published currents |'
+    )
     print('|---|---|---|---|---|---|---|---|')
     for row in rows:
-        print(f"| {row['topics']} | {row['rtf']:.3f} | {row['samples']:,} | "
-              f"{row['wall_s']:.1f} | {row['cpu_per_sample_us']:.0f} | "
-              f"{200.0 / row['cpu_per_sample_us']:.2f}x | {row['overruns']} | "
-              f"{row['recorded']:,} / {row['published']:,} = "
-              f"{row['recorded'] / max(row['published'], 1):.3f} |")
+        print(
+            f'| {row["topics"]} | {row["rtf"]:.3f} | {row["samples"]:,} | '
+            f'{row["wall_s"]:.1f} | {row["cpu_per_sample_us"]:.0f} | '
+            f'{200.0 / row["cpu_per_sample_us"]:.2f}x | {row["overruns"]} | '
+            f'{row["recorded"]:,} / {row["published"]:,} = '
+            f'{row["recorded"] / max(row["published"], 1):.3f} |'
+        )
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='2 s of data, 2 repeats')
-    parser.add_argument('--part', choices=('bag2data', 'writer', 'simulator'),
-                        help='run one measurement only')
+    parser.add_argument(
+        '--part', choices=('bag2data', 'writer', 'simulator'), help='run one measurement only'
+    )
     parser.add_argument('--seconds', type=float, default=10.0, help='bag length (s)')
     parser.add_argument('--repeat', type=int, default=3, help='repeats (best is kept)')
     args = parser.parse_args()

@@ -59,15 +59,15 @@ def ref_loop_field(px, py, pz, a, current):
     """Textbook field of a loop (radius a, axis z, centred at the origin), Cartesian."""
     rho = np.hypot(px, py)
     phi = np.arctan2(py, px)
-    k2 = np.clip(4 * a * rho / ((a + rho) ** 2 + pz ** 2), 0.0, 1.0)
+    k2 = np.clip(4 * a * rho / ((a + rho) ** 2 + pz**2), 0.0, 1.0)
     kk, ee = ellipk(k2), ellipe(k2)
-    ck = MU0 * current / (2 * np.pi * np.sqrt((a + rho) ** 2 + pz ** 2))  # c k, simplified
-    den = (rho - a) ** 2 + pz ** 2
-    bz = ck * (kk - (rho ** 2 - a ** 2 + pz ** 2) / den * ee)
+    ck = MU0 * current / (2 * np.pi * np.sqrt((a + rho) ** 2 + pz**2))  # c k, simplified
+    den = (rho - a) ** 2 + pz**2
+    bz = ck * (kk - (rho**2 - a**2 + pz**2) / den * ee)
     near = rho < 1e-6  # on/near a source axis (V2 centred: rim points exactly over solenoids)
     with np.errstate(divide='ignore', invalid='ignore'):
-        brho = -(pz / rho) * ck * (kk - (rho ** 2 + a ** 2 + pz ** 2) / den * ee)
-    axis = 3 * MU0 * current * a ** 2 * pz * rho / (4 * (a ** 2 + pz ** 2) ** 2.5)
+        brho = -(pz / rho) * ck * (kk - (rho**2 + a**2 + pz**2) / den * ee)
+    axis = 3 * MU0 * current * a**2 * pz * rho / (4 * (a**2 + pz**2) ** 2.5)
     brho = np.where(near, axis, brho)
     return brho * np.cos(phi), brho * np.sin(phi), bz
 
@@ -80,8 +80,9 @@ class ReferenceModel:
         pm = params.permanent_magnets
         for j in range(pm.count):
             cx, cy, cz = pm.centers[j]
-            self.sources.append((cx, cy, cz, pm.radius[j],
-                                 pm.polarization[j] * pm.length[j] / MU0, 0.0, -1))
+            self.sources.append(
+                (cx, cy, cz, pm.radius[j], pm.polarization[j] * pm.length[j] / MU0, 0.0, -1)
+            )
         sol = params.solenoids
         for j in range(sol.count):
             cx, cy, cz = sol.centers[j]
@@ -115,8 +116,11 @@ class ReferenceModel:
         offsets = self.radius * (r @ self.ring)  # (3, n): p_i - p
         tangents = r @ self.tang
         field = self.base_field(offsets + np.asarray(x[:3])[:, None], u)
-        dforce = (self.radius * self.thickness * 2 * np.pi / self.n) * self.k0 * np.cross(
-            tangents, field, axis=0)
+        dforce = (
+            (self.radius * self.thickness * 2 * np.pi / self.n)
+            * self.k0
+            * np.cross(tangents, field, axis=0)
+        )
         force = dforce.sum(axis=1)
         torque = np.cross(offsets, dforce, axis=0).sum(axis=1)
         return np.concatenate([force, torque])
@@ -129,8 +133,11 @@ class ReferenceModel:
         ca, sa, cb, tb = math.cos(x[3]), math.sin(x[3]), math.cos(x[4]), math.tan(x[4])
         om = x[9:12]
         i_w = self.inertia * om
-        rates = [om[0] + (om[1] * sa + om[2] * ca) * tb, om[1] * ca - om[2] * sa,
-                 (om[1] * sa + om[2] * ca) / cb]
+        rates = [
+            om[0] + (om[1] * sa + om[2] * ca) * tb,
+            om[1] * ca - om[2] * sa,
+            (om[1] * sa + om[2] * ca) / cb,
+        ]
         acc = w[:3] / self.mass - np.array([0.0, 0.0, GRAVITY])
         dw = (tau_body - np.cross(om, i_w)) / self.inertia
         return np.concatenate([x[6:9], rates, acc, dw])
@@ -167,10 +174,12 @@ def best_time(fn, repeats):
 
 def check_states(z_eq):
     """(label, x, u): equilibrium and perturbed states (mm, 0.05-0.1 rad, nonzero u)."""
+
     def state(dx, dy, dz, al, be, ga):
         x = np.zeros(12)
         x[:6] = [dx, dy, z_eq + dz, al, be, ga]
         return x
+
     zero = np.zeros(4)
     return [
         ('equilibrium, u = 0', state(0, 0, 0, 0, 0, 0), zero),
@@ -231,18 +240,23 @@ def bench_params(name, quick, load_rows):
         d_tau = np.linalg.norm(w_pkg[3:] - w_ref[3:])
         t_norm = np.linalg.norm(w_ref[3:])
         rel_t = d_tau / t_norm if t_norm > 1e-9 * scale * f_norm else math.nan
-        checks.append((label, f_norm, t_norm, rel_f, rel_t, d_tau / (scale * f_norm),
-                       rel_f100))
+        checks.append((label, f_norm, t_norm, rel_f, rel_t, d_tau / (scale * f_norm), rel_f100))
     max_rel_f = max(c[3] for c in checks)
 
     # -- force+torque speed
     states = [(x, u) for _, x, u in check_states(z_eq)]
-    t_pkg = sum(best_per_call(lambda x=x, u=u: model.wrench(x, u), 100 if quick else 400, reps)
-                for x, u in states) / len(states)
-    t_pkg100 = sum(best_per_call(lambda x=x, u=u: model_100.wrench(x, u),
-                                 50 if quick else 200, reps) for x, u in states) / len(states)
-    t_ref = sum(best_per_call(lambda x=x, u=u: ref.wrench(x, u), 5 if quick else 20, reps)
-                for x, u in states) / len(states)
+    t_pkg = sum(
+        best_per_call(lambda x=x, u=u: model.wrench(x, u), 100 if quick else 400, reps)
+        for x, u in states
+    ) / len(states)
+    t_pkg100 = sum(
+        best_per_call(lambda x=x, u=u: model_100.wrench(x, u), 50 if quick else 200, reps)
+        for x, u in states
+    ) / len(states)
+    t_ref = sum(
+        best_per_call(lambda x=x, u=u: ref.wrench(x, u), 5 if quick else 20, reps)
+        for x, u in states
+    ) / len(states)
 
     # -- simulator
     dt = 1.0 / SAMPLE_RATE
@@ -256,23 +270,34 @@ def bench_params(name, quick, load_rows):
     pairs = prbs_inputs(n_full, 50, 1, 'pairs')
     probe = sim.run(pairs)
     n_pairs = n_full if not probe.crashed else (len(probe.t) - 1) // 50 * 50 - 50
-    crash_note = (f'crashed at {probe.crash_time:.3f} s ({probe.reason})' if probe.crashed
-                  else 'no crash in 1 s')
+    crash_note = (
+        f'crashed at {probe.crash_time:.3f} s ({probe.reason})'
+        if probe.crashed
+        else 'no crash in 1 s'
+    )
     common = prbs_inputs(n_full, 50, 2, 'common')
-    crash = np.concatenate([[model.params.base_top, model.params.magnet.radius,
-                             model.params.magnet.thickness / 2],
-                            model.params.workspace.lower, model.params.workspace.upper])
+    crash = np.concatenate(
+        [
+            [model.params.base_top, model.params.magnet.radius, model.params.magnet.thickness / 2],
+            model.params.workspace.lower,
+            model.params.workspace.upper,
+        ]
+    )
     core_args = model.fast_arguments()
     sens_args = model.measurement_arguments()[2:4]  # sens, mag: the core also reads sensors
     cfg = kernels.simulator_config(dt, 1, kernels.COIL_IDEAL, True, False, np.ones(3), crash)
     sim_rows = []
     sim_reps = 2 if quick else 3
-    for label, inputs in ((f'pairs {n_pairs * dt:.2f} s', pairs[:n_pairs]),
-                          ('common 1.00 s', common)):
+    for label, inputs in (
+        (f'pairs {n_pairs * dt:.2f} s', pairs[:n_pairs]),
+        ('common 1.00 s', common),
+    ):
+
         def step_loop(inputs=inputs):
             sim.reset(x_eq)
             for u in inputs:
                 sim.step(u)
+
         step_loop()
         if sim.crashed:
             raise RuntimeError(f'{name}: step loop crashed on {label} at {sim.crash_time} s')
@@ -281,8 +306,12 @@ def bench_params(name, quick, load_rows):
         if result.crashed:
             raise RuntimeError(f'{name}: run crashed on {label} at {result.crash_time} s')
         t_run = best_time(lambda inputs=inputs: sim.run(inputs), sim_reps)
-        t_core = best_time(lambda inputs=inputs: kernels.rk4_run(
-            x_eq.copy(), inputs, cfg, *core_args, *sens_args), sim_reps)
+        t_core = best_time(
+            lambda inputs=inputs: kernels.rk4_run(
+                x_eq.copy(), inputs, cfg, *core_args, *sens_args
+            ),
+            sim_reps,
+        )
         sim_rows.append((label, len(inputs) * dt, t_step, t_run, t_core, result.x[-1]))
 
     # baseline: the same RK4 (one step per sample) with the reference f(x, u)
@@ -298,10 +327,21 @@ def bench_params(name, quick, load_rows):
     pkg_x = sim.run(base_inputs).x[-1]
     traj_err = np.max(np.abs(pkg_x[:3] - x[:3]))
     rtf_base = n_base * dt / t_base
-    return dict(name=name, z_eq=z_eq, correction=correction, checks=checks,
-                max_rel_f=max_rel_f, t_pkg=t_pkg, t_pkg100=t_pkg100, t_ref=t_ref,
-                sim_rows=sim_rows, crash_note=crash_note, n_base=n_base,
-                rtf_base=rtf_base, traj_err=traj_err)
+    return dict(
+        name=name,
+        z_eq=z_eq,
+        correction=correction,
+        checks=checks,
+        max_rel_f=max_rel_f,
+        t_pkg=t_pkg,
+        t_pkg100=t_pkg100,
+        t_ref=t_ref,
+        sim_rows=sim_rows,
+        crash_note=crash_note,
+        n_base=n_base,
+        rtf_base=rtf_base,
+        traj_err=traj_err,
+    )
 
 
 # ---------------------------------------------------------------------------- report
@@ -317,9 +357,12 @@ def machine_line():
         pass
     import numba
     import scipy
+
     cores = len(os.sched_getaffinity(0)) if hasattr(os, 'sched_getaffinity') else os.cpu_count()
-    return (f'{model_name}, {cores} cores; Python {platform.python_version()}, numpy '
-            f'{np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}')
+    return (
+        f'{model_name}, {cores} cores; Python {platform.python_version()}, numpy '
+        f'{np.__version__}, scipy {scipy.__version__}, numba {numba.__version__}'
+    )
 
 
 def result_rows(results):
@@ -329,27 +372,69 @@ def result_rows(results):
         n = r['name']
         speed = r['t_ref'] / r['t_pkg']
         ok = speed >= SPEEDUP_TARGET and r['max_rel_f'] <= FORCE_TOLERANCE
-        rows.append((n, 'max rel. force diff, 5 states', f"{r['max_rel_f']:.1e}", '',
-                     '', f'<= {FORCE_TOLERANCE:.0e}',
-                     verdict(r['max_rel_f'] <= FORCE_TOLERANCE)))
-        rows.append((n, 'wrench(x, u), us/call', f"{r['t_pkg'] * 1e6:.1f} (n=32)",
-                     f"{r['t_ref'] * 1e6:.0f} (n=100)", f'{speed:.0f}x',
-                     f'>= {SPEEDUP_TARGET:.0f}x', verdict(ok)))
-        rows.append((n, '  info: package at n=100', f"{r['t_pkg100'] * 1e6:.1f} (n=100)",
-                     f"{r['t_ref'] * 1e6:.0f} (n=100)", f"{r['t_ref'] / r['t_pkg100']:.0f}x",
-                     '', ''))
+        rows.append(
+            (
+                n,
+                'max rel. force diff, 5 states',
+                f'{r["max_rel_f"]:.1e}',
+                '',
+                '',
+                f'<= {FORCE_TOLERANCE:.0e}',
+                verdict(r['max_rel_f'] <= FORCE_TOLERANCE),
+            )
+        )
+        rows.append(
+            (
+                n,
+                'wrench(x, u), us/call',
+                f'{r["t_pkg"] * 1e6:.1f} (n=32)',
+                f'{r["t_ref"] * 1e6:.0f} (n=100)',
+                f'{speed:.0f}x',
+                f'>= {SPEEDUP_TARGET:.0f}x',
+                verdict(ok),
+            )
+        )
+        rows.append(
+            (
+                n,
+                '  info: package at n=100',
+                f'{r["t_pkg100"] * 1e6:.1f} (n=100)',
+                f'{r["t_ref"] * 1e6:.0f} (n=100)',
+                f'{r["t_ref"] / r["t_pkg100"]:.0f}x',
+                '',
+                '',
+            )
+        )
         base = r['rtf_base']
-        rows.append((n, f"RK4 baseline RTF ({r['n_base']} samples)", '', f'{base:.3f}x',
-                     '', '', ''))
+        rows.append(
+            (n, f'RK4 baseline RTF ({r["n_base"]} samples)', '', f'{base:.3f}x', '', '', '')
+        )
         for label, sim_t, t_step, t_run, t_core, _ in r['sim_rows']:
             for what, wall in (('step() loop', t_step), ('run()', t_run)):
                 rtf = sim_t / wall
-                rows.append((n, f'{what} RTF, {label}', f'{rtf:.1f}x', f'{base:.3f}x',
-                             f'{rtf / base:.0f}x', f'>= {RTF_TARGET:.0f}x RT',
-                             verdict(rtf >= RTF_TARGET)))
+                rows.append(
+                    (
+                        n,
+                        f'{what} RTF, {label}',
+                        f'{rtf:.1f}x',
+                        f'{base:.3f}x',
+                        f'{rtf / base:.0f}x',
+                        f'>= {RTF_TARGET:.0f}x RT',
+                        verdict(rtf >= RTF_TARGET),
+                    )
+                )
             rtf = sim_t / t_core
-            rows.append((n, f'  info: compiled RK4 core only, {label}', f'{rtf:.1f}x',
-                         f'{base:.3f}x', f'{rtf / base:.0f}x', '', ''))
+            rows.append(
+                (
+                    n,
+                    f'  info: compiled RK4 core only, {label}',
+                    f'{rtf:.1f}x',
+                    f'{base:.3f}x',
+                    f'{rtf / base:.0f}x',
+                    '',
+                    '',
+                )
+            )
     return rows
 
 
@@ -370,8 +455,9 @@ def markdown_table(header, rows):
     def line(values):
         return '| ' + ' | '.join(str(v).strip().replace('|', '\\|') for v in values) + ' |'
 
-    return '\n'.join([line(header), '|' + '|'.join('---' for _ in header) + '|',
-                      *(line(row) for row in rows)])
+    return '\n'.join(
+        [line(header), '|' + '|'.join('---' for _ in header) + '|', *(line(row) for row in rows)]
+    )
 
 
 def summaries(results):
@@ -379,23 +465,33 @@ def summaries(results):
     for r in results:
         speed = r['t_ref'] / r['t_pkg']
         ok = speed >= SPEEDUP_TARGET and r['max_rel_f'] <= FORCE_TOLERANCE
-        out.append(f"SUMMARY {r['name']} force+torque speed-up >= {SPEEDUP_TARGET:.0f}x at "
-                   f"rel. force diff <= {FORCE_TOLERANCE:.0e}: {verdict(ok)} "
-                   f"({speed:.0f}x, max rel. diff {r['max_rel_f']:.1e})")
+        out.append(
+            f'SUMMARY {r["name"]} force+torque speed-up >= {SPEEDUP_TARGET:.0f}x at '
+            f'rel. force diff <= {FORCE_TOLERANCE:.0e}: {verdict(ok)} '
+            f'({speed:.0f}x, max rel. diff {r["max_rel_f"]:.1e})'
+        )
         parts = []
         for label, sim_t, t_step, t_run, _, _ in r['sim_rows']:
-            parts.append(f'step() {sim_t / t_step:.1f}x {verdict(sim_t / t_step >= RTF_TARGET)}'
-                         f', run() {sim_t / t_run:.1f}x {verdict(sim_t / t_run >= RTF_TARGET)}'
-                         f' [{label}]')
-        out.append(f"SUMMARY {r['name']} simulator >= {RTF_TARGET:.0f}x real time at "
-                   f"{SAMPLE_RATE / 1000:.0f} kHz (fast model, no ROS): " + '; '.join(parts))
+            parts.append(
+                f'step() {sim_t / t_step:.1f}x {verdict(sim_t / t_step >= RTF_TARGET)}'
+                f', run() {sim_t / t_run:.1f}x {verdict(sim_t / t_run >= RTF_TARGET)}'
+                f' [{label}]'
+            )
+        out.append(
+            f'SUMMARY {r["name"]} simulator >= {RTF_TARGET:.0f}x real time at '
+            f'{SAMPLE_RATE / 1000:.0f} kHz (fast model, no ROS): ' + '; '.join(parts)
+        )
     return out
 
 
 def main(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split('\n', 1)[0])
-    parser.add_argument('--params', choices=('maggy_v2', 'maggy_v4'), action='append',
-                        help='parameter set (repeatable; default both)')
+    parser.add_argument(
+        '--params',
+        choices=('maggy_v2', 'maggy_v4'),
+        action='append',
+        help='parameter set (repeatable; default both)',
+    )
     parser.add_argument('--quick', action='store_true', help='fewer repeats')
     parser.add_argument('--markdown', metavar='PATH', help='also write the tables as markdown')
     args = parser.parse_args(argv)
@@ -404,42 +500,73 @@ def main(argv=None):
     t_start = time.perf_counter()
     t0 = time.perf_counter()
     import maglev_ros.physics.simulation  # noqa: F401  (import time, numba included)
+
     t_import = time.perf_counter() - t0
     load_rows = []
     results = [bench_params(name, args.quick, load_rows) for name in names]
 
-    out = [f'Physics benchmark: fast model, {SAMPLE_RATE:.0f} Hz, no ROS'
-           f'{" (quick)" if args.quick else ""}', f'machine: {machine_line()}',
-           f'reference: plain numpy/scipy, n = {REF_RIM_POINTS} rim points, Python loop over '
-           'sources; package: model.wrench, n = 32', '']
+    out = [
+        f'Physics benchmark: fast model, {SAMPLE_RATE:.0f} Hz, no ROS'
+        f'{" (quick)" if args.quick else ""}',
+        f'machine: {machine_line()}',
+        f'reference: plain numpy/scipy, n = {REF_RIM_POINTS} rim points, Python loop over '
+        'sources; package: model.wrench, n = 32',
+        '',
+    ]
 
-    out.append('Correctness (package n = 32 vs reference n = 100; U = '
-               f'{U_TEST.tolist()} A; torque diff also scaled by R |F|; last column: '
-               'the package at n = 100):')
-    check_header = ('params', 'state', '|F| (N)', '|tau| (N m)', 'rel dF', 'rel dtau',
-                    'dtau/(R|F|)', 'rel dF n=100')
+    out.append(
+        'Correctness (package n = 32 vs reference n = 100; U = '
+        f'{U_TEST.tolist()} A; torque diff also scaled by R |F|; last column: '
+        'the package at n = 100):'
+    )
+    check_header = (
+        'params',
+        'state',
+        '|F| (N)',
+        '|tau| (N m)',
+        'rel dF',
+        'rel dtau',
+        'dtau/(R|F|)',
+        'rel dF n=100',
+    )
     check_rows = []
     for r in results:
         for label, f_norm, t_norm, rel_f, rel_t, rel_tr, rel_f100 in r['checks']:
-            check_rows.append((r['name'], label, f'{f_norm:.4f}', f'{t_norm:.2e}',
-                               f'{rel_f:.1e}', '-' if math.isnan(rel_t) else f'{rel_t:.1e}',
-                               f'{rel_tr:.1e}', f'{rel_f100:.1e}'))
+            check_rows.append(
+                (
+                    r['name'],
+                    label,
+                    f'{f_norm:.4f}',
+                    f'{t_norm:.2e}',
+                    f'{rel_f:.1e}',
+                    '-' if math.isnan(rel_t) else f'{rel_t:.1e}',
+                    f'{rel_tr:.1e}',
+                    f'{rel_f100:.1e}',
+                )
+            )
     out += [text_table(check_header, check_rows), '']
 
-    load_header = ('params', 'make_model', 'correction (+JIT load)', 'first wrench',
-                   'find_equilibria', 'first sim step+run')
+    load_header = (
+        'params',
+        'make_model',
+        'correction (+JIT load)',
+        'first wrench',
+        'find_equilibria',
+        'first sim step+run',
+    )
     load_table = [(row[0], *(f'{v:.3f} s' for v in row[1:])) for row in load_rows]
-    out.append(f'Load/compile times (excluded from the figures; package import '
-               f'{t_import:.3f} s):')
+    out.append(f'Load/compile times (excluded from the figures; package import {t_import:.3f} s):')
     out += [text_table(load_header, load_table), '']
 
     notes = []
     for r in results:
-        notes.append(f"{r['name']}: z_eq = {r['z_eq'] * 1e3:.3f} mm, solenoid radius factor "
-                   f"{r['correction']:.4f}; PRBS +-0.05 A held 10 ms: antisymmetric pairs "
-                   f"{r['crash_note']}, common mode (all four coils) 1 s; RK4 trajectory "
-                   f"package vs reference after {r['n_base']} samples: "
-                   f"max |dp| = {r['traj_err']:.1e} m")
+        notes.append(
+            f'{r["name"]}: z_eq = {r["z_eq"] * 1e3:.3f} mm, solenoid radius factor '
+            f'{r["correction"]:.4f}; PRBS +-0.05 A held 10 ms: antisymmetric pairs '
+            f'{r["crash_note"]}, common mode (all four coils) 1 s; RK4 trajectory '
+            f'package vs reference after {r["n_base"]} samples: '
+            f'max |dp| = {r["traj_err"]:.1e} m'
+        )
     out += notes + ['']
     rows = result_rows(results)
     out += [text_table(HEADER, rows), '']
@@ -448,8 +575,14 @@ def main(argv=None):
     print('\n'.join(out))
 
     if args.markdown:
-        md = ['Correctness (package n = 32 vs reference n = 100):', '',
-              markdown_table(check_header, check_rows), '', markdown_table(HEADER, rows), '']
+        md = [
+            'Correctness (package n = 32 vs reference n = 100):',
+            '',
+            markdown_table(check_header, check_rows),
+            '',
+            markdown_table(HEADER, rows),
+            '',
+        ]
         md += [f'- {line}' for line in notes + summaries(results)]
         with open(args.markdown, 'w') as f:
             f.write('\n'.join(md) + '\n')

@@ -108,8 +108,17 @@ def siso_problem(kind: str, snr_db: float, seed: int) -> Problem:
     y = clean + _scale(clean, lfilter(C, A, e), snr_db)
     truth = np.r_[A[1:], B[1:]]
     name = {'arx': 'ARX SISO 7/9/1', 'iv': 'IV SISO 7/9/1', 'armax': 'ARMAX SISO 5/5/3/1'}[kind]
-    return Problem(name, kind, y[:, None], u[:, None], truth, np.array([[na]]),
-                   np.array([[nb]]), np.array([[1]]), None if nc is None else np.array([nc]))
+    return Problem(
+        name,
+        kind,
+        y[:, None],
+        u[:, None],
+        truth,
+        np.array([[na]]),
+        np.array([[nb]]),
+        np.array([[1]]),
+        None if nc is None else np.array([nc]),
+    )
 
 
 def mimo_problem(kind: str, snr_db: float, seed: int) -> Problem:
@@ -128,16 +137,34 @@ def mimo_problem(kind: str, snr_db: float, seed: int) -> Problem:
     # each output's own innovations are scaled to the requested SNR.
     clean2 = lfilter(B22, A22, u[:, 1])
     y2 = clean2 + _scale(clean2, lfilter(C2, A22, e[:, 1]), snr_db)
-    clean1 = lfilter([1.0], A11, lfilter(B11, [1], u[:, 0]) + lfilter(B12, [1], u[:, 1])
-                     - lfilter(A12, [1], clean2))
+    clean1 = lfilter(
+        [1.0],
+        A11,
+        lfilter(B11, [1], u[:, 0]) + lfilter(B12, [1], u[:, 1]) - lfilter(A12, [1], clean2),
+    )
     noise1 = _scale(clean1, lfilter(C1, A11, e[:, 0]), snr_db)
-    y1 = lfilter([1.0], A11, lfilter(B11, [1], u[:, 0]) + lfilter(B12, [1], u[:, 1])
-                 - lfilter(A12, [1], y2)) + noise1
+    y1 = (
+        lfilter(
+            [1.0],
+            A11,
+            lfilter(B11, [1], u[:, 0]) + lfilter(B12, [1], u[:, 1]) - lfilter(A12, [1], y2),
+        )
+        + noise1
+    )
     y = np.column_stack([y1, y2])
     truth = np.r_[A11[1:], A12[1:], B11[1:], B12[1:], A22[1:], B22[1:]]
     name = 'ARX MIMO 2x2' if kind == 'arx' else 'ARMAX MIMO 2x2'
-    return Problem(name, kind, y, u, truth, np.array(na), np.array(nb), np.ones((2, 2), int),
-                   None if nc is None else np.array(nc))
+    return Problem(
+        name,
+        kind,
+        y,
+        u,
+        truth,
+        np.array(na),
+        np.array(nb),
+        np.ones((2, 2), int),
+        None if nc is None else np.array(nc),
+    )
 
 
 # ------------------------------------------------------------------ our fits
@@ -174,7 +201,7 @@ def _row_design(p: Problem, i: int, start: int) -> np.ndarray:
     for j in range(p.u.shape[1]):
         if p.nb[i, j]:
             k, n = int(p.nk[i, j]), int(p.nb[i, j])
-            cols.append(lagmat(p.u[:, j], k + n - 1, trim='forward')[start:, k - 1:])
+            cols.append(lagmat(p.u[:, j], k + n - 1, trim='forward')[start:, k - 1 :])
     return np.hstack(cols)
 
 
@@ -198,13 +225,13 @@ def statsmodels_fit(p: Problem) -> np.ndarray:
 
             n_inst = X.shape[1]
             shift = n_inst
-            Z = lagmat(p.u[:, 0], start + shift, trim='forward')[start + shift:, :n_inst]
+            Z = lagmat(p.u[:, 0], start + shift, trim='forward')[start + shift :, :n_inst]
             out.append(IV2SLS(Y[shift:], X[shift:], Z).fit().params)
         else:
             from statsmodels.tsa.statespace.sarimax import SARIMAX
 
             res = SARIMAX(Y, exog=X, order=(0, 0, int(p.nc[i])), trend='n').fit(disp=False)
-            out.append(res.params[:X.shape[1]])
+            out.append(res.params[: X.shape[1]])
     return np.concatenate(out)
 
 
@@ -232,13 +259,17 @@ def sysidentpy_fit(p: Problem) -> np.ndarray:
                 kinds.append(('b', j))
         n_terms = int(p.na[i].sum() + p.nb[i].sum())
         xlag = lags if len(lags) > 1 else lags[0]
-        model = FROLS(order_selection=False, n_terms=n_terms, ylag=int(p.na[i, i]), xlag=xlag,
-                      basis_function=Polynomial(degree=1),
-                      estimator=LeastSquares(unbiased=p.structure == 'armax'),
-                      model_type='NARMAX')
-        model.fit(X=np.column_stack(inputs), y=p.y[:, i:i + 1])
-        theta = dict(zip((int(c[0]) for c in model.final_model), model.theta.ravel(),
-                         strict=True))
+        model = FROLS(
+            order_selection=False,
+            n_terms=n_terms,
+            ylag=int(p.na[i, i]),
+            xlag=xlag,
+            basis_function=Polynomial(degree=1),
+            estimator=LeastSquares(unbiased=p.structure == 'armax'),
+            model_type='NARMAX',
+        )
+        model.fit(X=np.column_stack(inputs), y=p.y[:, i : i + 1])
+        theta = dict(zip((int(c[0]) for c in model.final_model), model.theta.ravel(), strict=True))
         row = [-theta.get(1000 + k, 0.0) for k in range(1, int(p.na[i, i]) + 1)]
         blocks: dict[tuple[str, int], list[float]] = {}
         for idx, (kind, j) in enumerate(kinds):
@@ -270,12 +301,17 @@ def sippy_fit(p: Problem) -> np.ndarray:
         if p.structure == 'arx':
             m = system_identification(p.y[:, 0], p.u[:, 0], 'ARX', ARX_orders=[na, nb, nk - 1])
         else:
-            m = system_identification(p.y[:, 0], p.u[:, 0], 'ARMAX',
-                                      ARMAX_orders=[na, nb, int(p.nc[0]), nk - 1],
-                                      ARMAX_mod='ILLS', max_iterations=100)
+            m = system_identification(
+                p.y[:, 0],
+                p.u[:, 0],
+                'ARMAX',
+                ARMAX_orders=[na, nb, int(p.nc[0]), nk - 1],
+                ARMAX_mod='ILLS',
+                max_iterations=100,
+            )
     den = np.asarray(m.DENOMINATOR[0][0], dtype=float)
     num = np.asarray(m.NUMERATOR[0][0], dtype=float)
-    return np.r_[den[1:na + 1], num[nk - 1:nk - 1 + nb]]
+    return np.r_[den[1 : na + 1], num[nk - 1 : nk - 1 + nb]]
 
 
 PEERS: dict[str, tuple[str, Callable[[Problem], np.ndarray]]] = {
@@ -286,8 +322,9 @@ PEERS: dict[str, tuple[str, Callable[[Problem], np.ndarray]]] = {
 SLOW = {('statsmodels', 'armax'), ('SIPPY', 'armax')}
 
 
-def measure(fit: Callable[[Problem], np.ndarray], problems: list[Problem]
-            ) -> tuple[float, np.ndarray]:
+def measure(
+    fit: Callable[[Problem], np.ndarray], problems: list[Problem]
+) -> tuple[float, np.ndarray]:
     """Return (best time in s on the first data set, relative errors per data set used).
 
     Time is the CPU time of the calling thread (``time.thread_time``; all
@@ -331,16 +368,24 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--quick', action='store_true', help='skip peers slower than ~2 s')
     parser.add_argument('--seed', type=int, default=2024, help='first noise seed')
-    parser.add_argument('--seeds', type=int, default=15,
-                        help='data sets per case (error = median over them)')
+    parser.add_argument(
+        '--seeds', type=int, default=15, help='data sets per case (error = median over them)'
+    )
     args = parser.parse_args(argv)
     available = {}
-    warm_imports = {'statsmodels': ['statsmodels.api', 'statsmodels.tsa.statespace.sarimax',
-                                    'statsmodels.sandbox.regression.gmm',
-                                    'statsmodels.tsa.tsatools'],
-                    'sysidentpy': ['sysidentpy.model_structure_selection',
-                                   'sysidentpy.basis_function',
-                                   'sysidentpy.parameter_estimation']}
+    warm_imports = {
+        'statsmodels': [
+            'statsmodels.api',
+            'statsmodels.tsa.statespace.sarimax',
+            'statsmodels.sandbox.regression.gmm',
+            'statsmodels.tsa.tsatools',
+        ],
+        'sysidentpy': [
+            'sysidentpy.model_structure_selection',
+            'sysidentpy.basis_function',
+            'sysidentpy.parameter_estimation',
+        ],
+    }
     for peer, (module, fit) in PEERS.items():
         try:
             __import__(module)
@@ -348,15 +393,23 @@ def main(argv: list[str] | None = None) -> int:
                 __import__(sub)
             available[peer] = fit
         except ImportError:
-            print(f'{peer}: not installed, skipped (pip install '
-                  f'{"sippy-unipi" if peer == "SIPPY" else peer})')
-    builders = [lambda s, r: siso_problem('arx', s, r), lambda s, r: mimo_problem('arx', s, r),
-                lambda s, r: siso_problem('iv', s, r), lambda s, r: siso_problem('armax', s, r),
-                lambda s, r: mimo_problem('armax', s, r)]
-    print(f'N = {N} samples; time = best CPU time (thread_time) on the first data set; '
-          'error = median over '
-          f'{args.seeds} data sets of ||theta - theta_0|| / ||theta_0|| over A and B '
-          '(interquartile range in parentheses)\n')
+            print(
+                f'{peer}: not installed, skipped (pip install '
+                f'{"sippy-unipi" if peer == "SIPPY" else peer})'
+            )
+    builders = [
+        lambda s, r: siso_problem('arx', s, r),
+        lambda s, r: mimo_problem('arx', s, r),
+        lambda s, r: siso_problem('iv', s, r),
+        lambda s, r: siso_problem('armax', s, r),
+        lambda s, r: mimo_problem('armax', s, r),
+    ]
+    print(
+        f'N = {N} samples; time = best CPU time (thread_time) on the first data set; '
+        'error = median over '
+        f'{args.seeds} data sets of ||theta - theta_0|| / ||theta_0|| over A and B '
+        '(interquartile range in parentheses)\n'
+    )
     print('| structure | SNR | library | time [ms] | param. error | speed-up of maglev_ros |')
     print('|---|---|---|---:|---:|---:|')
     for build in builders:
@@ -364,14 +417,21 @@ def main(argv: list[str] | None = None) -> int:
             problems = [build(snr, args.seed + k) for k in range(args.seeds)]
             problem = problems[0]
             t_ours, e_ours = measure(ours, problems)
-            label = '**maglev_ros**' + (" (iv4 method='extended')" if problem.structure == 'iv'
-                                        else '')
-            print(f'| {problem.name} | {snr:.0f} dB | {label} | {1e3 * t_ours:.2f} | '
-                  f'{spread(e_ours)} | - |', flush=True)
+            label = '**maglev_ros**' + (
+                " (iv4 method='extended')" if problem.structure == 'iv' else ''
+            )
+            print(
+                f'| {problem.name} | {snr:.0f} dB | {label} | {1e3 * t_ours:.2f} | '
+                f'{spread(e_ours)} | - |',
+                flush=True,
+            )
             if problem.structure == 'iv':
                 t, e = measure(ours_iv4_toolbox, problems)
-                print(f'| {problem.name} | {snr:.0f} dB | maglev_ros (iv4 default: toolbox '
-                      f'stages) | {1e3 * t:.2f} | {spread(e)} | - |', flush=True)
+                print(
+                    f'| {problem.name} | {snr:.0f} dB | maglev_ros (iv4 default: toolbox '
+                    f'stages) | {1e3 * t:.2f} | {spread(e)} | - |',
+                    flush=True,
+                )
             for peer, fit in available.items():
                 if args.quick and (peer, problem.structure) in SLOW:
                     print(f'| {problem.name} | {snr:.0f} dB | {peer} | skipped (--quick) | | |')
@@ -379,11 +439,16 @@ def main(argv: list[str] | None = None) -> int:
                 try:
                     t, e = measure(fit, problems)
                 except UnsupportedError as exc:
-                    print(f'| {problem.name} | {snr:.0f} dB | {peer} | not supported: {exc} '
-                          '| | |', flush=True)
+                    print(
+                        f'| {problem.name} | {snr:.0f} dB | {peer} | not supported: {exc} | | |',
+                        flush=True,
+                    )
                     continue
-                print(f'| {problem.name} | {snr:.0f} dB | {peer} | {1e3 * t:.2f} | '
-                      f'{spread(e)} | {t / t_ours:.0f}x |', flush=True)
+                print(
+                    f'| {problem.name} | {snr:.0f} dB | {peer} | {1e3 * t:.2f} | '
+                    f'{spread(e)} | {t / t_ours:.0f}x |',
+                    flush=True,
+                )
     return 0
 
 

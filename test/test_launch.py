@@ -36,7 +36,8 @@ def test_nodes_executables_and_parameters_exist(path):
         declared = set(module._PARAMETERS) | BUILT_IN
         for param in node.findall('param'):
             assert param.get('name') in declared, (
-                f'{path.name}: {executable} declares no parameter {param.get("name")!r}')
+                f'{path.name}: {executable} declares no parameter {param.get("name")!r}'
+            )
     args = {a.get('name') for a in root.findall('arg')}
     for element in root.iter():
         for value in element.attrib.values():
@@ -51,10 +52,12 @@ def test_lab_launch_exists(name):
 
 
 CONFIG = LAUNCH.parent / 'config'
-NODE_MODULES = {'maglev_simulator': 'maglev_ros.nodes.simulator',
-                'maglev_excitation': 'maglev_ros.nodes.excitation',
-                'maglev_recorder': 'maglev_ros.nodes.recorder',
-                'maglev_player': 'maglev_ros.nodes.player'}
+NODE_MODULES = {
+    'maglev_simulator': 'maglev_ros.nodes.simulator',
+    'maglev_excitation': 'maglev_ros.nodes.excitation',
+    'maglev_recorder': 'maglev_ros.nodes.recorder',
+    'maglev_player': 'maglev_ros.nodes.player',
+}
 
 
 @pytest.mark.parametrize('path', sorted(CONFIG.glob('*_params.yaml')), ids=lambda p: p.name)
@@ -69,5 +72,6 @@ def test_parameter_files_name_declared_parameters_with_their_types(path):
             default = module._PARAMETERS[name][0]
             if not hasattr(default, 'name'):  # a typed default, not Parameter.Type
                 assert type(value) is type(default), (
-                    f'{path.name}: {name} = {value!r} is not a {type(default).__name__}')
+                    f'{path.name}: {name} = {value!r} is not a {type(default).__name__}'
+                )
                 assert value == default, f'{path.name}: {name} = {value!r}, default {default!r}'

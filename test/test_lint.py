@@ -19,6 +19,25 @@ def test_ruff_clean():
     ruff = _ruff()
     if ruff is None:
         pytest.skip('ruff is not installed (pip install ".[test]")')
-    result = subprocess.run([ruff, 'check', '--no-cache', 'maglev_ros', 'test', 'benchmarks'],
-                            cwd=ROOT, capture_output=True, text=True, check=False)
+    result = subprocess.run(
+        [ruff, 'check', '--no-cache', 'maglev_ros', 'test', 'benchmarks'],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
     assert result.returncode == 0, result.stdout + result.stderr
+
+
+def test_ruff_format_clean():
+    ruff = _ruff()
+    if ruff is None:
+        pytest.skip('ruff is not installed (pip install ".[test]")')
+    result = subprocess.run(
+        [ruff, 'format', '--check', '--no-cache', 'maglev_ros', 'test', 'benchmarks'],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    assert result.returncode == 0, 'run `ruff format`:\n' + result.stdout + result.stderr

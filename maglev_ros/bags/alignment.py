@@ -47,8 +47,16 @@ import numpy as np
 
 from .errors import BagError
 
-__all__ = ['GAP_FACTOR', 'Alignment', 'Gap', 'Source', 'SourceReport', 'align',
-           'estimate_period', 'find_gaps']
+__all__ = [
+    'GAP_FACTOR',
+    'Alignment',
+    'Gap',
+    'Source',
+    'SourceReport',
+    'align',
+    'estimate_period',
+    'find_gaps',
+]
 
 #: A stamp difference above GAP_FACTOR sample periods is a gap.
 GAP_FACTOR = 1.5
@@ -232,8 +240,10 @@ def find_gaps(topic: str, stamps: np.ndarray, period: float, t0_ns: int) -> tupl
     diffs = np.diff(stamps).astype(float) * 1e-9
     where = np.flatnonzero(diffs > GAP_FACTOR * period)
     missing = np.rint(diffs[where] / period).astype(int) - 1
-    return tuple(Gap(topic, (int(stamps[i]) - t0_ns) * 1e-9, max(int(m), 1))
-                 for i, m in zip(where, missing, strict=True))
+    return tuple(
+        Gap(topic, (int(stamps[i]) - t0_ns) * 1e-9, max(int(m), 1))
+        for i, m in zip(where, missing, strict=True)
+    )
 
 
 def _clean(source: Source) -> tuple[np.ndarray, np.ndarray, int]:
@@ -258,16 +268,25 @@ def _clean(source: Source) -> tuple[np.ndarray, np.ndarray, int]:
 
 def _first_gap_error(gaps: Sequence[Gap]) -> BagError:
     first = gaps[0]
-    more = f' ({len(gaps)} gaps, {sum(g.missing for g in gaps)} samples in all)' \
-        if len(gaps) > 1 else ''
-    return BagError(f'gap in topic {first.topic!r}: {first.missing} missing sample'
-                    f'{"s" if first.missing != 1 else ""} after t = {first.time:.6f} s{more}; '
-                    f'pass allow_gaps=True (--allow-gaps) to interpolate outputs and hold '
-                    f'inputs across gaps')
+    more = (
+        f' ({len(gaps)} gaps, {sum(g.missing for g in gaps)} samples in all)'
+        if len(gaps) > 1
+        else ''
+    )
+    return BagError(
+        f'gap in topic {first.topic!r}: {first.missing} missing sample'
+        f'{"s" if first.missing != 1 else ""} after t = {first.time:.6f} s{more}; '
+        f'pass allow_gaps=True (--allow-gaps) to interpolate outputs and hold '
+        f'inputs across gaps'
+    )
 
 
-def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool = False,
-          tolerance: float = TOLERANCE) -> Alignment:
+def align(
+    sources: Sequence[Source],
+    Ts: float | None = None,
+    allow_gaps: bool = False,
+    tolerance: float = TOLERANCE,
+) -> Alignment:
     """Align topics on the time base of the first output (see the module docstring).
 
     Parameters
@@ -303,8 +322,10 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
     base_index = sources.index(outputs[0])
     base_stamps = cleaned[base_index][0]
     if base_stamps.size < 2:
-        raise BagError(f'topic {outputs[0].topic!r} has {base_stamps.size} sample: '
-                       f'at least 2 are needed for a time base')
+        raise BagError(
+            f'topic {outputs[0].topic!r} has {base_stamps.size} sample: '
+            f'at least 2 are needed for a time base'
+        )
     if Ts is None:
         Ts = estimate_period(base_stamps)
     Ts = float(Ts)
@@ -330,32 +351,54 @@ def align(sources: Sequence[Source], Ts: float | None = None, allow_gaps: bool =
         if source.role == 'input':
             out, method, first, last = _hold(stamps, values, grid, ts_ns, tol_ns, period)
         else:
-            out, method, first, last = _match_or_interpolate(stamps, values, grid, ts_ns,
-                                                              tol_ns, period)
+            out, method, first, last = _match_or_interpolate(
+                stamps, values, grid, ts_ns, tol_ns, period
+            )
         first_ok, last_ok = max(first_ok, first), min(last_ok, last)
         results.append((out, method, period, gaps))
     if gaps_all and not allow_gaps:
         raise _first_gap_error(gaps_all)
     if last_ok < first_ok:
-        spans = ', '.join(f'{s.topic} {(int(c[0][0]) - t0) * 1e-9:.3f}..'
-                          f'{(int(c[0][-1]) - t0) * 1e-9:.3f} s' for s, c in zip(
-                              sources, cleaned, strict=True))
+        spans = ', '.join(
+            f'{s.topic} {(int(c[0][0]) - t0) * 1e-9:.3f}..{(int(c[0][-1]) - t0) * 1e-9:.3f} s'
+            for s, c in zip(sources, cleaned, strict=True)
+        )
         clocks = {s.clock for s in sources}
-        hint = ('; header stamps and log times come from different clocks: record with '
-                'the clock that stamps the messages (use_sim_time in simulation)'
-                if len(clocks) > 1 else '')
+        hint = (
+            '; header stamps and log times come from different clocks: record with '
+            'the clock that stamps the messages (use_sim_time in simulation)'
+            if len(clocks) > 1
+            else ''
+        )
         raise BagError(f'the topics do not overlap in time: {spans}{hint}')
     window = slice(first_ok, last_ok + 1)
     reports = []
-    for source, (_, _, dups), (_, method, period, gaps) in zip(sources, cleaned, results,
-                                                                strict=True):
+    for source, (_, _, dups), (_, method, period, gaps) in zip(
+        sources, cleaned, results, strict=True
+    ):
         fill = 'zoh' if source.role == 'input' else 'linear'
         filled = tuple(Gap(g.topic, g.time, g.missing, fill) for g in gaps)
-        reports.append(SourceReport(source.topic, source.role, source.clock,
-                                    int(source.stamps.size) - dups, period, method, dups, filled))
+        reports.append(
+            SourceReport(
+                source.topic,
+                source.role,
+                source.clock,
+                int(source.stamps.size) - dups,
+                period,
+                method,
+                dups,
+                filled,
+            )
+        )
     values = tuple(np.ascontiguousarray(r[0][window]) for r in results)
-    return Alignment(int(grid[first_ok]), Ts, values, tuple(reports),
-                     (first_ok, count - 1 - last_ok), 'stamps' if own else 'grid')
+    return Alignment(
+        int(grid[first_ok]),
+        Ts,
+        values,
+        tuple(reports),
+        (first_ok, count - 1 - last_ok),
+        'stamps' if own else 'grid',
+    )
 
 
 def _nearest(grid: np.ndarray, stamps: np.ndarray) -> np.ndarray:
@@ -367,9 +410,14 @@ def _nearest(grid: np.ndarray, stamps: np.ndarray) -> np.ndarray:
     return np.where(stamps - grid[left] <= grid[right] - stamps, left, right)
 
 
-def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray,
-                          ts_ns: float, tol_ns: float, period: float
-                          ) -> tuple[np.ndarray, str, int, int]:
+def _match_or_interpolate(
+    stamps: np.ndarray,
+    values: np.ndarray,
+    grid: np.ndarray,
+    ts_ns: float,
+    tol_ns: float,
+    period: float,
+) -> tuple[np.ndarray, str, int, int]:
     """Output: exact sample match if every message is on the time base, else linear.
 
     ``grid`` (int64 ns, increasing) is the time base, uniform or the first
@@ -383,8 +431,9 @@ def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarr
     last = int(np.searchsorted(grid, stamps[-1] + tol_ns, side='right')) - 1
     inside = (stamps >= grid[0] - 0.5 * ts_ns) & (stamps < grid[-1] + 0.5 * ts_ns)
     k_in = _nearest(grid, stamps[inside])
-    on_grid = bool(np.all(np.abs(stamps[inside] - grid[k_in]) <= tol_ns)
-                   and np.all(np.diff(k_in) > 0))
+    on_grid = bool(
+        np.all(np.abs(stamps[inside] - grid[k_in]) <= tol_ns) and np.all(np.diff(k_in) > 0)
+    )
     t = (stamps - stamps[0]).astype(float)
     tg = (grid - stamps[0]).astype(float)
     out = np.empty((grid.size, values.shape[1]))
@@ -399,8 +448,14 @@ def _match_or_interpolate(stamps: np.ndarray, values: np.ndarray, grid: np.ndarr
     return out, 'exact', first, last
 
 
-def _hold(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, ts_ns: float,
-          tol_ns: float, period: float) -> tuple[np.ndarray, str, int, int]:
+def _hold(
+    stamps: np.ndarray,
+    values: np.ndarray,
+    grid: np.ndarray,
+    ts_ns: float,
+    tol_ns: float,
+    period: float,
+) -> tuple[np.ndarray, str, int, int]:
     """Input: zero-order hold of the last sample at or before each base time.
 
     Held for one of its own periods after its last message (a topic that stopped
@@ -418,10 +473,10 @@ def _hold(stamps: np.ndarray, values: np.ndarray, grid: np.ndarray, ts_ns: float
     jj = np.clip(j, 0, stamps.size - 1)
     out = values[jj]
     exact = np.abs(stamps[jj] - grid) <= tol_ns
-    if np.all(exact[first:last + 1]):
+    if np.all(exact[first : last + 1]):
         return out, 'exact', first, last
     last_message = int(np.searchsorted(grid, stamps[-1] + tol_ns, side='right')) - 1
     same_rate = abs(period * 1e9 - ts_ns) <= tol_ns
-    if same_rate and first <= last_message and np.all(exact[first:last_message + 1]):
+    if same_rate and first <= last_message and np.all(exact[first : last_message + 1]):
         return out, 'exact', first, last_message
     return out, 'zoh', first, last

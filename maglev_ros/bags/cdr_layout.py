@@ -25,9 +25,22 @@ __all__ = ['CdrLayout', 'cdr_layout', 'decode_columns']
 
 Path = tuple[str | int, ...]
 # ROS 2 primitive -> little-endian numpy dtype (char and byte are uint8 in ROS 2)
-_DTYPES = {'bool': '|u1', 'byte': '|u1', 'char': '|u1', 'octet': '|u1', 'int8': '|i1',
-           'uint8': '|u1', 'int16': '<i2', 'uint16': '<u2', 'int32': '<i4', 'uint32': '<u4',
-           'int64': '<i8', 'uint64': '<u8', 'float32': '<f4', 'float64': '<f8'}
+_DTYPES = {
+    'bool': '|u1',
+    'byte': '|u1',
+    'char': '|u1',
+    'octet': '|u1',
+    'int8': '|i1',
+    'uint8': '|u1',
+    'int16': '<i2',
+    'uint16': '<u2',
+    'int32': '<i4',
+    'uint32': '<u4',
+    'int64': '<i8',
+    'uint64': '<u8',
+    'float32': '<f4',
+    'float64': '<f8',
+}
 _HEADER = 4  # CDR encapsulation header, bytes
 
 
@@ -69,7 +82,7 @@ class _Walker:
         start = _HEADER + self.pos
         if start + 4 > len(self.raw):
             raise _LayoutError
-        value = int.from_bytes(self.raw[start:start + 4], 'little')
+        value = int.from_bytes(self.raw[start : start + 4], 'little')
         self.lengths.append((start, value))
         self.pos += 4
         return value
@@ -114,16 +127,21 @@ class _Walker:
                 self.fields[path] = (start, dtype)
         else:
             for want in self.wanted:
-                if len(want) == len(path) + 1 and want[:-1] == path and \
-                        isinstance(want[-1], int) and want[-1] < count:
+                if (
+                    len(want) == len(path) + 1
+                    and want[:-1] == path
+                    and isinstance(want[-1], int)
+                    and want[-1] < count
+                ):
                     self.fields[want] = (start + want[-1] * size, dtype)
         self.pos += count * size
         if _HEADER + self.pos > len(self.raw):
             raise _LayoutError
 
 
-def cdr_layout(typestore: Typestore, msgtype: str, raw: bytes,
-               wanted: Collection[Path]) -> CdrLayout | None:
+def cdr_layout(
+    typestore: Typestore, msgtype: str, raw: bytes, wanted: Collection[Path]
+) -> CdrLayout | None:
     """Lay out one little-endian CDR message and locate the wanted fields.
 
     Parameters
@@ -158,11 +176,12 @@ def cdr_layout(typestore: Typestore, msgtype: str, raw: bytes,
 
 def _column(block: np.ndarray, offset: int, dtype: str) -> np.ndarray:
     size = np.dtype(dtype).itemsize
-    return np.ascontiguousarray(block[:, offset:offset + size]).view(dtype)[:, 0]
+    return np.ascontiguousarray(block[:, offset : offset + size]).view(dtype)[:, 0]
 
 
-def decode_columns(raws: Sequence[bytes], layout: CdrLayout,
-                   paths: Sequence[Path]) -> list[np.ndarray] | None:
+def decode_columns(
+    raws: Sequence[bytes], layout: CdrLayout, paths: Sequence[Path]
+) -> list[np.ndarray] | None:
     """Decode fields of many messages at once, if they all share ``layout``.
 
     Parameters

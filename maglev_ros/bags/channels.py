@@ -32,17 +32,32 @@ from rosbags.typesys.store import Typestore
 from .errors import BagError
 from .names import normalize_topic
 
-__all__ = ['Channel', 'FieldRef', 'check_field', 'parse_channel', 'parse_field_path',
-           'unit_of']
+__all__ = ['Channel', 'FieldRef', 'check_field', 'parse_channel', 'parse_field_path', 'unit_of']
 
 _NUMBER = r'(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?'
 _TOPIC = r'/?[A-Za-z_~][A-Za-z0-9_/]*'
 _PATH = r'[A-Za-z_][A-Za-z0-9_]*(?:\.[A-Za-z_][A-Za-z0-9_]*|\[\d+\])*'
-_TERM = re.compile(rf'\s*(?P<sign>[+-])?\s*(?:(?P<coef>{_NUMBER})\s*\*\s*)?'
-                   rf'(?P<topic>{_TOPIC})\s*:\s*(?P<path>{_PATH})\s*')
+_TERM = re.compile(
+    rf'\s*(?P<sign>[+-])?\s*(?:(?P<coef>{_NUMBER})\s*\*\s*)?'
+    rf'(?P<topic>{_TOPIC})\s*:\s*(?P<path>{_PATH})\s*'
+)
 _PATH_PART = re.compile(r'\.?([A-Za-z_][A-Za-z0-9_]*)|\[(\d+)\]')
-_NUMERIC = {'bool', 'byte', 'char', 'octet', 'int8', 'uint8', 'int16', 'uint16', 'int32',
-            'uint32', 'int64', 'uint64', 'float32', 'float64'}
+_NUMERIC = {
+    'bool',
+    'byte',
+    'char',
+    'octet',
+    'int8',
+    'uint8',
+    'int16',
+    'uint16',
+    'int32',
+    'uint32',
+    'int64',
+    'uint64',
+    'float32',
+    'float64',
+}
 # Units of the topic contract (docs/topics.md): (topic pattern, path prefix, unit).
 _UNITS = (
     (r'/maglev/sensor_\d+/field', 'magnetic_field.', 'T'),
@@ -69,8 +84,10 @@ def parse_field_path(text: str) -> tuple[str | int, ...]:
     """
     text = text.strip()
     if not re.fullmatch(_PATH, text):
-        raise BagError(f'invalid field path {text!r}: expected fields and indices like '
-                       f'magnetic_field.x or effort[0]')
+        raise BagError(
+            f'invalid field path {text!r}: expected fields and indices like '
+            f'magnetic_field.x or effort[0]'
+        )
     return tuple(name if name else int(index) for name, index in _PATH_PART.findall(text))
 
 
@@ -156,10 +173,12 @@ def parse_channel(spec: str) -> Channel:
     while pos < len(text):
         match = _TERM.match(text, pos)
         if match is None or (terms and not match.group('sign')):
-            where = text[pos:pos + 20]
-            raise BagError(f'invalid channel spec {spec!r} at {where!r}: expected '
-                           f'[COEF*]TOPIC:FIELD terms joined by + or -, e.g. '
-                           f'0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]')
+            where = text[pos : pos + 20]
+            raise BagError(
+                f'invalid channel spec {spec!r} at {where!r}: expected '
+                f'[COEF*]TOPIC:FIELD terms joined by + or -, e.g. '
+                f'0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]'
+            )
         coef = float(match.group('coef')) if match.group('coef') else 1.0
         if match.group('sign') == '-':
             coef = -coef
@@ -200,28 +219,30 @@ def check_field(typestore: Typestore, msgtype: str, ref: FieldRef) -> None:
         kind, detail = current
         if isinstance(part, str):
             if kind != Nodetype.NAME:
-                raise BagError(f'{ref.text}: {walked} is not a message, it has no field '
-                               f'{part!r}')
+                raise BagError(f'{ref.text}: {walked} is not a message, it has no field {part!r}')
             fields = dict(_fields(typestore, detail))
             if part not in fields:
                 where = f'{walked} ({detail})' if walked else detail
-                raise BagError(f'{ref.text}: {where} has no field {part!r}; its fields: '
-                               f'{", ".join(fields)}')
+                raise BagError(
+                    f'{ref.text}: {where} has no field {part!r}; its fields: {", ".join(fields)}'
+                )
             current = fields[part]
         else:
             if kind not in (Nodetype.ARRAY, Nodetype.SEQUENCE):
                 raise BagError(f'{ref.text}: {walked} is not an array, it cannot be indexed')
             sub, size = detail
             if kind == Nodetype.ARRAY and part >= size:
-                raise BagError(f'{ref.text}: index {part} out of range, {walked} has '
-                               f'{size} elements')
+                raise BagError(
+                    f'{ref.text}: index {part} out of range, {walked} has {size} elements'
+                )
             current = sub
         walked += f'[{part}]' if isinstance(part, int) else (f'.{part}' if walked else part)
     kind, detail = current
     if kind == Nodetype.NAME:
         fields = ', '.join(name for name, _ in _fields(typestore, detail))
-        raise BagError(f'{ref.text} is a {detail} message, not a number; choose one of its '
-                       f'fields: {fields}')
+        raise BagError(
+            f'{ref.text} is a {detail} message, not a number; choose one of its fields: {fields}'
+        )
     if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
         raise BagError(f'{ref.text} is an array; choose an element, e.g. {ref.text}[0]')
     if detail[0] not in _NUMERIC:
@@ -244,7 +265,13 @@ def unit_of(channel: Channel) -> str:
     units = set()
     for _, ref in channel.terms:
         path = format_field_path(ref.path)
-        unit = next((u for pattern, prefix, u in _UNITS
-                     if re.fullmatch(pattern, ref.topic) and path.startswith(prefix)), '')
+        unit = next(
+            (
+                u
+                for pattern, prefix, u in _UNITS
+                if re.fullmatch(pattern, ref.topic) and path.startswith(prefix)
+            ),
+            '',
+        )
         units.add(unit)
     return units.pop() if len(units) == 1 else ''

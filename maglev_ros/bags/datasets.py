@@ -106,23 +106,39 @@ class BagDataset:
         """
         data, al = self.data, self.alignment
         channels = []
-        for role, chans, units in (('output', self.outputs, data.output_units),
-                                   ('input', self.inputs, data.input_units)):
+        for role, chans, units in (
+            ('output', self.outputs, data.output_units),
+            ('input', self.inputs, data.input_units),
+        ):
             for chan, unit in zip(chans, units, strict=True):
-                channels.append({'name': chan.name, 'role': role, 'unit': unit,
-                                 'spec': chan.expression})
+                channels.append(
+                    {'name': chan.name, 'role': role, 'unit': unit, 'spec': chan.expression}
+                )
         out = {
-            'bag': self.bag, 'storage': self.storage,
-            'start_ns': al.t0_ns, 'duration_s': data.N * data.Ts, 'Ts_s': data.Ts,
-            'samples': data.N, 'channels': channels,
-            'topics': [{'topic': r.topic, 'role': r.role, 'clock': r.clock,
-                        'messages': r.samples,
-                        'period_s': r.period if np.isfinite(r.period) else None,
-                        'method': r.method,
-                        'duplicates': r.duplicates} for r in al.reports],
+            'bag': self.bag,
+            'storage': self.storage,
+            'start_ns': al.t0_ns,
+            'duration_s': data.N * data.Ts,
+            'Ts_s': data.Ts,
+            'samples': data.N,
+            'channels': channels,
+            'topics': [
+                {
+                    'topic': r.topic,
+                    'role': r.role,
+                    'clock': r.clock,
+                    'messages': r.samples,
+                    'period_s': r.period if np.isfinite(r.period) else None,
+                    'method': r.method,
+                    'duplicates': r.duplicates,
+                }
+                for r in al.reports
+            ],
             'trimmed': {'start': al.trimmed[0], 'end': al.trimmed[1]},
-            'gaps': [{'topic': g.topic, 'time_s': g.time, 'missing': g.missing,
-                      'filled': g.filled} for g in al.gaps],
+            'gaps': [
+                {'topic': g.topic, 'time_s': g.time, 'missing': g.missing, 'filled': g.filled}
+                for g in al.gaps
+            ],
             'metadata': dict(self.metadata),
         }
         if split is not None:
@@ -132,10 +148,15 @@ class BagDataset:
         return out
 
 
-def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
-             inputs: Sequence[str | Channel] | str | None = (), Ts: float | None = None,
-             allow_gaps: bool = False, tolerance: float = TOLERANCE,
-             fast: bool = True) -> BagDataset:
+def read_bag(
+    path: str | Path,
+    outputs: Sequence[str | Channel] | str,
+    inputs: Sequence[str | Channel] | str | None = (),
+    Ts: float | None = None,
+    allow_gaps: bool = False,
+    tolerance: float = TOLERANCE,
+    fast: bool = True,
+) -> BagDataset:
     """Read channels of a bag into a data set on one uniform time base.
 
     Parameters
@@ -207,17 +228,28 @@ def read_bag(path: str | Path, outputs: Sequence[str | Channel] | str,
     from ..sysid.dataset import IdData
 
     try:
-        data = IdData(combine(outs), combine(ins), alignment.Ts,
-                      [c.name for c in outs], [c.name for c in ins],
-                      [unit_of(c) for c in outs], [unit_of(c) for c in ins])
+        data = IdData(
+            combine(outs),
+            combine(ins),
+            alignment.Ts,
+            [c.name for c in outs],
+            [c.name for c in ins],
+            [unit_of(c) for c in outs],
+            [unit_of(c) for c in ins],
+        )
     except ValueError as exc:
         raise BagError(f'bag {str(path)!r}: {exc}') from None
     return BagDataset(data, str(path), storage, outs, ins, alignment, metadata)
 
 
-def load_bag_dataset(path: str | Path, outputs: Sequence[str] | str,
-                     inputs: Sequence[str] | str | None = (), Ts: float | None = None,
-                     allow_gaps: bool = False, tolerance: float = TOLERANCE) -> IdData:
+def load_bag_dataset(
+    path: str | Path,
+    outputs: Sequence[str] | str,
+    inputs: Sequence[str] | str | None = (),
+    Ts: float | None = None,
+    allow_gaps: bool = False,
+    tolerance: float = TOLERANCE,
+) -> IdData:
     """Read a bag into an :class:`IdData` (the ``maglev-sysid`` entry point).
 
     Parameters
@@ -238,5 +270,4 @@ def load_bag_dataset(path: str | Path, outputs: Sequence[str] | str,
     IdData
         Outputs, inputs, ``Ts``, names and units.
     """
-    return read_bag(path, outputs, inputs, Ts=Ts, allow_gaps=allow_gaps,
-                    tolerance=tolerance).data
+    return read_bag(path, outputs, inputs, Ts=Ts, allow_gaps=allow_gaps, tolerance=tolerance).data

@@ -55,8 +55,7 @@ def split_paths(path: str | Path) -> tuple[Path, Path]:
     """
     path = Path(path)
     suffix = _suffix(path)
-    return (path.with_name(f'{path.stem}_est{suffix}'),
-            path.with_name(f'{path.stem}_val{suffix}'))
+    return (path.with_name(f'{path.stem}_est{suffix}'), path.with_name(f'{path.stem}_val{suffix}'))
 
 
 def write_dataset(data: IdData, path: str | Path) -> Path:
@@ -83,11 +82,18 @@ def write_dataset(data: IdData, path: str | Path) -> Path:
     channels = np.vstack([data.y.T, data.u.T]) if data.nu else np.array(data.y.T)
     t = data.time
     if suffix == '.npz':
-        np.savez(path, y=data.y, u=data.u, Ts=data.Ts, t=t, DATA=channels,
-                 output_names=np.array(data.output_names, dtype=str),
-                 input_names=np.array(data.input_names, dtype=str),
-                 output_units=np.array(data.output_units, dtype=str),
-                 input_units=np.array(data.input_units, dtype=str))
+        np.savez(
+            path,
+            y=data.y,
+            u=data.u,
+            Ts=data.Ts,
+            t=t,
+            DATA=channels,
+            output_names=np.array(data.output_names, dtype=str),
+            input_names=np.array(data.input_names, dtype=str),
+            output_units=np.array(data.output_units, dtype=str),
+            input_units=np.array(data.input_units, dtype=str),
+        )
     elif suffix == '.mat':
         from scipy.io import savemat
 
@@ -96,17 +102,29 @@ def write_dataset(data: IdData, path: str | Path) -> Path:
             out[0, :] = items
             return out
 
-        savemat(path, {'DATA': channels, 'Ts': data.Ts, 't': t[None, :],
-                       'names': cell(names), 'units': cell(units),
-                       'ny': data.ny, 'nu': data.nu}, do_compression=True)
+        savemat(
+            path,
+            {
+                'DATA': channels,
+                'Ts': data.Ts,
+                't': t[None, :],
+                'names': cell(names),
+                'units': cell(units),
+                'ny': data.ny,
+                'nu': data.nu,
+            },
+            do_compression=True,
+        )
     else:
         bad = [n for n in names if ',' in n or '\n' in n]
         if bad:
-            raise BagError(f'channel names {bad} contain commas: name them (NAME=SPEC) '
-                           f'before writing CSV')
+            raise BagError(
+                f'channel names {bad} contain commas: name them (NAME=SPEC) before writing CSV'
+            )
         table = np.column_stack([t, data.y, data.u])
-        np.savetxt(path, table, delimiter=',', fmt='%.17g', header=','.join(['t', *names]),
-                   comments='')
+        np.savetxt(
+            path, table, delimiter=',', fmt='%.17g', header=','.join(['t', *names]), comments=''
+        )
     return path
 
 
@@ -124,33 +142,45 @@ def format_summary(summary: dict) -> str:
         A few lines: bag, duration, Ts, samples, channels, topics, gaps, metadata.
     """
     s = summary
-    lines = [f"bag       {s['bag']} ({s['storage']})",
-             f"duration  {s['duration_s']:.6g} s, Ts {s['Ts_s']:.6g} s "
-             f"({1.0 / s['Ts_s']:.6g} Hz), {s['samples']} samples"]
+    lines = [
+        f'bag       {s["bag"]} ({s["storage"]})',
+        f'duration  {s["duration_s"]:.6g} s, Ts {s["Ts_s"]:.6g} s '
+        f'({1.0 / s["Ts_s"]:.6g} Hz), {s["samples"]} samples',
+    ]
     if 'estimation' in s:
-        lines.append(f"split     estimation {s['estimation']['samples']} samples, "
-                     f"validation {s['validation']['samples']} samples")
+        lines.append(
+            f'split     estimation {s["estimation"]["samples"]} samples, '
+            f'validation {s["validation"]["samples"]} samples'
+        )
     for c in s['channels']:
-        unit = f" [{c['unit']}]" if c['unit'] else ''
-        name = c['name'] if c['name'] == c['spec'] else f"{c['name']} = {c['spec']}"
-        lines.append(f"{c['role']:<9} {name}{unit}")
+        unit = f' [{c["unit"]}]' if c['unit'] else ''
+        name = c['name'] if c['name'] == c['spec'] else f'{c["name"]} = {c["spec"]}'
+        lines.append(f'{c["role"]:<9} {name}{unit}')
     for tp in s['topics']:
-        dups = f", {tp['duplicates']} repeated stamps dropped" if tp['duplicates'] else ''
-        lines.append(f"topic     {tp['topic']}: {tp['messages']} messages, {tp['clock']} "
-                     f"stamps, {tp['method']}{dups}")
+        dups = f', {tp["duplicates"]} repeated stamps dropped' if tp['duplicates'] else ''
+        lines.append(
+            f'topic     {tp["topic"]}: {tp["messages"]} messages, {tp["clock"]} '
+            f'stamps, {tp["method"]}{dups}'
+        )
     trimmed = s['trimmed']
     if trimmed['start'] or trimmed['end']:
-        lines.append(f"trimmed   {trimmed['start']} samples at the start, {trimmed['end']} "
-                     f"at the end (not every topic had data)")
+        lines.append(
+            f'trimmed   {trimmed["start"]} samples at the start, {trimmed["end"]} '
+            f'at the end (not every topic had data)'
+        )
     if s['gaps']:
         total = sum(g['missing'] for g in s['gaps'])
         count = len(s['gaps'])
-        lines.append(f"gaps      {count} gap{'s' if count != 1 else ''} ({total} "
-                     f"sample{'s' if total != 1 else ''}), filled:")
-        lines += [f"          {g['topic']}: {g['missing']} after t = {g['time_s']:.6f} s "
-                  f"({g['filled']})" for g in s['gaps'][:10]]
+        lines.append(
+            f'gaps      {count} gap{"s" if count != 1 else ""} ({total} '
+            f'sample{"s" if total != 1 else ""}), filled:'
+        )
+        lines += [
+            f'          {g["topic"]}: {g["missing"]} after t = {g["time_s"]:.6f} s ({g["filled"]})'
+            for g in s['gaps'][:10]
+        ]
         if len(s['gaps']) > 10:
-            lines.append(f"          ... {len(s['gaps']) - 10} more")
+            lines.append(f'          ... {len(s["gaps"]) - 10} more')
     else:
         lines.append('gaps      none')
     for key, value in s['metadata'].items():

@@ -79,8 +79,12 @@ def _stack(objects: Sequence[object]) -> np.ndarray | None:
         return None
 
 
-def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...],
-            stacked: np.ndarray | None = None) -> np.ndarray:
+def _column(
+    ref: FieldRef,
+    objects: Sequence[object],
+    rest: tuple[str | int, ...],
+    stacked: np.ndarray | None = None,
+) -> np.ndarray:
     """Apply the rest of a path (indices first) to the fetched objects."""
     if not rest:
         return np.asarray(objects, dtype=float)
@@ -93,8 +97,10 @@ def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...
         if stacked is not None and stacked.ndim > len(indices) and stacked.dtype != object:
             for axis, index in enumerate(indices, start=1):
                 if index >= stacked.shape[axis]:
-                    raise BagError(f'{ref.text}: index {index} out of range, the messages '
-                                   f'have {stacked.shape[axis]} elements there')
+                    raise BagError(
+                        f'{ref.text}: index {index} out of range, the messages '
+                        f'have {stacked.shape[axis]} elements there'
+                    )
             return stacked[(slice(None), *indices)].astype(float)
     out = np.empty(len(objects))
     for n, obj in enumerate(objects):
@@ -102,14 +108,17 @@ def _column(ref: FieldRef, objects: Sequence[object], rest: tuple[str | int, ...
             for part in rest:
                 obj = obj[part] if isinstance(part, int) else getattr(obj, part)
         except IndexError:
-            raise BagError(f'{ref.text}: index out of range in message {n} of '
-                           f'{ref.topic!r} ({format_field_path(ref.path)})') from None
+            raise BagError(
+                f'{ref.text}: index out of range in message {n} of '
+                f'{ref.topic!r} ({format_field_path(ref.path)})'
+            ) from None
         out[n] = float(obj)
     return out
 
 
-def _decode_fast(reader: BagReader, msgtype: str, raws: list[bytes], has_header: bool,
-                 refs: Sequence[FieldRef]) -> tuple[np.ndarray | None, np.ndarray] | None:
+def _decode_fast(
+    reader: BagReader, msgtype: str, raws: list[bytes], has_header: bool, refs: Sequence[FieldRef]
+) -> tuple[np.ndarray | None, np.ndarray] | None:
     """Stamps (or None) and values by strided reads, if all messages share one layout."""
     paths: list[tuple[str | int, ...]] = [ref.path for ref in refs]
     if has_header:
@@ -128,9 +137,14 @@ def _decode_fast(reader: BagReader, msgtype: str, raws: list[bytes], has_header:
     return columns[-2].astype(np.int64) * 1_000_000_000 + columns[-1], values
 
 
-def _decode_slow(reader: BagReader, topic: str, msgtype: str, raws: list[bytes],
-                 has_header: bool, refs: Sequence[FieldRef]
-                 ) -> tuple[np.ndarray | None, np.ndarray]:
+def _decode_slow(
+    reader: BagReader,
+    topic: str,
+    msgtype: str,
+    raws: list[bytes],
+    has_header: bool,
+    refs: Sequence[FieldRef],
+) -> tuple[np.ndarray | None, np.ndarray]:
     """Stamps (or None) and values by deserialising message by message."""
     splits = [_split(ref.path) for ref in refs]
     chains = list(dict.fromkeys(prefix for prefix, _ in splits))
@@ -149,8 +163,9 @@ def _decode_slow(reader: BagReader, topic: str, msgtype: str, raws: list[bytes],
     stamps, offset = None, 0
     if has_header:
         offset = 2
-        stamps = (np.asarray(columns[0], dtype=np.int64) * 1_000_000_000
-                  + np.asarray(columns[1], dtype=np.int64))
+        stamps = np.asarray(columns[0], dtype=np.int64) * 1_000_000_000 + np.asarray(
+            columns[1], dtype=np.int64
+        )
     values = np.empty((len(rows), len(refs)))
     stacks: dict[str, np.ndarray | None] = {}  # one stack per indexed array field
     for k, (ref, (prefix, rest)) in enumerate(zip(refs, splits, strict=True)):
@@ -161,8 +176,9 @@ def _decode_slow(reader: BagReader, topic: str, msgtype: str, raws: list[bytes],
     return stamps, values
 
 
-def read_topics(reader: BagReader, refs: Mapping[str, Sequence[FieldRef]],
-                fast: bool = True) -> dict[str, TopicSamples]:
+def read_topics(
+    reader: BagReader, refs: Mapping[str, Sequence[FieldRef]], fast: bool = True
+) -> dict[str, TopicSamples]:
     """Read the stamps and the given fields of every message of some topics, in one pass.
 
     Parameters
@@ -204,14 +220,18 @@ def read_topics(reader: BagReader, refs: Mapping[str, Sequence[FieldRef]],
         if not messages:
             raise BagError(f'topic {info.name!r} has no messages in bag {str(reader.path)!r}')
         if len(messages) < info.count:
-            raise BagError(f'bag {str(reader.path)!r} is truncated: topic {info.name!r} has '
-                           f'{len(messages)} of the {info.count} messages its index lists')
+            raise BagError(
+                f'bag {str(reader.path)!r} is truncated: topic {info.name!r} has '
+                f'{len(messages)} of the {info.count} messages its index lists'
+            )
         has_header = _has_header(reader, info.msgtype)
-        decoded = _decode_fast(reader, info.msgtype, messages, has_header, refs[topic]) \
-            if fast else None
+        decoded = (
+            _decode_fast(reader, info.msgtype, messages, has_header, refs[topic]) if fast else None
+        )
         if decoded is None:
-            decoded = _decode_slow(reader, info.name, info.msgtype, messages, has_header,
-                                   refs[topic])
+            decoded = _decode_slow(
+                reader, info.name, info.msgtype, messages, has_header, refs[topic]
+            )
         header_stamps, values = decoded
         logs = np.asarray(log_times[info.name], dtype=np.int64)
         if header_stamps is not None and np.any(header_stamps):

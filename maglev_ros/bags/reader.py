@@ -34,9 +34,16 @@ __all__ = ['METADATA_TOPIC', 'BagReader', 'TopicInfo', 'decode_metadata', 'is_ba
 METADATA_TOPIC = '/maglev/metadata'
 _STORAGE_SUFFIXES = {'.mcap': 'mcap', '.db3': 'sqlite3'}
 # rosbags' messages about metadata.yaml (rosbag2/reader.py)
-_METADATA_ERRORS = ('Could not load YAML', 'Could not read metadata', 'A metadata key',
-                    'Invalid bag metadata', 'Rosbag2 version', 'Storage plugin',
-                    'Compression format', 'Serialization format')
+_METADATA_ERRORS = (
+    'Could not load YAML',
+    'Could not read metadata',
+    'A metadata key',
+    'Invalid bag metadata',
+    'Rosbag2 version',
+    'Storage plugin',
+    'Compression format',
+    'Serialization format',
+)
 
 
 @dataclass(frozen=True)
@@ -94,23 +101,27 @@ def decode_metadata(custom: dict[str, str] | None) -> dict[str, object]:
             value = yaml.safe_load(text) if isinstance(text, str) else text
         except yaml.YAMLError:
             value = text
-        out[str(key)] = value if value is None or isinstance(value, (str, int, float,
-                                                                     bool)) else text
+        out[str(key)] = (
+            value if value is None or isinstance(value, (str, int, float, bool)) else text
+        )
     return out
 
 
 def _corrupt(path: Path, exc: BaseException) -> BagError:
     detail = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    files = [p.name for p in path.iterdir() if p.suffix in _STORAGE_SUFFIXES] \
-        if path.is_dir() else [path.name]
+    files = (
+        [p.name for p in path.iterdir() if p.suffix in _STORAGE_SUFFIXES]
+        if path.is_dir()
+        else [path.name]
+    )
     if not files or detail.startswith('Some database files are missing'):
-        return BagError(f'cannot read bag {str(path)!r}: its storage file is missing '
-                        f'({detail})')
+        return BagError(f'cannot read bag {str(path)!r}: its storage file is missing ({detail})')
     if detail.startswith(_METADATA_ERRORS):
-        return BagError(f'cannot read bag {str(path)!r}: its metadata.yaml is invalid '
-                        f'({detail})')
-    return BagError(f'cannot read bag {str(path)!r}: storage file {", ".join(files)} is '
-                    f'truncated or corrupt ({detail})')
+        return BagError(f'cannot read bag {str(path)!r}: its metadata.yaml is invalid ({detail})')
+    return BagError(
+        f'cannot read bag {str(path)!r}: storage file {", ".join(files)} is '
+        f'truncated or corrupt ({detail})'
+    )
 
 
 class BagReader:
@@ -139,16 +150,22 @@ class BagReader:
                 raise BagError(f'bag directory {str(path)!r} is empty')
             if not (path / 'metadata.yaml').is_file():
                 names = sorted(p.name for p in files)
-                raise BagError(f'bag directory {str(path)!r} has no metadata.yaml (files: '
-                               f'{names}); an unfinished recording can be rebuilt with '
-                               f'"ros2 bag reindex"')
-            storage = next((s for p in files for suf, s in _STORAGE_SUFFIXES.items()
-                            if p.name.endswith(suf)), '')
+                raise BagError(
+                    f'bag directory {str(path)!r} has no metadata.yaml (files: '
+                    f'{names}); an unfinished recording can be rebuilt with '
+                    f'"ros2 bag reindex"'
+                )
+            storage = next(
+                (s for p in files for suf, s in _STORAGE_SUFFIXES.items() if p.name.endswith(suf)),
+                '',
+            )
         elif path.suffix in _STORAGE_SUFFIXES:
             storage = _STORAGE_SUFFIXES[path.suffix]
         else:
-            raise BagError(f'{str(path)!r} is not a rosbag2 bag (a directory with '
-                           f'metadata.yaml, or a .mcap / .db3 file)')
+            raise BagError(
+                f'{str(path)!r} is not a rosbag2 bag (a directory with '
+                f'metadata.yaml, or a .mcap / .db3 file)'
+            )
         self.path = path
         self.storage = storage
         self._reader: Reader | None = None
@@ -176,8 +193,10 @@ class BagReader:
         try:
             connections = [c for c in reader.connections]
             if reader.message_count == 0:
-                raise BagError(f'bag {str(self.path)!r} is empty: it has no messages '
-                               f'(topics: {sorted({c.topic for c in connections})})')
+                raise BagError(
+                    f'bag {str(self.path)!r} is empty: it has no messages '
+                    f'(topics: {sorted({c.topic for c in connections})})'
+                )
             self._typestore = bag_typestore(connections)
         except BaseException:
             reader.close()
@@ -187,8 +206,9 @@ class BagReader:
             name = normalize_topic(conn.topic)
             self._connections.setdefault(name, []).append(conn)
             old = self._topics.get(name)
-            self._topics[name] = TopicInfo(name, conn.msgtype,
-                                           conn.msgcount + (old.count if old else 0))
+            self._topics[name] = TopicInfo(
+                name, conn.msgtype, conn.msgcount + (old.count if old else 0)
+            )
         return self
 
     def close(self) -> None:
@@ -200,8 +220,12 @@ class BagReader:
     def __enter__(self) -> BagReader:
         return self.open()
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         self.close()
 
     def _open_reader(self) -> Reader:
@@ -303,8 +327,9 @@ class BagReader:
         """Run metadata: ``custom_data`` plus the ``/maglev/metadata`` topic's mapping."""
         reader = self._open_reader()
         if self._metadata is None:
-            meta = decode_metadata(getattr(reader.storage, 'metadata', None) and
-                                   reader.storage.metadata.custom)
+            meta = decode_metadata(
+                getattr(reader.storage, 'metadata', None) and reader.storage.metadata.custom
+            )
             if METADATA_TOPIC in self._topics:
                 decode = self.deserializer(METADATA_TOPIC)
                 for _, _, raw in self.messages([METADATA_TOPIC]):

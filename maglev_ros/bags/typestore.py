@@ -64,11 +64,16 @@ def bag_typestore(connections: Iterable[Connection]) -> Typestore:
                 sep = '=' * 80 + '\n'
                 chunks = text.split(sep)[1:] if text.startswith(sep + 'IDL: ') else [text]
                 for chunk in chunks:
-                    extra.update(get_types_from_idl(chunk.split('\n', 1)[-1]
-                                                    if chunk.startswith('IDL: ') else chunk))
+                    extra.update(
+                        get_types_from_idl(
+                            chunk.split('\n', 1)[-1] if chunk.startswith('IDL: ') else chunk
+                        )
+                    )
         except Exception as exc:  # any parser failure
-            raise BagError(f'cannot parse the definition of {conn.msgtype!r} stored in the '
-                           f'bag for topic {conn.topic!r}: {exc}') from None
+            raise BagError(
+                f'cannot parse the definition of {conn.msgtype!r} stored in the '
+                f'bag for topic {conn.topic!r}: {exc}'
+            ) from None
     if not extra:
         return base
     store = get_typestore(Stores.ROS2_JAZZY)
@@ -93,8 +98,10 @@ def cdr_deserializer(typestore: Typestore, msgtype: str) -> Callable[[bytes], ob
         raises :class:`BagError` on bytes that are not a ``msgtype`` message.
     """
     if msgtype not in typestore.fielddefs:
-        raise BagError(f'message type {msgtype!r} is neither a ROS 2 Jazzy standard type '
-                       f'nor defined in the bag')
+        raise BagError(
+            f'message type {msgtype!r} is neither a ROS 2 Jazzy standard type '
+            f'nor defined in the bag'
+        )
     msgdef = typestore.get_msgdef(msgtype)
     little, big, cls = msgdef.deserialize_cdr_le, msgdef.deserialize_cdr_be, msgdef.cls
 
@@ -106,9 +113,9 @@ def cdr_deserializer(typestore: Typestore, msgtype: str) -> Callable[[bytes], ob
                 if raw[1] == 0:
                     return big(raw[4:], 0, cls, typestore)[0]
         except Exception as exc:  # struct/decode errors: corrupt data
-            raise BagError(f'cannot deserialise a {msgtype} message ({len(raw)} bytes): '
-                           f'{exc}') from None
-        raise BagError(f'a {msgtype} message ({len(raw)} bytes) has no CDR encapsulation '
-                       f'header')
+            raise BagError(
+                f'cannot deserialise a {msgtype} message ({len(raw)} bytes): {exc}'
+            ) from None
+        raise BagError(f'a {msgtype} message ({len(raw)} bytes) has no CDR encapsulation header')
 
     return deserialize

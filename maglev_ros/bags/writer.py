@@ -35,8 +35,7 @@ from .typestore import jazzy_typestore
 __all__ = ['STORAGES', 'BagWriter', 'TopicHandle', 'encode_metadata']
 
 #: Storage plugins by name (``ros2 bag record --storage``).
-STORAGES: dict[str, StoragePlugin] = {'mcap': StoragePlugin.MCAP,
-                                      'sqlite3': StoragePlugin.SQLITE3}
+STORAGES: dict[str, StoragePlugin] = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 #: rosbag2 metadata version written (ROS 2 Jazzy writes 8).
 BAG_VERSION = 8
 _SCALARS = (str, int, float, bool)
@@ -62,9 +61,11 @@ def encode_metadata(metadata: Mapping[str, object] | None) -> dict[str, str]:
         if isinstance(value, np.generic):  # numpy scalars (a seed from a Generator ...)
             value = value.item()
         if value is not None and not isinstance(value, _SCALARS):
-            raise BagError(f'metadata {key!r} must be a string, number or boolean (flatten '
-                           f'nested options into keys such as "model.field"), '
-                           f'got {type(value).__name__}')
+            raise BagError(
+                f'metadata {key!r} must be a string, number or boolean (flatten '
+                f'nested options into keys such as "model.field"), '
+                f'got {type(value).__name__}'
+            )
         text = yaml.safe_dump(value, default_flow_style=True, width=10**6).strip()
         encoded[key] = text.removesuffix('\n...').removesuffix('...').strip()
     return encoded
@@ -117,15 +118,18 @@ class BagWriter:
     leaves an unfinished bag.
     """
 
-    def __init__(self, path: str | Path, storage: str = 'mcap',
-                 metadata: Mapping[str, object] | None = None,
-                 typestore: Typestore | None = None) -> None:
+    def __init__(
+        self,
+        path: str | Path,
+        storage: str = 'mcap',
+        metadata: Mapping[str, object] | None = None,
+        typestore: Typestore | None = None,
+    ) -> None:
         if storage not in STORAGES:
             raise BagError(f'unknown bag storage {storage!r} (use one of {sorted(STORAGES)})')
         self.path = Path(path)
         if self.path.exists():
-            raise BagError(f'bag directory {str(self.path)!r} exists already; '
-                           f'choose a new name')
+            raise BagError(f'bag directory {str(self.path)!r} exists already; choose a new name')
         self.storage = storage
         self.metadata = dict(metadata or {})
         self._custom = encode_metadata(self.metadata)
@@ -176,8 +180,7 @@ class BagWriter:
             return
         conn.commit()
         conn.close()
-        storage.conn = sqlite3.connect(f'file:{storage.path}', uri=True,
-                                       check_same_thread=False)
+        storage.conn = sqlite3.connect(f'file:{storage.path}', uri=True, check_same_thread=False)
         storage.cursor = storage.conn.cursor()
 
     def close(self) -> None:
@@ -196,8 +199,12 @@ class BagWriter:
     def __enter__(self) -> BagWriter:
         return self.open()
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self,
+        exc_type: type[BaseException] | None,
+        exc: BaseException | None,
+        tb: TracebackType | None,
+    ) -> None:
         # finalise also on errors and KeyboardInterrupt: what was written stays readable
         self.close()
 
@@ -220,8 +227,13 @@ class BagWriter:
                     self._writer.set_custom_data(key, value)
 
     # -------------------------------------------------------------- writing
-    def add_topic(self, name: str, msgtype: str, serialization_format: str = 'cdr',
-                  offered_qos: Sequence[Qos] | None = None) -> TopicHandle:
+    def add_topic(
+        self,
+        name: str,
+        msgtype: str,
+        serialization_format: str = 'cdr',
+        offered_qos: Sequence[Qos] | None = None,
+    ) -> TopicHandle:
         """Register a topic; returns the handle to write its messages with.
 
         Parameters
@@ -246,12 +258,17 @@ class BagWriter:
             if topic in self._topics:
                 raise BagError(f'topic {topic!r} was added to bag {str(self.path)!r} already')
             if msgtype not in self._typestore.fielddefs:
-                raise BagError(f'unknown message type {msgtype!r} for topic {topic!r} (not in '
-                               f'the type store; pass typestore= with its definition)')
+                raise BagError(
+                    f'unknown message type {msgtype!r} for topic {topic!r} (not in '
+                    f'the type store; pass typestore= with its definition)'
+                )
             connection = self._writer.add_connection(
-                topic, msgtype, typestore=self._typestore,
+                topic,
+                msgtype,
+                typestore=self._typestore,
                 serialization_format=serialization_format,
-                offered_qos_profiles=list(offered_qos or ()))
+                offered_qos_profiles=list(offered_qos or ()),
+            )
             handle = TopicHandle(topic, msgtype, connection)
             self._topics[topic] = handle
             return handle
@@ -270,12 +287,17 @@ class BagWriter:
         """
         with self._lock:
             self._check_open()
-            handle = topic if isinstance(topic, TopicHandle) else self._topics.get(
-                normalize_topic(topic))
+            handle = (
+                topic
+                if isinstance(topic, TopicHandle)
+                else self._topics.get(normalize_topic(topic))
+            )
             if handle is None or self._topics.get(handle.name) is not handle:
-                raise BagError(f'topic {topic if isinstance(topic, str) else topic.name!r} '
-                               f'was not added to bag {str(self.path)!r} '
-                               f'(topics: {sorted(self._topics)})')
+                raise BagError(
+                    f'topic {topic if isinstance(topic, str) else topic.name!r} '
+                    f'was not added to bag {str(self.path)!r} '
+                    f'(topics: {sorted(self._topics)})'
+                )
             stamp = int(timestamp_ns)
             if stamp < 0:
                 raise BagError(f'timestamp must be >= 0 ns, got {timestamp_ns!r}')

@@ -33,8 +33,9 @@ def split_point(text: str) -> float | int:
     try:
         value: float | int = float(text) if any(c in text for c in '.eE') else int(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a fraction or a sample count, '
-                                         f'got {text!r}') from None
+        raise argparse.ArgumentTypeError(
+            f'expected a fraction or a sample count, got {text!r}'
+        ) from None
     if isinstance(value, float) and not 0.0 < value < 1.0:
         raise argparse.ArgumentTypeError(f'a split fraction must be in (0, 1), got {text!r}')
     if isinstance(value, int) and value < 1:
@@ -58,18 +59,35 @@ def add_channel_arguments(parser: argparse.ArgumentParser) -> None:
         Gets ``--output``, ``--input``, ``--allow-gaps`` and ``--tolerance``
         (``--ts`` is left to the caller).
     """
-    parser.add_argument('--output', action='append', default=[], metavar='SPEC',
-                        help="output channel [NAME=]TOPIC:FIELD, e.g. "
-                        "'maglev/sensor_0/field:magnetic_field.x' (repeat for more; the "
-                        "first one's topic defines the time base)")
-    parser.add_argument('--input', action='append', default=[], metavar='SPEC',
-                        help="input channel, e.g. 'maglev/currents:effort[0]' or "
-                        "'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]'")
-    parser.add_argument('--allow-gaps', action='store_true',
-                        help='fill gaps (outputs linearly, inputs by zero-order hold) '
-                        'instead of refusing the bag')
-    parser.add_argument('--tolerance', type=_tolerance, default=0.05, metavar='FRACTION',
-                        help='exact stamp match tolerance as a fraction of Ts (default 0.05)')
+    parser.add_argument(
+        '--output',
+        action='append',
+        default=[],
+        metavar='SPEC',
+        help='output channel [NAME=]TOPIC:FIELD, e.g. '
+        "'maglev/sensor_0/field:magnetic_field.x' (repeat for more; the "
+        "first one's topic defines the time base)",
+    )
+    parser.add_argument(
+        '--input',
+        action='append',
+        default=[],
+        metavar='SPEC',
+        help="input channel, e.g. 'maglev/currents:effort[0]' or "
+        "'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]'",
+    )
+    parser.add_argument(
+        '--allow-gaps',
+        action='store_true',
+        help='fill gaps (outputs linearly, inputs by zero-order hold) instead of refusing the bag',
+    )
+    parser.add_argument(
+        '--tolerance',
+        type=_tolerance,
+        default=0.05,
+        metavar='FRACTION',
+        help='exact stamp match tolerance as a fraction of Ts (default 0.05)',
+    )
 
 
 def dataset_from_args(bag: str, args: argparse.Namespace) -> object:
@@ -90,27 +108,50 @@ def dataset_from_args(bag: str, args: argparse.Namespace) -> object:
     from maglev_ros.bags import read_bag
 
     if not args.output:
-        raise UsageError('choose at least one --output channel (TOPIC:FIELD); '
-                         '--topics lists what the bag has')
-    return read_bag(bag, args.output, args.input, Ts=getattr(args, 'ts', None),
-                    allow_gaps=args.allow_gaps, tolerance=args.tolerance)
+        raise UsageError(
+            'choose at least one --output channel (TOPIC:FIELD); --topics lists what the bag has'
+        )
+    return read_bag(
+        bag,
+        args.output,
+        args.input,
+        Ts=getattr(args, 'ts', None),
+        allow_gaps=args.allow_gaps,
+        tolerance=args.tolerance,
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-bag2data``."""
-    p = Parser(prog=PROG, description='Turn a rosbag2 bag (MCAP or sqlite3) into '
-               'estimation/validation data sets (.npz, .csv, .mat).')
+    p = Parser(
+        prog=PROG,
+        description='Turn a rosbag2 bag (MCAP or sqlite3) into '
+        'estimation/validation data sets (.npz, .csv, .mat).',
+    )
     p.add_argument('bag', help='bag directory (with metadata.yaml)')
     add_channel_arguments(p)
-    p.add_argument('--ts', type=positive_float, metavar='SECONDS',
-                   help='sample time (default: estimated from the first output stamps)')
-    p.add_argument('--split', type=split_point, default=0.5,
-                   help='estimation part: fraction (default 0.5) or sample count')
-    p.add_argument('--out', metavar='FILE', help='write FILE (.npz, .csv or .mat) with all '
-                   'samples, and FILE_est / FILE_val with the two parts')
+    p.add_argument(
+        '--ts',
+        type=positive_float,
+        metavar='SECONDS',
+        help='sample time (default: estimated from the first output stamps)',
+    )
+    p.add_argument(
+        '--split',
+        type=split_point,
+        default=0.5,
+        help='estimation part: fraction (default 0.5) or sample count',
+    )
+    p.add_argument(
+        '--out',
+        metavar='FILE',
+        help='write FILE (.npz, .csv or .mat) with all '
+        'samples, and FILE_est / FILE_val with the two parts',
+    )
     p.add_argument('--json', action='store_true', help='print the summary as JSON')
-    p.add_argument('--topics', action='store_true',
-                   help="list the bag's topics and run metadata, then exit")
+    p.add_argument(
+        '--topics', action='store_true', help="list the bag's topics and run metadata, then exit"
+    )
     return p
 
 
@@ -119,18 +160,25 @@ def _topics(bag: str, as_json: bool) -> int:
 
     with BagReader(bag) as reader:
         topics = reader.topics
-        info = {'bag': bag, 'storage': reader.storage, 'messages': reader.message_count,
-                'duration_s': (reader.end_ns - reader.start_ns) * 1e-9,
-                'topics': [{'topic': t.name, 'type': t.msgtype, 'messages': t.count}
-                           for t in topics.values()],
-                'metadata': reader.metadata}
+        info = {
+            'bag': bag,
+            'storage': reader.storage,
+            'messages': reader.message_count,
+            'duration_s': (reader.end_ns - reader.start_ns) * 1e-9,
+            'topics': [
+                {'topic': t.name, 'type': t.msgtype, 'messages': t.count} for t in topics.values()
+            ],
+            'metadata': reader.metadata,
+        }
     if as_json:
         print(json.dumps(info, indent=2))
         return 0
-    print(f"bag       {bag} ({info['storage']}), {info['messages']} messages, "
-          f"{info['duration_s']:.6g} s")
+    print(
+        f'bag       {bag} ({info["storage"]}), {info["messages"]} messages, '
+        f'{info["duration_s"]:.6g} s'
+    )
     for t in info['topics']:
-        print(f"topic     {t['topic']} ({t['type']}): {t['messages']} messages")
+        print(f'topic     {t["topic"]} ({t["type"]}): {t["messages"]} messages')
     for key, value in info['metadata'].items():
         print(f'metadata  {key}: {value}')
     return 0
@@ -149,8 +197,11 @@ def _run(args: argparse.Namespace) -> int:
     if args.out:
         est, val = ds.split(args.split)
         est_path, val_path = split_paths(args.out)
-        summary['files'] = [str(write_dataset(ds.data, args.out)),
-                            str(write_dataset(est, est_path)), str(write_dataset(val, val_path))]
+        summary['files'] = [
+            str(write_dataset(ds.data, args.out)),
+            str(write_dataset(est, est_path)),
+            str(write_dataset(val, val_path)),
+        ]
     if args.json:
         print(json.dumps(summary, indent=2))
     else:

@@ -52,8 +52,18 @@ from maglev_ros.cli.usage import (  # noqa: E402
 )
 from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix  # noqa: E402
 
-__all__ = ['applied_channels', 'build_parser', 'identify', 'input_channels', 'load_data',
-           'main', 'on_board', 'run_board_experiment', 'run_experiment', 'start_virtual_board']
+__all__ = [
+    'applied_channels',
+    'build_parser',
+    'identify',
+    'input_channels',
+    'load_data',
+    'main',
+    'on_board',
+    'run_board_experiment',
+    'run_experiment',
+    'start_virtual_board',
+]
 
 PROG = 'maglev-lab'
 AXES = 'xyz'
@@ -64,52 +74,99 @@ BOARD_READ_INTERVAL = 0.002  # s between port reads in board runs (open loop: la
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-lab``."""
-    p = Parser(prog=PROG, description='Simulate, excite, record and identify: the Maggy lab '
-               'session in one command.')
-    p.add_argument('--duration', type=positive_float, default=5.0,
-                   help='simulated seconds to record (default 5)')
-    p.add_argument('--params', default='maggy_v2', help='parameter set (maggy_v2, maggy_v4, '
-                   'or a YAML path)')
-    p.add_argument('--magnet', choices=('free', 'fixed', 'absent'), default='fixed',
-                   help='levitating magnet (default fixed: no controller needed)')
+    p = Parser(
+        prog=PROG,
+        description='Simulate, excite, record and identify: the Maggy lab session in one command.',
+    )
+    p.add_argument(
+        '--duration',
+        type=positive_float,
+        default=5.0,
+        help='simulated seconds to record (default 5)',
+    )
+    p.add_argument(
+        '--params', default='maggy_v2', help='parameter set (maggy_v2, maggy_v4, or a YAML path)'
+    )
+    p.add_argument(
+        '--magnet',
+        choices=('free', 'fixed', 'absent'),
+        default='fixed',
+        help='levitating magnet (default fixed: no controller needed)',
+    )
     p.add_argument('--field-model', choices=('fast', 'accurate', 'filament'), default='fast')
     p.add_argument('--sample-rate', type=positive_float, default=5000.0, help='Hz')
     p.add_argument('--no-coil', action='store_true', help='no coil L/R dynamics')
     p.add_argument('--delay', type=int, default=1, help='sensor delay in samples (default 1)')
-    p.add_argument('--noise', type=non_negative_float, default=0.0,
-                   help='sensor noise, T rms (default 0)')
+    p.add_argument(
+        '--noise', type=non_negative_float, default=0.0, help='sensor noise, T rms (default 0)'
+    )
     p.add_argument('--seed', type=int, default=0, help='seed of noise and excitation')
-    p.add_argument('--sensors', type=int, nargs='+', default=[0],
-                   help='sensors to record and identify (default 0)')
+    p.add_argument(
+        '--sensors',
+        type=int,
+        nargs='+',
+        default=[0],
+        help='sensors to record and identify (default 0)',
+    )
     p.add_argument('--excitation', choices=SIGNALS, default='prbs', help='input signal')
     p.add_argument('--amplitude', type=non_negative_float, default=0.5, help='A (default 0.5)')
-    p.add_argument('--band', type=float, nargs=2, default=[0.0, 1.0], metavar=('LOW', 'HIGH'),
-                   help='band as fractions of Nyquist (default 0 1)')
-    p.add_argument('--pattern', choices=PATTERNS, default='pairs',
-                   help='coil pattern (default pairs: +u on x+, -u on x-, same for y)')
+    p.add_argument(
+        '--band',
+        type=float,
+        nargs=2,
+        default=[0.0, 1.0],
+        metavar=('LOW', 'HIGH'),
+        help='band as fractions of Nyquist (default 0 1)',
+    )
+    p.add_argument(
+        '--pattern',
+        choices=PATTERNS,
+        default='pairs',
+        help='coil pattern (default pairs: +u on x+, -u on x-, same for y)',
+    )
     p.add_argument('--length', type=int, default=8191, help='samples per excitation period')
     p.add_argument('--na', type=int, default=2, help='ARX order of A (default 2)')
     p.add_argument('--nb', type=int, default=2, help='ARX order of B per input (default 2)')
-    p.add_argument('--nk', type=int, default=None,
-                   help='ARX input delay (default 1; 0 against a board)')
-    p.add_argument('--split', type=float, default=0.5,
-                   help='fraction of samples for estimation (default 0.5)')
+    p.add_argument(
+        '--nk', type=int, default=None, help='ARX input delay (default 1; 0 against a board)'
+    )
+    p.add_argument(
+        '--split', type=float, default=0.5, help='fraction of samples for estimation (default 0.5)'
+    )
     p.add_argument('--storage', choices=('mcap', 'sqlite3'), default='mcap')
     p.add_argument('--out', default=None, help='output directory (default lab_<date>_<time>)')
-    p.add_argument('--overwrite', action='store_true',
-                   help="replace a previous session's results in --out (its bag/ is removed)")
+    p.add_argument(
+        '--overwrite',
+        action='store_true',
+        help="replace a previous session's results in --out (its bag/ is removed)",
+    )
     p.add_argument('--no-plots', action='store_true', help='write no plots')
     board = p.add_mutually_exclusive_group()
-    board.add_argument('--board', metavar='PATH', default=None,
-                       help='run the driver on this serial device instead of the simulator')
-    board.add_argument('--virtual-board', action='store_true',
-                       help='start a virtual board (physics plant, --params, --magnet) in a '
-                       'child process and run the driver on it')
-    p.add_argument('--board-sensors', type=int, default=None,
-                   help='sensors per board record (default: --params for a virtual board, '
-                   'else max(--sensors) + 1)')
-    p.add_argument('--command-rate', type=positive_float, default=1000.0,
-                   help='board: excitation commands per wall-clock second, Hz (default 1000)')
+    board.add_argument(
+        '--board',
+        metavar='PATH',
+        default=None,
+        help='run the driver on this serial device instead of the simulator',
+    )
+    board.add_argument(
+        '--virtual-board',
+        action='store_true',
+        help='start a virtual board (physics plant, --params, --magnet) in a '
+        'child process and run the driver on it',
+    )
+    p.add_argument(
+        '--board-sensors',
+        type=int,
+        default=None,
+        help='sensors per board record (default: --params for a virtual board, '
+        'else max(--sensors) + 1)',
+    )
+    p.add_argument(
+        '--command-rate',
+        type=positive_float,
+        default=1000.0,
+        help='board: excitation commands per wall-clock second, Hz (default 1000)',
+    )
     return p
 
 
@@ -140,14 +197,15 @@ def applied_channels(pattern: str) -> list[str]:
     As :func:`input_channels`, read from the driver's ``maglev/currents`` (header
     stamps of the board's records), e.g. ``u_x=maglev/currents:effort[0]``.
     """
-    return [spec.split('=')[0] + '=maglev/currents:effort' + spec[spec.index('['):]
-            for spec in input_channels(pattern)]
+    return [
+        spec.split('=')[0] + '=maglev/currents:effort' + spec[spec.index('[') :]
+        for spec in input_channels(pattern)
+    ]
 
 
 def output_channels(sensors) -> list[str]:
     """Bag channel specs of the field components of ``sensors``."""
-    return [f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}'
-            for k in sensors for a in AXES]
+    return [f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}' for k in sensors for a in AXES]
 
 
 def load_data(bag: Path, sensors, pattern: str, board: bool = False):
@@ -177,8 +235,9 @@ def load_data(bag: Path, sensors, pattern: str, board: bool = False):
     from maglev_ros.bags import read_bag
 
     if board:
-        return read_bag(bag, output_channels(sensors), applied_channels(pattern),
-                        Ts=BOARD_TS, allow_gaps=True)
+        return read_bag(
+            bag, output_channels(sensors), applied_channels(pattern), Ts=BOARD_TS, allow_gaps=True
+        )
     return read_bag(bag, output_channels(sensors), input_channels(pattern))
 
 
@@ -210,8 +269,15 @@ def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
     for i, name in enumerate(data.output_names):
         if spread[i] <= 1e-9 * spread.max():
             # e.g. Bz at the centre sensor under antisymmetric pairs: zero by symmetry
-            rows.append({'output': name, 'model': None, 'fit_estimation': float('nan'),
-                         'fit_validation': float('nan'), 'note': 'no response to the inputs'})
+            rows.append(
+                {
+                    'output': name,
+                    'model': None,
+                    'fit_estimation': float('nan'),
+                    'fit_validation': float('nan'),
+                    'note': 'no response to the inputs',
+                }
+            )
             continue
         est, val = est_all.select(outputs=[i]), val_all.select(outputs=[i])
         nu = data.nu
@@ -223,11 +289,17 @@ def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
             # e.g. noise-free data of a static plant (a fixed magnet on a virtual board):
             # A is not identifiable and the model's simulation diverges
             fits, note = [float('nan')] * 2, 'simulation diverged: try lower orders'
-        rows.append({
-            'output': name, 'model': model,
-            'fit_estimation': fits[0], 'fit_validation': fits[1],
-            'estimation': est, 'validation': val, 'note': note,
-        })
+        rows.append(
+            {
+                'output': name,
+                'model': model,
+                'fit_estimation': fits[0],
+                'fit_validation': fits[1],
+                'estimation': est,
+                'validation': val,
+                'note': note,
+            }
+        )
     return rows
 
 
@@ -292,44 +364,92 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
     from maglev_ros.nodes.recorder import RecorderNode
     from maglev_ros.nodes.simulator import SimulatorNode
 
-    topics = ([contract.field_topic(k) for k in args.sensors]
-              + [contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC, contract.TRUE_STATE_TOPIC,
-                 contract.CLOCK_TOPIC])
+    topics = [contract.field_topic(k) for k in args.sensors] + [
+        contract.CURRENTS_TOPIC,
+        contract.COMMAND_TOPIC,
+        contract.TRUE_STATE_TOPIC,
+        contract.CLOCK_TOPIC,
+    ]
     ctx = Context()
     rclpy.init(context=ctx, args=[])
     nodes, spinner = [], None
     try:
-        sim = SimulatorNode(context=ctx, parameter_overrides=overrides(
-            params=args.params, field_model=args.field_model, magnet=args.magnet,
-            sample_rate=args.sample_rate, coil_dynamics=not args.no_coil,
-            sensor_delay=args.delay, sensor_noise=args.noise, seed=args.seed, mode='lockstep',
-            start_paused=True, sensors=list(args.sensors), marker_rate=0.0,
-            command_timeout=5.0))
+        sim = SimulatorNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                params=args.params,
+                field_model=args.field_model,
+                magnet=args.magnet,
+                sample_rate=args.sample_rate,
+                coil_dynamics=not args.no_coil,
+                sensor_delay=args.delay,
+                sensor_noise=args.noise,
+                seed=args.seed,
+                mode='lockstep',
+                start_paused=True,
+                sensors=list(args.sensors),
+                marker_rate=0.0,
+                command_timeout=5.0,
+            ),
+        )
         nodes.append(sim)
-        excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
-            signal=args.excitation, amplitude=args.amplitude, band=list(args.band),
-            pattern=args.pattern, seed=args.seed, length=args.length))
+        excite = ExcitationNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                signal=args.excitation,
+                amplitude=args.amplitude,
+                band=list(args.band),
+                pattern=args.pattern,
+                seed=args.seed,
+                length=args.length,
+            ),
+        )
         nodes.append(excite)
-        recorder = RecorderNode(context=ctx, parameter_overrides=overrides(
-            path=str(bag), storage=args.storage, topics=topics, log_clock='topic'))
+        recorder = RecorderNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                path=str(bag), storage=args.storage, topics=topics, log_clock='topic'
+            ),
+        )
         nodes.insert(0, recorder)  # destroyed last: finalises the bag
         spinner = contract.Spinner(ctx, nodes)
-        _wait(lambda: len(recorder.subscribed) == len(topics) and recorder.metadata_complete
-              and excite._pub.get_subscription_count() >= 2
-              and sim._current_pub.get_subscription_count() >= 2, ctx, 'the node graph')
+        _wait(
+            lambda: (
+                len(recorder.subscribed) == len(topics)
+                and recorder.metadata_complete
+                and excite._pub.get_subscription_count() >= 2
+                and sim._current_pub.get_subscription_count() >= 2
+            ),
+            ctx,
+            'the node graph',
+        )
         wall = time.monotonic()
         sim.set_paused(False)
-        _wait(lambda: sim.sim.time >= args.duration or sim.sim.crashed, ctx,
-              'the simulation', timeout=1e9)
+        _wait(
+            lambda: sim.sim.time >= args.duration or sim.sim.crashed,
+            ctx,
+            'the simulation',
+            timeout=1e9,
+        )
         sim.set_paused(True)
         wall = time.monotonic() - wall
         published = sim.counters['samples']
-        _wait(lambda: recorder.counts['/maglev/currents'] >= published
-              and recorder.counts['/' + contract.COMMAND_TOPIC] >= published - 1, ctx,
-              'the recorder')
-        return {'samples': published, 'simulated_s': sim.sim.time, 'wall_s': wall,
-                'timeouts': sim.counters['timeouts'], 'crashed': sim.sim.crashed,
-                'crash_reason': sim.sim.reason}
+        _wait(
+            lambda: (
+                recorder.counts['/maglev/currents'] >= published
+                and recorder.counts['/' + contract.COMMAND_TOPIC] >= published - 1
+            ),
+            ctx,
+            'the recorder',
+        )
+        return {
+            'samples': published,
+            'simulated_s': sim.sim.time,
+            'wall_s': wall,
+            'timeouts': sim.counters['timeouts'],
+            'crashed': sim.sim.crashed,
+            'crash_reason': sim.sim.reason,
+        }
     finally:
         if spinner is not None:
             spinner.close()
@@ -358,8 +478,19 @@ def start_virtual_board(params: str, magnet: str) -> tuple[subprocess.Popen, str
     RuntimeError
         If the board does not start (its error output is in the message).
     """
-    cmd = [sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--plant', 'physics',
-           '--params', params, '--magnet', magnet, '--startup-delay', '0.2']
+    cmd = [
+        sys.executable,
+        '-m',
+        'maglev_ros.cli.virtual_board',
+        '--plant',
+        'physics',
+        '--params',
+        params,
+        '--magnet',
+        magnet,
+        '--startup-delay',
+        '0.2',
+    ]
     child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     line = child.stdout.readline().strip()  # the device path, once the board runs
     if not line:
@@ -396,8 +527,7 @@ def board_sensors(args: argparse.Namespace) -> int:
     return max(args.sensors) + 1
 
 
-def run_board_experiment(args: argparse.Namespace, bag: Path, port: str,
-                         n_sensors: int) -> dict:
+def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_sensors: int) -> dict:
     """Run the driver (on ``port``), excitation (timer) and recorder on one executor.
 
     Real time: the board sets the pace; recording lasts ``args.duration``
@@ -434,34 +564,69 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str,
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
 
-    topics = ([contract.field_topic(k) for k in args.sensors]
-              + [contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC])
+    topics = [contract.field_topic(k) for k in args.sensors] + [
+        contract.CURRENTS_TOPIC,
+        contract.COMMAND_TOPIC,
+    ]
     currents_topic = '/' + contract.CURRENTS_TOPIC
     ctx = Context()
     rclpy.init(context=ctx, args=[])
     nodes, spinner = [], None
     try:
-        recorder = RecorderNode(context=ctx, parameter_overrides=overrides(
-            path=str(bag), storage=args.storage, topics=topics, metadata_node='maglev_driver'))
+        recorder = RecorderNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                path=str(bag), storage=args.storage, topics=topics, metadata_node='maglev_driver'
+            ),
+        )
         nodes.append(recorder)  # destroyed last: finalises the bag
         # an open-loop recording: latency does not matter, so the driver reads the port
         # every 2 ms (two bursts per read), which roughly halves its CPU time
-        driver = DriverNode(context=ctx, parameter_overrides=overrides(
-            port=port, n_sensors=n_sensors, start_enabled=True, command_timeout=1.0,
-            read_interval=BOARD_READ_INTERVAL))
+        driver = DriverNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                port=port,
+                n_sensors=n_sensors,
+                start_enabled=True,
+                command_timeout=1.0,
+                read_interval=BOARD_READ_INTERVAL,
+            ),
+        )
         nodes.append(driver)
         spinner = contract.Spinner(ctx, nodes)
-        _wait(lambda: len(recorder.subscribed) == len(topics) - 1 and recorder.metadata_complete
-              and driver.link_state == 'connected', ctx, 'the driver and the recorder')
+        _wait(
+            lambda: (
+                len(recorder.subscribed) == len(topics) - 1
+                and recorder.metadata_complete
+                and driver.link_state == 'connected'
+            ),
+            ctx,
+            'the driver and the recorder',
+        )
         # the excitation starts once everything listens: its first command is recorded
-        excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
-            signal=args.excitation, amplitude=args.amplitude, band=list(args.band),
-            pattern=args.pattern, seed=args.seed, length=args.length, trigger='timer',
-            sample_rate=args.command_rate))
+        excite = ExcitationNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                signal=args.excitation,
+                amplitude=args.amplitude,
+                band=list(args.band),
+                pattern=args.pattern,
+                seed=args.seed,
+                length=args.length,
+                trigger='timer',
+                sample_rate=args.command_rate,
+            ),
+        )
         nodes.append(excite)
         spinner.add_node(excite)
-        _wait(lambda: len(recorder.subscribed) == len(topics)
-              and excite._pub.get_subscription_count() >= 2, ctx, 'the excitation')
+        _wait(
+            lambda: (
+                len(recorder.subscribed) == len(topics)
+                and excite._pub.get_subscription_count() >= 2
+            ),
+            ctx,
+            'the excitation',
+        )
         start = recorder.counts[currents_topic]
         wall = time.monotonic()
         end = wall + args.duration
@@ -469,9 +634,15 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str,
         recorder.close()  # finalised; the driver zeroes the currents when destroyed
         wall = time.monotonic() - wall
         samples = recorder.counts[currents_topic] - start
-        return {'samples': samples, 'simulated_s': samples * BOARD_TS, 'wall_s': wall,
-                'timeouts': driver.counters['timeouts'], 'crashed': False, 'crash_reason': '',
-                'driver': dict(driver.counters)}
+        return {
+            'samples': samples,
+            'simulated_s': samples * BOARD_TS,
+            'wall_s': wall,
+            'timeouts': driver.counters['timeouts'],
+            'crashed': False,
+            'crash_reason': '',
+            'driver': dict(driver.counters),
+        }
     finally:
         if spinner is not None:
             spinner.close()
@@ -483,8 +654,10 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str,
 def _run_board(args: argparse.Namespace, bag: Path) -> dict:
     n_sensors = board_sensors(args)
     if max(args.sensors) >= n_sensors or min(args.sensors) < 0:
-        raise UsageError(f'--sensors must be in 0 .. {n_sensors - 1} (the board has '
-                         f'{n_sensors}), got {args.sensors}')
+        raise UsageError(
+            f'--sensors must be in 0 .. {n_sensors - 1} (the board has '
+            f'{n_sensors}), got {args.sensors}'
+        )
     if args.board:
         return run_board_experiment(args, bag, args.board, n_sensors)
     child, port = start_virtual_board(args.params, args.magnet)
@@ -507,33 +680,47 @@ def _run(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     board = on_board(args)
     if board:
-        where = (args.board if args.board else
-                 f'a virtual board ({args.params}, magnet {args.magnet}, physics plant)')
-        print(f'{PROG}: {args.duration:g} s (wall clock) on {where}, {args.excitation} '
-              f'{args.amplitude:g} A on {args.pattern} at {args.command_rate:g} commands/s, '
-              f'seed {args.seed}')
+        where = (
+            args.board
+            if args.board
+            else f'a virtual board ({args.params}, magnet {args.magnet}, physics plant)'
+        )
+        print(
+            f'{PROG}: {args.duration:g} s (wall clock) on {where}, {args.excitation} '
+            f'{args.amplitude:g} A on {args.pattern} at {args.command_rate:g} commands/s, '
+            f'seed {args.seed}'
+        )
     else:
-        print(f'{PROG}: {args.duration:g} s of {args.params}, magnet {args.magnet}, '
-              f'{args.excitation} {args.amplitude:g} A on {args.pattern}, coil dynamics '
-              f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
-              f'{args.noise:g} T, seed {args.seed}')
+        print(
+            f'{PROG}: {args.duration:g} s of {args.params}, magnet {args.magnet}, '
+            f'{args.excitation} {args.amplitude:g} A on {args.pattern}, coil dynamics '
+            f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
+            f'{args.noise:g} T, seed {args.seed}'
+        )
     try:
         stats = _run_board(args, bag) if board else run_experiment(args, bag)
     except KeyboardInterrupt:
         print(f'{PROG}: interrupted; bag finalised in {bag}', file=sys.stderr)
         return 130
     if board:
-        print(f'recorded {stats["samples"]} board samples ({stats["simulated_s"]:.3f} s of '
-              f'board time in {stats["wall_s"]:.1f} s; {stats["timeouts"]} command timeouts, '
-              f'{stats["driver"]["resyncs"]} resyncs) -> {bag}')
+        print(
+            f'recorded {stats["samples"]} board samples ({stats["simulated_s"]:.3f} s of '
+            f'board time in {stats["wall_s"]:.1f} s; {stats["timeouts"]} command timeouts, '
+            f'{stats["driver"]["resyncs"]} resyncs) -> {bag}'
+        )
     else:
         rate = stats['simulated_s'] / max(stats['wall_s'], 1e-9)
-        print(f'recorded {stats["samples"]} samples ({stats["simulated_s"]:.3f} s simulated '
-              f'in {stats["wall_s"]:.1f} s, {rate:.2f} x real time; {stats["timeouts"]} '
-              f'command timeouts) -> {bag}')
+        print(
+            f'recorded {stats["samples"]} samples ({stats["simulated_s"]:.3f} s simulated '
+            f'in {stats["wall_s"]:.1f} s, {rate:.2f} x real time; {stats["timeouts"]} '
+            f'command timeouts) -> {bag}'
+        )
     if stats['crashed']:
-        print(f'warning: the magnet crashed ({stats["crash_reason"]}); identifying the '
-              f'samples before the crash', file=sys.stderr)
+        print(
+            f'warning: the magnet crashed ({stats["crash_reason"]}); identifying the '
+            f'samples before the crash',
+            file=sys.stderr,
+        )
     dataset = load_data(bag, args.sensors, args.pattern, board=board)
     alignment = dataset.alignment
     methods = ', '.join(f'{r.topic} {r.method}' for r in alignment.reports)
@@ -541,39 +728,59 @@ def _run(args: argparse.Namespace) -> int:
     for gap in dataset.gaps:
         print(f'gap: {gap.describe()}')
     if board and dataset.gaps:
-        print('(board run: a gap above is records lost between board and bag, resyncs or '
-              'messages the recorder missed; filled: fields linearly, currents held)')
+        print(
+            '(board run: a gap above is records lost between board and bag, resyncs or '
+            'messages the recorder missed; filled: fields linearly, currents held)'
+        )
     data = dataset.data
     rows = identify(data, args.na, args.nb, args.nk, args.split)
-    print(f'ARX na={args.na} nb={args.nb} nk={args.nk}, inputs {", ".join(data.input_names)}; '
-          f'{data.N} samples, Ts = {data.Ts:g} s, split {args.split:g}')
+    print(
+        f'ARX na={args.na} nb={args.nb} nk={args.nk}, inputs {", ".join(data.input_names)}; '
+        f'{data.N} samples, Ts = {data.Ts:g} s, split {args.split:g}'
+    )
     print(f'{"output":<10} {"fit est. %":>11} {"fit val. %":>11}')
     for row in rows:
-        print(f'{row["output"]:<10} {row["fit_estimation"]:>11.2f} '
-              f'{row["fit_validation"]:>11.2f}  {row["note"]}')
-    rows_fitted = [row for row in rows
-                   if row['model'] is not None and np.isfinite(row['fit_validation'])]
+        print(
+            f'{row["output"]:<10} {row["fit_estimation"]:>11.2f} '
+            f'{row["fit_validation"]:>11.2f}  {row["note"]}'
+        )
+    rows_fitted = [
+        row for row in rows if row['model'] is not None and np.isfinite(row['fit_validation'])
+    ]
     if not args.no_plots:
         from maglev_ros.sysid import compare_plot
 
         for row in rows_fitted:
-            path = compare_plot(row['validation'], [row['model']],
-                                out / f'compare_{row["output"]}.png',
-                                labels=[f'ARX {args.na} {args.nb} {args.nk}'], ic='estimate')
+            path = compare_plot(
+                row['validation'],
+                [row['model']],
+                out / f'compare_{row["output"]}.png',
+                labels=[f'ARX {args.na} {args.nb} {args.nk}'],
+                ic='estimate',
+            )
             print(f'wrote {path}')
     summary = {
-        'run': stats, 'args': {k: v for k, v in vars(args).items()},
+        'run': stats,
+        'args': {k: v for k, v in vars(args).items()},
         'metadata': {k: v for k, v in dataset.metadata.items()},
-        'alignment': {'base': alignment.base,
-                      'methods': {r.topic: r.method for r in alignment.reports}},
-        'models': [{
-            'output': r['output'], 'fit_estimation': r['fit_estimation'],
-            'fit_validation': r['fit_validation'], 'note': r['note'],
-            'A': r['model'].polynomial('A').tolist(),
-            'B': [r['model'].polynomial('B', 0, j).tolist() for j in range(data.nu)],
-            'theta': np.asarray(r['model'].theta).tolist(),
-        } if r['model'] is not None else {'output': r['output'], 'note': r['note']}
-            for r in rows],
+        'alignment': {
+            'base': alignment.base,
+            'methods': {r.topic: r.method for r in alignment.reports},
+        },
+        'models': [
+            {
+                'output': r['output'],
+                'fit_estimation': r['fit_estimation'],
+                'fit_validation': r['fit_validation'],
+                'note': r['note'],
+                'A': r['model'].polynomial('A').tolist(),
+                'B': [r['model'].polynomial('B', 0, j).tolist() for j in range(data.nu)],
+                'theta': np.asarray(r['model'].theta).tolist(),
+            }
+            if r['model'] is not None
+            else {'output': r['output'], 'note': r['note']}
+            for r in rows
+        ],
     }
     (out / 'models.json').write_text(json.dumps(summary, indent=2, default=_plain))
     print(f'wrote {out / "models.json"}')

@@ -48,47 +48,94 @@ def _int_list(text: str) -> list[int]:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-sysid``."""
-    p = _Parser(prog=PROG, description='Identify ARX/IV/ARMAX/OE/BJ models from data '
-                'files, like the MATLAB System Identification Toolbox.')
-    p.add_argument('data', help='data file (.npz, .csv or MATLAB .mat, v7 or older) or a '
-                   'rosbag2 bag directory (then choose channels with --output/--input)')
+    p = _Parser(
+        prog=PROG,
+        description='Identify ARX/IV/ARMAX/OE/BJ models from data '
+        'files, like the MATLAB System Identification Toolbox.',
+    )
+    p.add_argument(
+        'data',
+        help='data file (.npz, .csv or MATLAB .mat, v7 or older) or a '
+        'rosbag2 bag directory (then choose channels with --output/--input)',
+    )
     from .bag2data import add_channel_arguments
 
     add_channel_arguments(p)
     p.add_argument('--ts', type=float, help='sample time in seconds (default: from file)')
-    p.add_argument('--rows', nargs=2, type=_int_list, metavar=('OUTPUTS', 'INPUTS'),
-                   help='rows of the channel matrix (e.g. DATA) used as outputs and inputs, '
-                   'counted from 1, comma-separated (e.g. --rows 1,2 4,5)')
+    p.add_argument(
+        '--rows',
+        nargs=2,
+        type=_int_list,
+        metavar=('OUTPUTS', 'INPUTS'),
+        help='rows of the channel matrix (e.g. DATA) used as outputs and inputs, '
+        'counted from 1, comma-separated (e.g. --rows 1,2 4,5)',
+    )
     p.add_argument('--matrix', default='DATA', help='name of the channel matrix (default DATA)')
     p.add_argument('--outputs', help='CSV output column names, comma-separated')
     p.add_argument('--inputs', help='CSV input column names, comma-separated')
-    p.add_argument('--split', default='0.5',
-                   help='estimation/validation split: fraction (0.5) or sample count (12500)')
-    p.add_argument('--detrend', nargs='?', const='constant', choices=('constant', 'linear'),
-                   help='remove means (default) or linear trends before estimation')
-    p.add_argument('--filter', nargs=2, type=float, metavar=('LOW', 'HIGH'),
-                   help='Butterworth pass band in Hz (LOW 0: low-pass), like idfilt')
+    p.add_argument(
+        '--split',
+        default='0.5',
+        help='estimation/validation split: fraction (0.5) or sample count (12500)',
+    )
+    p.add_argument(
+        '--detrend',
+        nargs='?',
+        const='constant',
+        choices=('constant', 'linear'),
+        help='remove means (default) or linear trends before estimation',
+    )
+    p.add_argument(
+        '--filter',
+        nargs=2,
+        type=float,
+        metavar=('LOW', 'HIGH'),
+        help='Butterworth pass band in Hz (LOW 0: low-pass), like idfilt',
+    )
     p.add_argument('--filter-order', type=int, default=5, help='filter order (default 5)')
     p.add_argument('--zero-phase', action='store_true', help='filter forwards and backwards')
     p.add_argument('--decimate', type=int, default=1, help='decimation factor (default 1)')
     p.add_argument('--arx', nargs=3, type=int, action='append', metavar=('NA', 'NB', 'NK'))
-    p.add_argument('--iv', nargs=3, type=int, action='append', metavar=('NA', 'NB', 'NK'),
-                   help='four-stage instrumental variables (iv4)')
-    p.add_argument('--armax', nargs=4, type=int, action='append',
-                   metavar=('NA', 'NB', 'NC', 'NK'))
+    p.add_argument(
+        '--iv',
+        nargs=3,
+        type=int,
+        action='append',
+        metavar=('NA', 'NB', 'NK'),
+        help='four-stage instrumental variables (iv4)',
+    )
+    p.add_argument('--armax', nargs=4, type=int, action='append', metavar=('NA', 'NB', 'NC', 'NK'))
     p.add_argument('--oe', nargs=3, type=int, action='append', metavar=('NB', 'NF', 'NK'))
-    p.add_argument('--bj', nargs=5, type=int, action='append',
-                   metavar=('NB', 'NC', 'ND', 'NF', 'NK'))
-    p.add_argument('--spec', help='YAML file with a "models" list (structure and order '
-                   'matrices na, nb, nc, nk ... for MIMO models)')
-    p.add_argument('--select', nargs='?', const='val', choices=('val', 'aic', 'mdl'),
-                   help='ARX order search (SISO) by validation loss, AIC or MDL')
-    p.add_argument('--select-max', nargs=3, type=int, default=[10, 10, 1],
-                   metavar=('NA', 'NB', 'NK'), help='search na, nb in 1..max, nk in 1..max')
-    p.add_argument('--horizon', type=int, help='compare k-step predictions instead of '
-                   'simulation')
-    p.add_argument('--ic', choices=('zero', 'estimate'), default='estimate',
-                   help='initial conditions for compare (default estimate, as the toolbox)')
+    p.add_argument(
+        '--bj', nargs=5, type=int, action='append', metavar=('NB', 'NC', 'ND', 'NF', 'NK')
+    )
+    p.add_argument(
+        '--spec',
+        help='YAML file with a "models" list (structure and order '
+        'matrices na, nb, nc, nk ... for MIMO models)',
+    )
+    p.add_argument(
+        '--select',
+        nargs='?',
+        const='val',
+        choices=('val', 'aic', 'mdl'),
+        help='ARX order search (SISO) by validation loss, AIC or MDL',
+    )
+    p.add_argument(
+        '--select-max',
+        nargs=3,
+        type=int,
+        default=[10, 10, 1],
+        metavar=('NA', 'NB', 'NK'),
+        help='search na, nb in 1..max, nk in 1..max',
+    )
+    p.add_argument('--horizon', type=int, help='compare k-step predictions instead of simulation')
+    p.add_argument(
+        '--ic',
+        choices=('zero', 'estimate'),
+        default='estimate',
+        help='initial conditions for compare (default estimate, as the toolbox)',
+    )
     p.add_argument('--json', action='store_true', help='print a JSON result instead of text')
     p.add_argument('--plot', metavar='DIR', help='write compare/resid/bode PNGs into DIR')
     p.add_argument('--save', metavar='DIR', help='save each model as JSON into DIR')
@@ -109,9 +156,13 @@ def _spec_models(path: str) -> list[tuple[str, dict[str, Any]]]:
     if not isinstance(models, list) or not models:
         raise UsageError(f'spec file {path!r} needs a non-empty "models" list')
     out = []
-    allowed = {'arx': {'na', 'nb', 'nk'}, 'iv': {'na', 'nb', 'nk'},
-               'armax': {'na', 'nb', 'nc', 'nk'}, 'oe': {'nb', 'nf', 'nk'},
-               'bj': {'nb', 'nc', 'nd', 'nf', 'nk'}}
+    allowed = {
+        'arx': {'na', 'nb', 'nk'},
+        'iv': {'na', 'nb', 'nk'},
+        'armax': {'na', 'nb', 'nc', 'nk'},
+        'oe': {'nb', 'nf', 'nk'},
+        'bj': {'nb', 'nc', 'nd', 'nf', 'nk'},
+    }
     for k, entry in enumerate(models):
         if not isinstance(entry, dict) or 'structure' not in entry:
             raise UsageError(f'spec model {k + 1} needs a "structure" field')
@@ -121,16 +172,19 @@ def _spec_models(path: str) -> list[tuple[str, dict[str, Any]]]:
         orders = {key: v for key, v in entry.items() if key != 'structure'}
         unknown = set(orders) - allowed[structure]
         if unknown:
-            raise UsageError(f'spec model {k + 1} ({structure}): unknown orders '
-                             f'{sorted(unknown)}')
+            raise UsageError(f'spec model {k + 1} ({structure}): unknown orders {sorted(unknown)}')
         out.append((structure, orders))
     return out
 
 
 def _requested(args: argparse.Namespace) -> list[tuple[str, dict[str, Any]]]:
-    names = {'arx': ('na', 'nb', 'nk'), 'iv': ('na', 'nb', 'nk'),
-             'armax': ('na', 'nb', 'nc', 'nk'), 'oe': ('nb', 'nf', 'nk'),
-             'bj': ('nb', 'nc', 'nd', 'nf', 'nk')}
+    names = {
+        'arx': ('na', 'nb', 'nk'),
+        'iv': ('na', 'nb', 'nk'),
+        'armax': ('na', 'nb', 'nc', 'nk'),
+        'oe': ('nb', 'nf', 'nk'),
+        'bj': ('nb', 'nc', 'nd', 'nf', 'nk'),
+    }
     out = []
     for structure, keys in names.items():
         for values in getattr(args, structure) or []:
@@ -171,27 +225,42 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
     models_requested = _requested(args)
     if not models_requested and not args.select:
-        raise UsageError('no model requested: give --arx, --iv, --armax, --oe, --bj, --spec '
-                         'or --select')
+        raise UsageError(
+            'no model requested: give --arx, --iv, --armax, --oe, --bj, --spec or --select'
+        )
     split_text = str(args.split)
     try:
         split: float | int = float(split_text) if '.' in split_text else int(split_text)
     except ValueError:
-        raise UsageError(f'--split must be a fraction such as 0.5 or a sample count such as '
-                         f'12500, got {split_text!r}') from None
+        raise UsageError(
+            f'--split must be a fraction such as 0.5 or a sample count such as '
+            f'12500, got {split_text!r}'
+        ) from None
     from maglev_ros.bags import is_bag_path, load_bag_dataset
 
     if is_bag_path(args.data):
         if not args.output:
-            raise UsageError(f'{args.data} is a bag: choose channels with --output TOPIC:FIELD '
-                             '(and --input); maglev-bag2data --topics lists them')
-        data = load_bag_dataset(args.data, outputs=args.output, inputs=args.input, Ts=args.ts,
-                                allow_gaps=args.allow_gaps, tolerance=args.tolerance)
+            raise UsageError(
+                f'{args.data} is a bag: choose channels with --output TOPIC:FIELD '
+                '(and --input); maglev-bag2data --topics lists them'
+            )
+        data = load_bag_dataset(
+            args.data,
+            outputs=args.output,
+            inputs=args.input,
+            Ts=args.ts,
+            allow_gaps=args.allow_gaps,
+            tolerance=args.tolerance,
+        )
     else:
-        data = sysid.load_data(args.data, Ts=args.ts,
-                               rows=tuple(args.rows) if args.rows else None, matrix=args.matrix,
-                               outputs=args.outputs.split(',') if args.outputs else None,
-                               inputs=args.inputs.split(',') if args.inputs else None)
+        data = sysid.load_data(
+            args.data,
+            Ts=args.ts,
+            rows=tuple(args.rows) if args.rows else None,
+            matrix=args.matrix,
+            outputs=args.outputs.split(',') if args.outputs else None,
+            inputs=args.inputs.split(',') if args.inputs else None,
+        )
     if args.detrend:
         data = data.detrend(args.detrend)
     if args.filter:
@@ -200,17 +269,32 @@ def run(args: argparse.Namespace) -> int:
         data = data.decimate(args.decimate)
     est, val = data.split(split)
     result: dict[str, Any] = {
-        'data': {'file': str(args.data), 'N': data.N, 'ny': data.ny, 'nu': data.nu,
-                 'Ts': data.Ts, 'n_estimation': est.N, 'n_validation': val.N,
-                 'outputs': list(data.output_names), 'inputs': list(data.input_names)},
-        'models': []}
+        'data': {
+            'file': str(args.data),
+            'N': data.N,
+            'ny': data.ny,
+            'nu': data.nu,
+            'Ts': data.Ts,
+            'n_estimation': est.N,
+            'n_validation': val.N,
+            'outputs': list(data.output_names),
+            'inputs': list(data.input_names),
+        },
+        'models': [],
+    }
     if args.select:
         na_max, nb_max, nk_max = args.select_max
-        search = sysid.arxstruc(est, val, range(1, na_max + 1), range(1, nb_max + 1),
-                                range(1, nk_max + 1))
+        search = sysid.arxstruc(
+            est, val, range(1, na_max + 1), range(1, nb_max + 1), range(1, nk_max + 1)
+        )
         best = sysid.selstruc(search, args.select)
-        result['selection'] = {'criterion': args.select, 'na': best[0], 'nb': best[1],
-                               'nk': best[2], 'candidates': len(search.loss)}
+        result['selection'] = {
+            'criterion': args.select,
+            'na': best[0],
+            'nb': best[1],
+            'nk': best[2],
+            'candidates': len(search.loss),
+        }
         models_requested.append(('arx', {'na': best[0], 'nb': best[1], 'nk': best[2]}))
     models, texts = [], []
     for structure, orders in models_requested:
@@ -220,40 +304,58 @@ def run(args: argparse.Namespace) -> int:
         fit_val = sysid.compare(model, val, args.horizon, args.ic).fit
         analysis = sysid.resid(model, val)
         entry = sysid.model_to_dict(model)
-        entry.update({'std': None if model.std is None else model.std.tolist(),
-                      'fit_estimation': fit_est.tolist(), 'fit_validation': fit_val.tolist(),
-                      'fpe': model.report.fpe, 'mse': model.report.mse.tolist(),
-                      'residuals_white': analysis.white,
-                      'residuals_independent': analysis.independent})
+        entry.update(
+            {
+                'std': None if model.std is None else model.std.tolist(),
+                'fit_estimation': fit_est.tolist(),
+                'fit_validation': fit_val.tolist(),
+                'fpe': model.report.fpe,
+                'mse': model.report.mse.tolist(),
+                'residuals_white': analysis.white,
+                'residuals_independent': analysis.independent,
+            }
+        )
         entry.pop('covariance', None)
         result['models'].append(entry)
         what = 'simulation' if args.horizon is None else f'{args.horizon}-step prediction'
-        texts.append(f'{model}\n  Compare ({what}, ic={args.ic}): fit to estimation data '
-                     + ', '.join(f'{f:.2f}%' for f in fit_est) + '; validation data '
-                     + ', '.join(f'{f:.2f}%' for f in fit_val)
-                     + f'\n  Validation {analysis.summary()}')
+        texts.append(
+            f'{model}\n  Compare ({what}, ic={args.ic}): fit to estimation data '
+            + ', '.join(f'{f:.2f}%' for f in fit_est)
+            + '; validation data '
+            + ', '.join(f'{f:.2f}%' for f in fit_val)
+            + f'\n  Validation {analysis.summary()}'
+        )
         if args.plot:
             Path(args.plot).mkdir(parents=True, exist_ok=True)
             index = len(models)
-            sysid.resid_plot(analysis, Path(args.plot) / f'resid_{index}_{structure}.png',
-                             val.output_names, val.input_names)
+            sysid.resid_plot(
+                analysis,
+                Path(args.plot) / f'resid_{index}_{structure}.png',
+                val.output_names,
+                val.input_names,
+            )
         if args.save:
             Path(args.save).mkdir(parents=True, exist_ok=True)
             sysid.save_model(model, Path(args.save) / f'model_{len(models)}_{structure}.json')
     if args.plot:
         labels = [_label(m) for m in models]
-        sysid.compare_plot(val, models, Path(args.plot) / 'compare.png', labels, args.horizon,
-                           args.ic)
+        sysid.compare_plot(
+            val, models, Path(args.plot) / 'compare.png', labels, args.horizon, args.ic
+        )
         sysid.bode_plot(models, Path(args.plot) / 'bode.png', labels)
     if args.json:
         print(json.dumps(result, indent=1))
     else:
-        header = (f'{PROG}: {data.N} samples of {data.ny} output(s), {data.nu} input(s), '
-                  f'Ts = {data.Ts:g} s; estimation {est.N}, validation {val.N}')
+        header = (
+            f'{PROG}: {data.N} samples of {data.ny} output(s), {data.nu} input(s), '
+            f'Ts = {data.Ts:g} s; estimation {est.N}, validation {val.N}'
+        )
         if 'selection' in result:
             s = result['selection']
-            header += (f'\nOrder search ({s["criterion"]}, {s["candidates"]} candidates): '
-                       f'na={s["na"]} nb={s["nb"]} nk={s["nk"]}')
+            header += (
+                f'\nOrder search ({s["criterion"]}, {s["candidates"]} candidates): '
+                f'na={s["na"]} nb={s["nb"]} nk={s["nk"]}'
+            )
         print(header)
         for text in texts:
             print('\n' + text)

@@ -50,9 +50,12 @@ def non_negative_float(text: str) -> float:
     return value
 
 
-def run_command(prog: str, parser: argparse.ArgumentParser,
-                run: Callable[[argparse.Namespace], int],
-                argv: Sequence[str] | None = None) -> int:
+def run_command(
+    prog: str,
+    parser: argparse.ArgumentParser,
+    run: Callable[[argparse.Namespace], int],
+    argv: Sequence[str] | None = None,
+) -> int:
     """Parse ``argv`` and call ``run``; map bad input to one line and status 2.
 
     Parameters

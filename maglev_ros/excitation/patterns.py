@@ -64,6 +64,8 @@ def apply_pattern(signals: np.ndarray, pattern: str, offset=0.0) -> np.ndarray:
     if values.ndim == 1:
         values = values[:, None]
     if values.ndim != 2 or values.shape[1] != matrix.shape[1]:
-        raise ValueError(f'pattern {pattern!r} takes {matrix.shape[1]} signal column(s), '
-                         f'got shape {values.shape}')
+        raise ValueError(
+            f'pattern {pattern!r} takes {matrix.shape[1]} signal column(s), '
+            f'got shape {values.shape}'
+        )
     return values @ matrix.T + np.broadcast_to(np.asarray(offset, dtype=float), (4,))

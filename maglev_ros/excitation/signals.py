@@ -18,10 +18,25 @@ SIGNALS = ('prbs', 'random_binary', 'multisine', 'chirp')
 
 # Feedback taps of maximum-length LFSRs (Fibonacci form), register length: taps.
 _LFSR_TAPS = {
-    2: (2, 1), 3: (3, 2), 4: (4, 3), 5: (5, 3), 6: (6, 5), 7: (7, 6), 8: (8, 6, 5, 4),
-    9: (9, 5), 10: (10, 7), 11: (11, 9), 12: (12, 6, 4, 1), 13: (13, 4, 3, 1),
-    14: (14, 5, 3, 1), 15: (15, 14), 16: (16, 15, 13, 4), 17: (17, 14), 18: (18, 11),
-    19: (19, 6, 2, 1), 20: (20, 17),
+    2: (2, 1),
+    3: (3, 2),
+    4: (4, 3),
+    5: (5, 3),
+    6: (6, 5),
+    7: (7, 6),
+    8: (8, 6, 5, 4),
+    9: (9, 5),
+    10: (10, 7),
+    11: (11, 9),
+    12: (12, 6, 4, 1),
+    13: (13, 4, 3, 1),
+    14: (14, 5, 3, 1),
+    15: (15, 14),
+    16: (16, 15, 13, 4),
+    17: (17, 14),
+    18: (18, 11),
+    19: (19, 6, 2, 1),
+    20: (20, 17),
 }
 
 
@@ -32,13 +47,20 @@ def _check(length: int, amplitude: float, band: tuple[float, float]) -> tuple[fl
         raise ValueError(f'amplitude must be a finite number >= 0, got {amplitude!r}')
     low, high = (float(b) for b in band)
     if not (0.0 <= low < high <= 1.0):
-        raise ValueError(f'band must be (low, high) with 0 <= low < high <= 1 (fractions of '
-                         f'Nyquist), got {tuple(band)!r}')
+        raise ValueError(
+            f'band must be (low, high) with 0 <= low < high <= 1 (fractions of '
+            f'Nyquist), got {tuple(band)!r}'
+        )
     return low, high
 
 
-def prbs(length: int, amplitude: float = 1.0, band: tuple[float, float] = (0.0, 1.0),
-         seed: int | None = 0, order: int | None = None) -> np.ndarray:
+def prbs(
+    length: int,
+    amplitude: float = 1.0,
+    band: tuple[float, float] = (0.0, 1.0),
+    seed: int | None = 0,
+    order: int | None = None,
+) -> np.ndarray:
     """Maximum-length pseudo-random binary sequence.
 
     Parameters
@@ -84,8 +106,12 @@ def prbs(length: int, amplitude: float = 1.0, band: tuple[float, float] = (0.0, 
     return amplitude * out
 
 
-def random_binary(length: int, amplitude: float = 1.0, band: tuple[float, float] = (0.0, 1.0),
-                  seed: int | None = 0) -> np.ndarray:
+def random_binary(
+    length: int,
+    amplitude: float = 1.0,
+    band: tuple[float, float] = (0.0, 1.0),
+    seed: int | None = 0,
+) -> np.ndarray:
     """Random binary signal: the sign of band-limited Gaussian noise (as ``idinput('rbs')``).
 
     Parameters
@@ -117,8 +143,13 @@ def random_binary(length: int, amplitude: float = 1.0, band: tuple[float, float]
     return amplitude * out
 
 
-def multisine(length: int, amplitude: float = 1.0, band: tuple[float, float] = (0.0, 1.0),
-              seed: int | None = 0, n_sines: int | None = None) -> np.ndarray:
+def multisine(
+    length: int,
+    amplitude: float = 1.0,
+    band: tuple[float, float] = (0.0, 1.0),
+    seed: int | None = 0,
+    n_sines: int | None = None,
+) -> np.ndarray:
     """Periodic sum of sinusoids on the DFT grid of ``length``, random phases.
 
     Parameters
@@ -155,8 +186,12 @@ def multisine(length: int, amplitude: float = 1.0, band: tuple[float, float] = (
     return amplitude * out / peak if peak > 0 else out
 
 
-def chirp(length: int, amplitude: float = 1.0, band: tuple[float, float] = (0.0, 1.0),
-          seed: int | None = 0) -> np.ndarray:
+def chirp(
+    length: int,
+    amplitude: float = 1.0,
+    band: tuple[float, float] = (0.0, 1.0),
+    seed: int | None = 0,
+) -> np.ndarray:
     """Linear frequency sweep from ``band[0]`` to ``band[1]`` (x Nyquist) over ``length``.
 
     Parameters
@@ -180,12 +215,22 @@ def chirp(length: int, amplitude: float = 1.0, band: tuple[float, float] = (0.0,
     return amplitude * sps.chirp(t, f0=low / 2.0, t1=end, f1=high / 2.0, method='linear')
 
 
-_GENERATORS = {'prbs': prbs, 'random_binary': random_binary, 'multisine': multisine,
-               'chirp': chirp}
+_GENERATORS = {
+    'prbs': prbs,
+    'random_binary': random_binary,
+    'multisine': multisine,
+    'chirp': chirp,
+}
 
 
-def excitation(kind: str, length: int, channels: int = 1, amplitude: float = 1.0,
-               band: tuple[float, float] = (0.0, 1.0), seed: int = 0) -> np.ndarray:
+def excitation(
+    kind: str,
+    length: int,
+    channels: int = 1,
+    amplitude: float = 1.0,
+    band: tuple[float, float] = (0.0, 1.0),
+    seed: int = 0,
+) -> np.ndarray:
     """Independent excitation signals, one per channel.
 
     Parameters

@@ -85,8 +85,14 @@ class BoardClock:
         of the fit.
     """
 
-    def __init__(self, bucket: float = 1.0, buckets: int = 30, slew: float = 0.02,
-                 max_slew: float = 0.05, max_drift: float = 0.005) -> None:
+    def __init__(
+        self,
+        bucket: float = 1.0,
+        buckets: int = 30,
+        slew: float = 0.02,
+        max_slew: float = 0.05,
+        max_drift: float = 0.005,
+    ) -> None:
         if not bucket > 0:
             raise ValueError(f'bucket must be > 0 s, got {bucket!r}')
         if buckets < 3:
@@ -118,8 +124,13 @@ class BoardClock:
 
     def reset(self) -> None:
         """Forget all observations (new board or new power-up)."""
-        self.__init__(self._bucket_us * 1e-6, self._buckets,  # type: ignore[misc]
-                      self._slew, self._max_slew, self._max_drift)
+        self.__init__(
+            self._bucket_us * 1e-6,
+            self._buckets,  # type: ignore[misc]
+            self._slew,
+            self._max_slew,
+            self._max_drift,
+        )
 
     @property
     def drift(self) -> float:
@@ -199,8 +210,11 @@ class BoardClock:
         # a minimum above another by more than max_drift allows (plus a margin for
         # the latency's spread) is a stall: its reads all came late
         rate = 1000.0 * self._max_drift  # ns per us
-        minima = [(x, y) for x, y in minima
-                  if all(y - y2 <= rate * abs(x - x2) + _STALL_MARGIN_NS for x2, y2 in minima)]
+        minima = [
+            (x, y)
+            for x, y in minima
+            if all(y - y2 <= rate * abs(x - x2) + _STALL_MARGIN_NS for x2, y2 in minima)
+        ]
         hull: list[tuple[int, int]] = []
         for x, y in sorted(minima):
             while len(hull) >= 2:
@@ -294,8 +308,12 @@ class BoardClock:
             remaining = size - elapsed * rate
             if remaining < 0:
                 remaining = 0
-            stamp = 1000 * b + intercept + int(round(slope * float(b - ref))) \
+            stamp = (
+                1000 * b
+                + intercept
+                + int(round(slope * float(b - ref)))
                 - sign * (remaining // 1000)
+            )
             last = stamp if stamp > last else last + 1
             out.append(last)
         self._last_stamp_ns = last

@@ -102,8 +102,9 @@ class CurrentScaling:
         counts = np.rint(amps * self.counts_per_ampere)
         return np.clip(counts, -PWM_FULL_SCALE, PWM_FULL_SCALE).astype(np.int64)
 
-    def to_current(self, counts: ArrayLike, out: NDArray[np.float64] | None = None
-                   ) -> NDArray[np.float64]:
+    def to_current(
+        self, counts: ArrayLike, out: NDArray[np.float64] | None = None
+    ) -> NDArray[np.float64]:
         """Convert PWM counts to the steady-state coil currents they imply.
 
         Parameters

@@ -343,9 +343,14 @@ class RecordDecoder:
         bounds = self.bounds
         ts, field, pwm = self._views(buf, n)
         bad = first_bad_record(
-            np.frombuffer(buf, '<u4', count=n * size // 4).reshape(n, size // 4), start,
-            self._prev_ts, 3 * self.n_sensors,
-            bounds.min_step_us, bounds.max_step_us, self._field_bits, PWM_FULL_SCALE,
+            np.frombuffer(buf, '<u4', count=n * size // 4).reshape(n, size // 4),
+            start,
+            self._prev_ts,
+            3 * self.n_sensors,
+            bounds.min_step_us,
+            bounds.max_step_us,
+            self._field_bits,
+            PWM_FULL_SCALE,
         )
         ok = bad == n
         last = bad - 1  # index of the last accepted record, -1 if none
@@ -461,8 +466,9 @@ class RecordDecoder:
             # a contiguous, writable copy: one compiled signature for every run (a
             # one-record view counts as contiguous to numpy, a longer one not, and a new
             # signature would compile mid-stream)
-            time_us, restarts, wraps = unwrap_run(ts.copy(), last_raw,
-                                                  self._last_time_us, SAMPLE_PERIOD_US)
+            time_us, restarts, wraps = unwrap_run(
+                ts.copy(), last_raw, self._last_time_us, SAMPLE_PERIOD_US
+            )
             self._restarts += restarts
             self._wraps += wraps
             self._last_emit_ts = int(ts[-1])

@@ -25,8 +25,14 @@ __all__ = ['RawMessageBatch', 'SampleSerialiser', 'fill_messages']
 
 
 @njit(cache=True)
-def fill_messages(out: np.ndarray, template: np.ndarray, stamp_offsets: np.ndarray,
-                  value_offsets: np.ndarray, stamps_ns: np.ndarray, bits: np.ndarray) -> None:
+def fill_messages(
+    out: np.ndarray,
+    template: np.ndarray,
+    stamp_offsets: np.ndarray,
+    value_offsets: np.ndarray,
+    stamps_ns: np.ndarray,
+    bits: np.ndarray,
+) -> None:
     """Write n samples' messages into ``out``: template bytes, stamps, float64 values.
 
     Parameters
@@ -147,15 +153,21 @@ class SampleSerialiser:
         stamps = np.ascontiguousarray(stamps_ns, dtype=np.int64)
         n = stamps.shape[0]
         if isinstance(values, list | tuple):
-            values = np.concatenate([np.asarray(v, dtype=np.float64).reshape(n, -1)
-                                     for v in values], axis=1)
+            values = np.concatenate(
+                [np.asarray(v, dtype=np.float64).reshape(n, -1) for v in values], axis=1
+            )
         values = np.ascontiguousarray(values, dtype=np.float64)
         if values.shape != (n, self.n_values):
-            raise ValueError(f'values must have shape ({n}, {self.n_values}), '
-                             f'got {values.shape}')
+            raise ValueError(f'values must have shape ({n}, {self.n_values}), got {values.shape}')
         out = np.empty(n * self.size, np.uint8)
-        fill_messages(out, self._template, self._stamp_offsets, self._value_offsets, stamps,
-                      values.view(np.uint64))
+        fill_messages(
+            out,
+            self._template,
+            self._stamp_offsets,
+            self._value_offsets,
+            stamps,
+            values.view(np.uint64),
+        )
         bounds = self._bounds.get(n)
         if bounds is None:
             ends = np.cumsum(np.tile(self._sizes, n)).tolist()

@@ -165,11 +165,13 @@ def odometry_values(x: np.ndarray) -> np.ndarray:
     ca, sa = math.cos(alpha), math.sin(alpha)
     cb, sb = math.cos(beta), math.sin(beta)
     cg, sg = math.cos(gamma), math.sin(gamma)
-    rot = np.array([  # Rz Ry Rx, body to world
-        [cg * cb, cg * sb * sa - sg * ca, cg * sb * ca + sg * sa],
-        [sg * cb, sg * sb * sa + cg * ca, sg * sb * ca - cg * sa],
-        [-sb, cb * sa, cb * ca],
-    ])
+    rot = np.array(
+        [  # Rz Ry Rx, body to world
+            [cg * cb, cg * sb * sa - sg * ca, cg * sb * ca + sg * sa],
+            [sg * cb, sg * sb * sa + cg * ca, sg * sb * ca - cg * sa],
+            [-sb, cb * sa, cb * ca],
+        ]
+    )
     out = np.empty(13)
     out[0:3] = x[0:3]
     out[3:7] = euler_to_quaternion(alpha, beta, gamma)
@@ -320,8 +322,12 @@ class Spinner:
         for node in nodes:
             self.executor.add_node(node)
         self._stop = threading.Event()
-        self._thread = threading.Thread(target=spin, args=(self.executor, context, self._stop),
-                                        name='maglev-spinner', daemon=True)
+        self._thread = threading.Thread(
+            target=spin,
+            args=(self.executor, context, self._stop),
+            name='maglev-spinner',
+            daemon=True,
+        )
         self._thread.start()
 
     def add_node(self, node) -> None:
@@ -357,10 +363,10 @@ def declare_parameters(node, table: Mapping[str, tuple[object, str]]) -> dict[st
     from rclpy.parameter import Parameter
 
     for name, (default, text) in table.items():
-        node.declare_parameter(name, default,
-                               ParameterDescriptor(description=text, read_only=True))
-    return {name: node.get_parameter_or(name, Parameter(name, value=None)).value
-            for name in table}
+        node.declare_parameter(
+            name, default, ParameterDescriptor(description=text, read_only=True)
+        )
+    return {name: node.get_parameter_or(name, Parameter(name, value=None)).value for name in table}
 
 
 def run_nodes(factories, args: list[str] | None, name: str, errors: tuple) -> int:
@@ -476,10 +482,13 @@ def raw_layout(template, values: Sequence[Path], stamp: Path = HEADER_STAMP) -> 
         raise ValueError(f'cannot locate {wanted} in a serialised {msgtype}')
     kinds = [layout.fields[w][1] for w in wanted]
     if kinds != ['<i4', '<u4'] + ['<f8'] * len(values):
-        raise ValueError(f'cannot locate {wanted} in a serialised {msgtype} as a Time and '
-                         f'float64s (found {kinds})')
-    return RawLayout(raw, layout.fields[wanted[0]][0],
-                     tuple(layout.fields[w][0] for w in wanted[2:]))
+        raise ValueError(
+            f'cannot locate {wanted} in a serialised {msgtype} as a Time and '
+            f'float64s (found {kinds})'
+        )
+    return RawLayout(
+        raw, layout.fields[wanted[0]][0], tuple(layout.fields[w][0] for w in wanted[2:])
+    )
 
 
 class RawTemplate:
@@ -516,8 +525,9 @@ class RawTemplate:
     def serialise(self, t_ns: int, values: Sequence[float] = ()) -> bytes:
         """CDR bytes of one message stamped ``t_ns`` (ns) with ``values`` (n_values,)."""
         buf = bytearray(self._template)
-        self._stamp_packer.pack_into(buf, self._stamp_at, t_ns // 1_000_000_000,
-                                     t_ns % 1_000_000_000)
+        self._stamp_packer.pack_into(
+            buf, self._stamp_at, t_ns // 1_000_000_000, t_ns % 1_000_000_000
+        )
         for offset, first, packer in self._runs:
             packer.pack_into(buf, offset, *values[first : first + packer.size // 8])
         return bytes(buf)

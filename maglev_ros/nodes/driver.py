@@ -312,8 +312,9 @@ class DriverNode(Node):
         self._held: list[tuple[np.ndarray, np.ndarray]] = []  # samples kept meanwhile
         # records a read brings when the link keeps up: the bursts of one read interval
         # (at least one 1 ms burst) and one more for timing jitter, and the held-back record
-        self._caught_up_records = BURST_RECORDS * (
-            max(1, math.ceil(cfg.read_interval / BURST_PERIOD_S - 1e-9)) + 1) + 1
+        self._caught_up_records = (
+            BURST_RECORDS * (max(1, math.ceil(cfg.read_interval / BURST_PERIOD_S - 1e-9)) + 1) + 1
+        )
         self._lock = threading.Lock()  # command state
         self._enabled = cfg.start_enabled
         self._last_command_ns: int | None = None
@@ -348,7 +349,8 @@ class DriverNode(Node):
         self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
         self._serialiser = SampleSerialiser(
             [RawMessageBatch(field_layout(frame)) for frame in cfg.sensor_frames]
-            + [RawMessageBatch(currents_layout())])
+            + [RawMessageBatch(currents_layout())]
+        )
         # per sample: the field of each sensor, then the currents (SampleSerialiser order)
         self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]
         self._publish_calls: dict[int, list] = {}  # per burst length: bound publish_raw calls
@@ -381,8 +383,9 @@ class DriverNode(Node):
         n = self.config.n_sensors
         decoder = RecordDecoder(n, confirm=self.config.confirm_records)
         stamps = SAMPLE_PERIOD_US * np.arange(2 * BURST_RECORDS)
-        decoder.feed(pack_records(stamps, np.zeros((stamps.size, n, 3)),
-                                  np.zeros((stamps.size, 4))))
+        decoder.feed(
+            pack_records(stamps, np.zeros((stamps.size, n, 3)), np.zeros((stamps.size, 4)))
+        )
         self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, 3 * n + 4)))
 
     # -- parameters -------------------------------------------------------------
@@ -561,8 +564,9 @@ class DriverNode(Node):
             if len(batch):
                 n = len(batch)
                 values = np.empty((n, self._serialiser.n_values))  # each field (T), currents (A)
-                np.multiply(batch.field_mT.reshape(n, -1), 1e-3, out=values[:, :-4],
-                            dtype=np.float64)  # mT -> T
+                np.multiply(
+                    batch.field_mT.reshape(n, -1), 1e-3, out=values[:, :-4], dtype=np.float64
+                )  # mT -> T
                 self.config.scaling.to_current(batch.pwm, out=values[:, -4:])
                 self._deliver(batch.time_us, values, host_ns)
             return
@@ -581,8 +585,9 @@ class DriverNode(Node):
             board_us = np.array([round(s.time * 1e6) for s in samples], dtype=np.int64)
             field_t = np.stack([s.field_mT for s in samples]) * 1e-3
             currents = np.stack([s.current for s in samples])
-            self._deliver(board_us, np.hstack([field_t.reshape(len(samples), -1), currents]),
-                          host_ns)
+            self._deliver(
+                board_us, np.hstack([field_t.reshape(len(samples), -1), currents]), host_ns
+            )
 
     def _deliver(self, board_us: np.ndarray, values: np.ndarray, host_ns: int) -> None:
         """Observe the board clock, stamp the samples and publish them.
@@ -710,6 +715,7 @@ def main(args: list[str] | None = None) -> int:
         Exit status: 0, or 2 for invalid parameters.
     """
     return run_nodes([DriverNode], args, NODE_NAME, (DriverParameterError,))
+
 
 if __name__ == '__main__':
     raise SystemExit(main())

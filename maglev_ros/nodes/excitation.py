@@ -41,8 +41,14 @@ from maglev_ros.excitation import (
 )
 from maglev_ros.nodes import contract
 
-__all__ = ['ExcitationConfig', 'ExcitationNode', 'ExcitationParameterError', 'build_config',
-           'commands_of', 'main']
+__all__ = [
+    'ExcitationConfig',
+    'ExcitationNode',
+    'ExcitationParameterError',
+    'build_config',
+    'commands_of',
+    'main',
+]
 
 NODE_NAME = 'maglev_excitation'
 TRIGGERS = ('sample', 'timer')
@@ -123,10 +129,12 @@ def build_config(values: dict) -> ExcitationConfig:
     ExcitationParameterError
         Naming the first invalid parameter and its value.
     """
+
     def choice(name, allowed):
         if values[name] not in allowed:
             raise ExcitationParameterError(
-                f'{name} must be one of {", ".join(allowed)}, got {values[name]!r}')
+                f'{name} must be one of {", ".join(allowed)}, got {values[name]!r}'
+            )
         return values[name]
 
     def integer(name, low):
@@ -138,11 +146,13 @@ def build_config(values: dict) -> ExcitationConfig:
     amplitude = values['amplitude']
     if not (isinstance(amplitude, float) and math.isfinite(amplitude) and amplitude >= 0):
         raise ExcitationParameterError(
-            f'amplitude must be a finite number >= 0, got {amplitude!r}')
+            f'amplitude must be a finite number >= 0, got {amplitude!r}'
+        )
     band = tuple(float(b) for b in values['band'])
     if len(band) != 2 or not (0.0 <= band[0] < band[1] <= 1.0):
         raise ExcitationParameterError(
-            f'band must be [low, high] with 0 <= low < high <= 1, got {list(band)}')
+            f'band must be [low, high] with 0 <= low < high <= 1, got {list(band)}'
+        )
     offset = tuple(float(v) for v in values['offset'])
     if len(offset) != 4 or not all(math.isfinite(v) for v in offset):
         raise ExcitationParameterError(f'offset must be 4 finite currents, got {list(offset)}')
@@ -150,10 +160,17 @@ def build_config(values: dict) -> ExcitationConfig:
     if not (isinstance(rate, float) and math.isfinite(rate) and rate > 0):
         raise ExcitationParameterError(f'sample_rate must be a finite number > 0, got {rate!r}')
     return ExcitationConfig(
-        signal=choice('signal', SIGNALS), amplitude=amplitude, band=band,
-        pattern=choice('pattern', PATTERNS), offset=offset, seed=integer('seed', 0),
-        length=integer('length', 1), cycles=integer('cycles', 0),
-        trigger=choice('trigger', TRIGGERS), sample_rate=rate)
+        signal=choice('signal', SIGNALS),
+        amplitude=amplitude,
+        band=band,
+        pattern=choice('pattern', PATTERNS),
+        offset=offset,
+        seed=integer('seed', 0),
+        length=integer('length', 1),
+        cycles=integer('cycles', 0),
+        trigger=choice('trigger', TRIGGERS),
+        sample_rate=rate,
+    )
 
 
 def commands_of(cfg: ExcitationConfig) -> np.ndarray:
@@ -165,8 +182,9 @@ def commands_of(cfg: ExcitationConfig) -> np.ndarray:
         If the signal cannot be generated with these settings.
     """
     try:
-        signals = excitation(cfg.signal, cfg.length, pattern_signals(cfg.pattern),
-                             cfg.amplitude, cfg.band, cfg.seed)
+        signals = excitation(
+            cfg.signal, cfg.length, pattern_signals(cfg.pattern), cfg.amplitude, cfg.band, cfg.seed
+        )
     except ValueError as err:
         raise ExcitationParameterError(f'{cfg.signal}: {err}') from err
     return apply_pattern(signals, cfg.pattern, cfg.offset)
@@ -194,17 +212,20 @@ class ExcitationNode(Node):
         self._rows = self.commands.tolist()
         self.sent = 0
         self._msg = Float64MultiArray()
-        self._pub = self.create_publisher(Float64MultiArray, contract.COMMAND_TOPIC,
-                                          contract.LOCKSTEP_COMMAND_QOS)
+        self._pub = self.create_publisher(
+            Float64MultiArray, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS
+        )
         if cfg.trigger == 'sample':
-            self.create_subscription(JointState, contract.CURRENTS_TOPIC, self._on_sample,
-                                     contract.SENSOR_QOS, raw=True)
+            self.create_subscription(
+                JointState, contract.CURRENTS_TOPIC, self._on_sample, contract.SENSOR_QOS, raw=True
+            )
         else:
             self.create_timer(1.0 / cfg.sample_rate, self.publish_next)
         self.get_logger().info(
             f'{cfg.signal}, {cfg.amplitude:g} A, band {list(cfg.band)}, pattern {cfg.pattern}, '
             f'{cfg.length} samples x {cfg.cycles or "inf"}, seed {cfg.seed}, '
-            f'trigger {cfg.trigger}')
+            f'trigger {cfg.trigger}'
+        )
 
     @property
     def finished(self) -> bool:

@@ -61,11 +61,10 @@ class PlayerNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         v = contract.declare_parameters(self, _PARAMETERS)
         if not v['path'] or not Path(v['path']).exists():
-            raise PlayerParameterError(f"path must be an existing bag, got {v['path']!r}")
+            raise PlayerParameterError(f'path must be an existing bag, got {v["path"]!r}')
         for name in ('rate', 'clock_period', 'start_delay'):
             if not (math.isfinite(v[name]) and v[name] >= 0):
-                raise PlayerParameterError(f'{name} must be a finite number >= 0, '
-                                           f'got {v[name]!r}')
+                raise PlayerParameterError(f'{name} must be a finite number >= 0, got {v[name]!r}')
         self.rate = v['rate']
         self.loop = v['loop']
         self.clock_period_ns = int(v['clock_period'] * 1e9)
@@ -75,28 +74,34 @@ class PlayerNode(Node):
             self._reader = Reader(self.path)
             self._reader.open()
         except Exception as err:  # noqa: BLE001 - rosbags raises several kinds
-            raise PlayerParameterError(f"path {v['path']!r}: not a readable bag ({err})") from err
+            raise PlayerParameterError(f'path {v["path"]!r}: not a readable bag ({err})') from err
         wanted = set(v['topics'])
         everything = '*' in wanted
         wanted = {t if t.startswith('/') else '/' + t for t in wanted}
-        self._connections = [c for c in self._reader.connections
-                             if everything or c.topic in wanted]
+        self._connections = [
+            c for c in self._reader.connections if everything or c.topic in wanted
+        ]
         self._topic_pubs = {}
         for conn in self._connections:
             if conn.topic not in self._topic_pubs:
                 self._topic_pubs[conn.topic] = self.create_publisher(
-                    message_class(conn.msgtype), conn.topic, contract.SENSOR_QOS)
+                    message_class(conn.msgtype), conn.topic, contract.SENSOR_QOS
+                )
         self._own_clock = contract.CLOCK_TOPIC not in self._topic_pubs
-        self._clock_pub = (self.create_publisher(Clock, contract.CLOCK_TOPIC, contract.SENSOR_QOS)
-                           if self._own_clock else None)
+        self._clock_pub = (
+            self.create_publisher(Clock, contract.CLOCK_TOPIC, contract.SENSOR_QOS)
+            if self._own_clock
+            else None
+        )
         self._clock_raw = contract.clock_template()
         self.published = 0
         self.done = threading.Event()
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._play, name='maglev-player', daemon=True)
         self._thread.start()
-        self.get_logger().info(f'playing {self.path}: {len(self._topic_pubs)} topic(s) at '
-                               f'{self.rate:g} x')
+        self.get_logger().info(
+            f'playing {self.path}: {len(self._topic_pubs)} topic(s) at {self.rate:g} x'
+        )
 
     def _play(self) -> None:
         if self._stop.wait(self.start_delay):

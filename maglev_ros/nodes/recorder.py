@@ -37,13 +37,26 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from maglev_ros.bags import BagError, BagWriter
 from maglev_ros.nodes import contract
 
-__all__ = ['DEFAULT_TOPICS', 'RecorderConfig', 'RecorderNode', 'RecorderParameterError',
-           'build_config', 'main', 'message_class']
+__all__ = [
+    'DEFAULT_TOPICS',
+    'RecorderConfig',
+    'RecorderNode',
+    'RecorderParameterError',
+    'build_config',
+    'main',
+    'message_class',
+]
 
 NODE_NAME = 'maglev_recorder'
-DEFAULT_TOPICS = ['maglev/sensor_0/field', 'maglev/sensor_1/field', 'maglev/sensor_2/field',
-                  contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC, contract.TRUE_STATE_TOPIC,
-                  contract.CLOCK_TOPIC]
+DEFAULT_TOPICS = [
+    'maglev/sensor_0/field',
+    'maglev/sensor_1/field',
+    'maglev/sensor_2/field',
+    contract.CURRENTS_TOPIC,
+    contract.COMMAND_TOPIC,
+    contract.TRUE_STATE_TOPIC,
+    contract.CLOCK_TOPIC,
+]
 _CLOCK = struct.Struct('<iI')  # rosgraph_msgs/Clock after the 4-byte CDR header
 
 
@@ -112,25 +125,35 @@ def build_config(values: dict) -> RecorderConfig:
     """
     if values['storage'] not in ('mcap', 'sqlite3'):
         raise RecorderParameterError(
-            f"storage must be one of mcap, sqlite3, got {values['storage']!r}")
+            f'storage must be one of mcap, sqlite3, got {values["storage"]!r}'
+        )
     topics = tuple(dict.fromkeys(_absolute(t) for t in values['topics'] if t))
     if not topics:
-        raise RecorderParameterError(f"topics must name at least one topic, got "
-                                     f"{list(values['topics'])}")
+        raise RecorderParameterError(
+            f'topics must name at least one topic, got {list(values["topics"])}'
+        )
     depth = values['depth']
     if not isinstance(depth, int) or depth < 1:
         raise RecorderParameterError(f'depth must be an integer >= 1, got {depth!r}')
     if values['log_clock'] not in ('ros', 'topic'):
         raise RecorderParameterError(
-            f"log_clock must be one of ros, topic, got {values['log_clock']!r}")
+            f'log_clock must be one of ros, topic, got {values["log_clock"]!r}'
+        )
     if values['log_clock'] == 'topic' and contract.CLOCK_TOPIC not in topics:
-        raise RecorderParameterError('log_clock topic needs /clock among topics, got '
-                                     f'{list(topics)}')
+        raise RecorderParameterError(
+            f'log_clock topic needs /clock among topics, got {list(topics)}'
+        )
     path = values['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
     if Path(path).exists():
         raise RecorderParameterError(f'path must be a new directory, got {path!r} (exists)')
-    return RecorderConfig(path=path, storage=values['storage'], topics=topics, depth=depth,
-                          log_clock=values['log_clock'], metadata_node=values['metadata_node'])
+    return RecorderConfig(
+        path=path,
+        storage=values['storage'],
+        topics=topics,
+        depth=depth,
+        log_clock=values['log_clock'],
+        metadata_node=values['metadata_node'],
+    )
 
 
 def message_class(msgtype: str):
@@ -186,9 +209,13 @@ class RecorderNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
-        meta = {'maglev_ros.version': package_version(), 'recorder.storage': cfg.storage,
-                'recorder.topics': ' '.join(cfg.topics), 'recorder.log_clock': cfg.log_clock,
-                'recorder.started': time.strftime('%Y-%m-%dT%H:%M:%S%z')}
+        meta = {
+            'maglev_ros.version': package_version(),
+            'recorder.storage': cfg.storage,
+            'recorder.topics': ' '.join(cfg.topics),
+            'recorder.log_clock': cfg.log_clock,
+            'recorder.started': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
+        }
         try:
             self.writer = BagWriter(cfg.path, cfg.storage, metadata=meta)
             self.writer.open()
@@ -202,8 +229,9 @@ class RecorderNode(Node):
         self._closed = False
         self.create_timer(0.1, self._discover)
         self._discover()
-        self.get_logger().info(f'recording {len(cfg.topics)} topic(s) to {cfg.path} '
-                               f'({cfg.storage})')
+        self.get_logger().info(
+            f'recording {len(cfg.topics)} topic(s) to {cfg.path} ({cfg.storage})'
+        )
 
     @property
     def subscribed(self) -> list[str]:
@@ -226,11 +254,16 @@ class RecorderNode(Node):
             if not publishers:
                 continue
             msgtype = types[topic][0]
-            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE
-                           for p in publishers)
-            qos = QoSProfile(depth=self.config.depth, history=HistoryPolicy.KEEP_LAST,
-                             reliability=ReliabilityPolicy.RELIABLE if reliable
-                             else ReliabilityPolicy.BEST_EFFORT)
+            reliable = all(
+                p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers
+            )
+            qos = QoSProfile(
+                depth=self.config.depth,
+                history=HistoryPolicy.KEEP_LAST,
+                reliability=ReliabilityPolicy.RELIABLE
+                if reliable
+                else ReliabilityPolicy.BEST_EFFORT,
+            )
             try:
                 handle = self.writer.add_topic(topic, msgtype)
                 cls = message_class(msgtype)
@@ -240,8 +273,9 @@ class RecorderNode(Node):
                 continue
             self._handles[topic] = handle
             is_clock = topic == contract.CLOCK_TOPIC
-            self.create_subscription(cls, topic, self._writer_for(handle, topic, is_clock), qos,
-                                     raw=True)
+            self.create_subscription(
+                cls, topic, self._writer_for(handle, topic, is_clock), qos, raw=True
+            )
         if not self._metadata_done and not self._metadata_pending:
             self._request_metadata()
         elif self._metadata_pending and time.monotonic() - self._metadata_since > 0.3:
@@ -312,7 +346,8 @@ class RecorderNode(Node):
                 ask(names[1:])
 
             getter.call_async(GetParameters.Request(names=[parameter])).add_done_callback(
-                got_value)
+                got_value
+            )
 
         def got_names(future):
             result = future.result()

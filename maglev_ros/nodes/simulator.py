@@ -91,8 +91,16 @@ from maglev_ros.physics import (
 )
 from maglev_ros.physics.simulation import MAGNET_MODES
 
-__all__ = ['MODES', 'SimulatorConfig', 'SimulatorNode', 'SimulatorParameterError',
-           'base_markers', 'build_config', 'make_simulator', 'main']
+__all__ = [
+    'MODES',
+    'SimulatorConfig',
+    'SimulatorNode',
+    'SimulatorParameterError',
+    'base_markers',
+    'build_config',
+    'make_simulator',
+    'main',
+]
 
 NODE_NAME = 'maglev_simulator'
 MODES = ('realtime', 'lockstep')
@@ -186,9 +194,11 @@ _PARAMETERS = {
     'sample_rate': (5000.0, 'samples per second, Hz (the board: 5000)'),
     'substeps': (1, 'RK4 steps per sample'),
     'magnet': ('free', 'levitating magnet: free, fixed (held at the initial state) or absent'),
-    'initial_state': (Parameter.Type.DOUBLE_ARRAY,
-                      '12 numbers x y z alpha beta gamma vx vy vz wx wy wz; '
-                      'unset: resting at the first equilibrium'),
+    'initial_state': (
+        Parameter.Type.DOUBLE_ARRAY,
+        '12 numbers x y z alpha beta gamma vx vy vz wx wy wz; '
+        'unset: resting at the first equilibrium',
+    ),
     'coil_dynamics': (True, 'coil L/R electrics, voltage R i_cmd clipped at the supply'),
     'sensor_noise': (0.0, 'white sensor noise per axis, T rms'),
     'sensor_quantization': (0.0, 'sensor resolution, T per LSB (0: none)'),
@@ -210,8 +220,7 @@ _PARAMETERS = {
 def _choice(values: dict, name: str, allowed: tuple[str, ...]) -> str:
     value = values[name]
     if value not in allowed:
-        raise SimulatorParameterError(
-            f'{name} must be one of {", ".join(allowed)}, got {value!r}')
+        raise SimulatorParameterError(f'{name} must be one of {", ".join(allowed)}, got {value!r}')
     return value
 
 
@@ -259,11 +268,13 @@ def build_config(values: dict) -> SimulatorConfig:
         if len(state) != 12 or not all(math.isfinite(v) for v in state):
             raise SimulatorParameterError(
                 f'initial_state must be 12 finite numbers (x y z alpha beta gamma vx vy vz '
-                f'wx wy wz), got {list(state)}')
+                f'wx wy wz), got {list(state)}'
+            )
     sensors = tuple(int(k) for k in (values['sensors'] or ()))
     if any(k < 0 for k in sensors) or len(set(sensors)) != len(sensors):
         raise SimulatorParameterError(
-            f'sensors must be distinct sensor indices >= 0, got {list(sensors)}')
+            f'sensors must be distinct sensor indices >= 0, got {list(sensors)}'
+        )
     seed = values['seed']
     if not isinstance(seed, int) or seed < 0:
         raise SimulatorParameterError(f'seed must be an integer >= 0, got {seed!r}')
@@ -303,8 +314,9 @@ def make_simulator(cfg: SimulatorConfig) -> Simulator:
         If the parameter set cannot be loaded or the options do not fit it.
     """
     try:
-        model = make_model(cfg.params, field=cfg.field_model, torque=cfg.torque,
-                           kinematics=cfg.kinematics)
+        model = make_model(
+            cfg.params, field=cfg.field_model, torque=cfg.torque, kinematics=cfg.kinematics
+        )
     except (ParameterError, OSError, ValueError) as err:
         raise SimulatorParameterError(f'params {cfg.params!r}: {err}') from err
     n_sensors = len(model.params.sensors)
@@ -312,13 +324,25 @@ def make_simulator(cfg: SimulatorConfig) -> Simulator:
     if bad:
         raise SimulatorParameterError(
             f'sensors must be indices below {n_sensors} ({model.params.name} has {n_sensors} '
-            f'sensors), got {list(cfg.sensors)}')
+            f'sensors), got {list(cfg.sensors)}'
+        )
     coil = CoilDynamics.from_parameters(model.params) if cfg.coil_dynamics else None
-    sensor = SensorEffects(noise_rms=cfg.sensor_noise, quantization=cfg.sensor_quantization,
-                           delay_samples=cfg.sensor_delay)
+    sensor = SensorEffects(
+        noise_rms=cfg.sensor_noise,
+        quantization=cfg.sensor_quantization,
+        delay_samples=cfg.sensor_delay,
+    )
     try:
-        return Simulator(model, cfg.sample_rate, substeps=cfg.substeps, coil=coil,
-                         sensor=sensor, seed=cfg.seed, x0=cfg.initial_state, magnet=cfg.magnet)
+        return Simulator(
+            model,
+            cfg.sample_rate,
+            substeps=cfg.substeps,
+            coil=coil,
+            sensor=sensor,
+            seed=cfg.seed,
+            x0=cfg.initial_state,
+            magnet=cfg.magnet,
+        )
     except ValueError as err:
         raise SimulatorParameterError(f'initial_state / model: {err}') from err
 
@@ -330,8 +354,10 @@ def _color(r: float, g: float, b: float, a: float = 1.0) -> ColorRGBA:
 def base_markers(params) -> list[Marker]:
     """Cylinder markers of the solenoids (copper) and permanent magnets (grey)."""
     markers = []
-    groups = ((params.solenoids, 'solenoids', _color(0.8, 0.45, 0.2)),
-              (params.permanent_magnets, 'permanent_magnets', _color(0.5, 0.5, 0.55)))
+    groups = (
+        (params.solenoids, 'solenoids', _color(0.8, 0.45, 0.2)),
+        (params.permanent_magnets, 'permanent_magnets', _color(0.5, 0.5, 0.55)),
+    )
     for cyl, ns, color in groups:
         for i in range(cyl.count):
             m = Marker(ns=ns, id=i, type=Marker.CYLINDER, action=Marker.ADD, color=color)
@@ -369,8 +395,19 @@ class SimulatorNode(Node):
         self._dt_ns = 1e9 / cfg.sample_rate
         self._lock = threading.RLock()  # simulator, command and run state
         self.counters = dict.fromkeys(
-            ('samples', 'commands', 'commands_rejected', 'late_commands', 'held_samples',
-             'timeouts', 'overruns', 'crashes', 'resets'), 0)
+            (
+                'samples',
+                'commands',
+                'commands_rejected',
+                'late_commands',
+                'held_samples',
+                'timeouts',
+                'overruns',
+                'crashes',
+                'resets',
+            ),
+            0,
+        )
         self._command = _ZERO.copy()  # the command held for the next step
         self._queue: deque[np.ndarray] = deque()  # lockstep: commands not yet used
         self._steps_since_command = 0
@@ -386,8 +423,10 @@ class SimulatorNode(Node):
 
         # publishers: raw CDR templates, published as bytes
         qos = contract.SENSOR_QOS
-        self._field_pubs = [self.create_publisher(MagneticField, contract.field_topic(k), qos)
-                            for k in self.sensors]
+        self._field_pubs = [
+            self.create_publisher(MagneticField, contract.field_topic(k), qos)
+            for k in self.sensors
+        ]
         self._field_raw = [contract.field_template(k) for k in self.sensors]
         self._current_pub = self.create_publisher(JointState, contract.CURRENTS_TOPIC, qos)
         self._current_raw = contract.currents_template()
@@ -401,20 +440,25 @@ class SimulatorNode(Node):
             self._clock_pub = self.create_publisher(Clock, contract.CLOCK_TOPIC, qos)
             self._clock_raw = contract.clock_template()
         # samples per /clock message: each one in lockstep, one per burst in real time
-        self._clock_stride = (1 if cfg.mode == 'lockstep' else
-                              max(1, int(round(cfg.pace_period * cfg.sample_rate))))
+        self._clock_stride = (
+            1 if cfg.mode == 'lockstep' else max(1, int(round(cfg.pace_period * cfg.sample_rate)))
+        )
         self._diag_pub = self.create_publisher(
-            contract.DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS)
-        command_qos = (contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep'
-                       else contract.COMMAND_QOS)
-        self.create_subscription(Float64MultiArray, contract.COMMAND_TOPIC, self._on_command,
-                                 command_qos)
+            contract.DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
+        )
+        command_qos = (
+            contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
+        )
+        self.create_subscription(
+            Float64MultiArray, contract.COMMAND_TOPIC, self._on_command, command_qos
+        )
         self.create_service(Trigger, 'maglev/simulator/reset', self._on_reset)
         self.create_service(SetBool, 'maglev/simulator/pause', self._on_pause)
         self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
         if cfg.marker_rate > 0:
-            self._marker_pub = self.create_publisher(MarkerArray, contract.MARKERS_TOPIC,
-                                                     contract.MARKERS_QOS)
+            self._marker_pub = self.create_publisher(
+                MarkerArray, contract.MARKERS_TOPIC, contract.MARKERS_QOS
+            )
             self._base_markers = base_markers(self.sim.model.params)
             self.create_timer(1.0 / cfg.marker_rate, self.publish_markers)
         self._last_state = self.sim.state
@@ -434,8 +478,9 @@ class SimulatorNode(Node):
         publishers.append(self._current_handle)
         self._burst_serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
         # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
-        self._burst_serialiser.serialise(np.zeros(1, np.int64),
-                                         np.zeros((1, self._burst_serialiser.n_values)))
+        self._burst_serialiser.serialise(
+            np.zeros(1, np.int64), np.zeros((1, self._burst_serialiser.n_values))
+        )
         self._burst_publishers = [handle.publish_raw for handle in publishers]
         self._first_reading = self.sim.reset()
         self._stop = threading.Event()
@@ -445,8 +490,9 @@ class SimulatorNode(Node):
             self.create_timer(min(0.05, cfg.command_timeout / 4), self._lockstep_watch)
         else:
             self._publish_sample(self._first_reading)
-            self._thread = threading.Thread(target=self._realtime_loop,
-                                            name='maglev-simulator', daemon=True)
+            self._thread = threading.Thread(
+                target=self._realtime_loop, name='maglev-simulator', daemon=True
+            )
             self._thread.start()
         p = self.sim.model.params
         self.get_logger().info(
@@ -454,7 +500,8 @@ class SimulatorNode(Node):
             f'{cfg.sample_rate:g} Hz, sensors {list(self.sensors)}, coil dynamics '
             f'{"on" if cfg.coil_dynamics else "off"}, sensor delay {cfg.sensor_delay}, '
             f'noise {cfg.sensor_noise:g} T, seed {cfg.seed}'
-            f'{", paused" if self.paused else ""}')
+            f'{", paused" if self.paused else ""}'
+        )
 
     # -- publishing -------------------------------------------------------------
 
@@ -472,8 +519,7 @@ class SimulatorNode(Node):
         if self._clock_pub is not None and sim.samples % self._clock_stride == 0:
             self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
         values = reading[self._columns].tolist()
-        for k, (handle, raw) in enumerate(zip(self._field_handles, self._field_raw,
-                                              strict=True)):
+        for k, (handle, raw) in enumerate(zip(self._field_handles, self._field_raw, strict=True)):
             handle.publish_raw(raw.serialise(t_ns, values[3 * k : 3 * k + 3]))
         state = sim.state
         if self._state_pub is not None:
@@ -483,8 +529,7 @@ class SimulatorNode(Node):
                 self._odom_state = key
             self._state_handle.publish_raw(self._state_raw.serialise(t_ns, self._odom_cache))
         self._last_state = state
-        self._current_handle.publish_raw(self._current_raw.serialise(t_ns,
-                                                                     sim.currents.tolist()))
+        self._current_handle.publish_raw(self._current_raw.serialise(t_ns, sim.currents.tolist()))
         self.last_stamp_ns = t_ns
         self.counters['samples'] += 1
 
@@ -494,9 +539,13 @@ class SimulatorNode(Node):
         stamp_ns = max(self.last_stamp_ns, 0)
         if self.config.magnet != 'absent':
             m = self.sim.model.params.magnet
-            magnet = Marker(ns='magnet', id=0, type=Marker.CYLINDER, action=Marker.ADD,
-                            color=_color(0.85, 0.1, 0.1) if not self.sim.crashed
-                            else _color(0.3, 0.3, 0.3))
+            magnet = Marker(
+                ns='magnet',
+                id=0,
+                type=Marker.CYLINDER,
+                action=Marker.ADD,
+                color=_color(0.85, 0.1, 0.1) if not self.sim.crashed else _color(0.3, 0.3, 0.3),
+            )
             magnet.header.frame_id = contract.BASE_FRAME
             v = contract.odometry_values(self._last_state)
             magnet.pose = Pose()
@@ -519,8 +568,9 @@ class SimulatorNode(Node):
         then, samples = self._rate_mark
         self._rate_mark = (now, self.counters['samples'])
         if self.started and not self.paused and not self.sim.crashed:
-            self.real_time_factor = ((self.counters['samples'] - samples) * self._dt_ns * 1e-9
-                                     / max(now - then, 1e-9))
+            self.real_time_factor = (
+                (self.counters['samples'] - samples) * self._dt_ns * 1e-9 / max(now - then, 1e-9)
+            )
         sim = self.sim
         if sim.crashed:
             level = DiagnosticStatus.ERROR
@@ -539,13 +589,21 @@ class SimulatorNode(Node):
             'real-time factor': f'{self.real_time_factor:.3f}',
             'crash reason': sim.reason,
             'crash time (s)': '' if sim.crash_time is None else f'{sim.crash_time:.6f}',
-            'crash state': ('' if sim.crash_state is None
-                            else ' '.join(f'{v:.6g}' for v in sim.crash_state)),
+            'crash state': (
+                '' if sim.crash_state is None else ' '.join(f'{v:.6g}' for v in sim.crash_state)
+            ),
         }
         values.update({name.replace('_', ' '): v for name, v in self.counters.items()})
-        self._diag_pub.publish(contract.diagnostic_array(
-            time.time_ns(), f'{NODE_NAME}: simulation', level, message, values,
-            hardware_id='simulator'))
+        self._diag_pub.publish(
+            contract.diagnostic_array(
+                time.time_ns(),
+                f'{NODE_NAME}: simulation',
+                level,
+                message,
+                values,
+                hardware_id='simulator',
+            )
+        )
 
     # -- stepping ---------------------------------------------------------------
 
@@ -593,8 +651,13 @@ class SimulatorNode(Node):
             self._on_crash()
         return len(indices) + crashed
 
-    def _publish_burst(self, indices: list[int], readings: np.ndarray,
-                       states: list[np.ndarray], currents: np.ndarray) -> None:
+    def _publish_burst(
+        self,
+        indices: list[int],
+        readings: np.ndarray,
+        states: list[np.ndarray],
+        currents: np.ndarray,
+    ) -> None:
         """Publish n samples at once, the messages :meth:`_publish_sample` would publish.
 
         Parameters
@@ -642,7 +705,8 @@ class SimulatorNode(Node):
         state = ' '.join(f'{v:.4g}' for v in sim.crash_state[:6])
         self.get_logger().error(
             f'magnet crashed at t = {sim.crash_time:.4f} s ({sim.reason}); pose {state}; '
-            'integration stopped: call maglev/simulator/reset')
+            'integration stopped: call maglev/simulator/reset'
+        )
         self.publish_diagnostics()
 
     def _on_command(self, msg: Float64MultiArray) -> None:
@@ -651,7 +715,9 @@ class SimulatorNode(Node):
             self.counters['commands_rejected'] += 1
             self.get_logger().warning(
                 f'rejected command: need 4 finite currents (x+, x-, y+, y-), got '
-                f'{values.tolist()}', throttle_duration_sec=WARN_THROTTLE_S)
+                f'{values.tolist()}',
+                throttle_duration_sec=WARN_THROTTLE_S,
+            )
             return
         with self._lock:
             self.counters['commands'] += 1
@@ -680,9 +746,10 @@ class SimulatorNode(Node):
             if self.paused or self.sim.crashed:
                 return
             if not self.started:
-                if (self.count_publishers(contract.COMMAND_TOPIC) >= 1
-                        and self._current_pub.get_subscription_count()
-                        >= self.config.start_subscribers):
+                if (
+                    self.count_publishers(contract.COMMAND_TOPIC) >= 1
+                    and self._current_pub.get_subscription_count() >= self.config.start_subscribers
+                ):
                     self._start_run()
                 return
             age = time.monotonic() - self._wait_since
@@ -691,7 +758,8 @@ class SimulatorNode(Node):
                 self.get_logger().warning(
                     f'no command for {age:.3f} s > {self.config.command_timeout} s at '
                     f't = {self.sim.time:.6f} s: holding the last command',
-                    throttle_duration_sec=WARN_THROTTLE_S)
+                    throttle_duration_sec=WARN_THROTTLE_S,
+                )
                 self._step(self._command)
                 self._wait_since = time.monotonic()
 

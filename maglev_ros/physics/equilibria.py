@@ -69,8 +69,9 @@ def vertical_force(model, z, u=None) -> np.ndarray:
     return out.reshape(np.shape(z))
 
 
-def find_equilibria(model, z_max: float | None = None, grid_points: int | None = None,
-                    inverted: bool = False) -> list[Equilibrium]:
+def find_equilibria(
+    model, z_max: float | None = None, grid_points: int | None = None, inverted: bool = False
+) -> list[Equilibrium]:
     """All heights where the centred magnet floats with u = 0.
 
     The net vertical force is bracketed on a grid from just above the base
@@ -110,11 +111,18 @@ def find_equilibria(model, z_max: float | None = None, grid_points: int | None =
         elif values[k + 1] == 0.0:
             continue  # counted at the next bracket
         else:
-            z_eq = brentq(lambda h: float(vertical_force(model, h)), grid[k], grid[k + 1],
-                          xtol=1e-15, rtol=4 * np.finfo(float).eps, maxiter=200)
+            z_eq = brentq(
+                lambda h: float(vertical_force(model, h)),
+                grid[k],
+                grid[k + 1],
+                xtol=1e-15,
+                rtol=4 * np.finfo(float).eps,
+                maxiter=200,
+            )
         step = _STIFFNESS_STEP
-        stiffness = float((vertical_force(model, z_eq + step) - vertical_force(model, z_eq - step))
-                          / (2 * step))
+        stiffness = float(
+            (vertical_force(model, z_eq + step) - vertical_force(model, z_eq - step)) / (2 * step)
+        )
         found.append(Equilibrium(float(z_eq), stiffness, inverted))
     return found
 
@@ -163,5 +171,6 @@ def solenoid_radius_correction(params: MaggyParameters) -> float:
     for k in range(len(grid) - 1):
         if np.sign(values[k]) != np.sign(values[k + 1]):
             return float(brentq(mismatch, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-14))
-    raise ValueError(f'{params.name}: no solenoid radius factor in (0.05, 3] matches the '
-                     'filament model')
+    raise ValueError(
+        f'{params.name}: no solenoid radius factor in (0.05, 3] matches the filament model'
+    )

@@ -37,8 +37,9 @@ def filament_loops(radius: float, length: float, turns: float) -> tuple[np.ndarr
         Loop radii, m.
     """
     if radius <= 0 or length <= 0 or turns <= 0:
-        raise ValueError(f'radius, length and turns must be positive, got '
-                         f'{radius!r}, {length!r}, {turns!r}')
+        raise ValueError(
+            f'radius, length and turns must be positive, got {radius!r}, {length!r}, {turns!r}'
+        )
     n_axial = max(1, math.floor(length * math.sqrt(turns / (length * radius))))
     n_radial = max(2, round(turns / n_axial))
     heights = np.linspace(-length / 2, length / 2, n_axial)

@@ -79,7 +79,6 @@ WORK_ROWS = _RIM + 12
 P_RIM_RADIUS, P_SCALE, P_K0, P_MASS, P_IXX, P_IYY, P_IZZ, P_TORQUE, P_KINEMATICS = range(9)
 
 
-
 @njit(cache=True, error_model='numpy')
 def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
     """R = Rz(gamma) Ry(beta) Rx(alpha), body to world, shape (3, 3)."""
@@ -190,8 +189,9 @@ def loops_field(points, u, src, coil):
     out = np.zeros((3, n))
     if n > 0 and src.shape[0] > 0:
         work = np.empty((WORK_ROWS, n * src.shape[0]))
-        base_field_points(points[:, 0].copy(), points[:, 1].copy(), points[:, 2].copy(), u,
-                          src, coil, work, out)
+        base_field_points(
+            points[:, 0].copy(), points[:, 1].copy(), points[:, 2].copy(), u, src, coil, work, out
+        )
     return out.T.copy()
 
 
@@ -206,10 +206,10 @@ def rim_force_torque(x, u, src, coil, rim, par, work, r):
     n = rim.shape[1]
     rim_radius = par[P_RIM_RADIUS]
     k0 = par[P_K0]
-    off = work[_RIM:_RIM + 3]
-    tan = work[_RIM + 3:_RIM + 6]
-    pts = work[_RIM + 6:_RIM + 9]
-    field = work[_RIM + 9:_RIM + 12]
+    off = work[_RIM : _RIM + 3]
+    tan = work[_RIM + 3 : _RIM + 6]
+    pts = work[_RIM + 6 : _RIM + 9]
+    field = work[_RIM + 9 : _RIM + 12]
     for i in range(n):
         c = rim[0, i]
         s = rim[1, i]
@@ -219,7 +219,7 @@ def rim_force_torque(x, u, src, coil, rim, par, work, r):
             tan[a, i] = -r[a, 0] * s + r[a, 1] * c
             pts[a, i] = x[a] + off[a, i]
     base_field_points(pts[0, :n], pts[1, :n], pts[2, :n], u, src, coil, work, field)
-    contrib = work[_PAIR:_PAIR + 6]  # per-point wrench; the pair rows are free again
+    contrib = work[_PAIR : _PAIR + 6]  # per-point wrench; the pair rows are free again
     nzx, nzy, nzz = r[0, 2], r[1, 2], r[2, 2]
     published = par[P_TORQUE] != TORQUE_TRUE
     for i in range(n):
@@ -315,8 +315,9 @@ def fast_dynamics(x, u, src, coil, rim, par, work):
     """f(x, u) of the fast model, shape (12,)."""
     r = rotation_matrix(x[3], x[4], x[5])
     wrench = rim_force_torque(x, u, src, coil, rim, par, work, r)
-    return rigid_body_rates(x, wrench, par[P_MASS], par[P_IXX:P_IZZ + 1],
-                            int(par[P_KINEMATICS]), r)
+    return rigid_body_rates(
+        x, wrench, par[P_MASS], par[P_IXX : P_IZZ + 1], int(par[P_KINEMATICS]), r
+    )
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
@@ -326,8 +327,9 @@ def fast_measurement(x, u, src, coil, sens, mag, work):
     n = sens.shape[0]
     base = np.zeros((3, n))
     if src.shape[0] > 0:
-        base_field_points(sens[:, 0].copy(), sens[:, 1].copy(), sens[:, 2].copy(), u, src,
-                          coil, work, base)
+        base_field_points(
+            sens[:, 0].copy(), sens[:, 1].copy(), sens[:, 2].copy(), u, src, coil, work, base
+        )
     # the levitating magnet: a loop in its own frame, evaluated at R^T (s - p)
     local = np.empty((3, n))
     for k in range(n):
@@ -348,8 +350,9 @@ def fast_measurement(x, u, src, coil, sens, mag, work):
             total[a] = base[a, k] + r[a, 0] * own[0, k] + r[a, 1] * own[1, k] + r[a, 2] * own[2, k]
         for a in range(3):
             # reading = gain * (R_mount^T B) + offset
-            reading = (sens[k, 3 + a] * total[0] + sens[k, 6 + a] * total[1]
-                       + sens[k, 9 + a] * total[2])
+            reading = (
+                sens[k, 3 + a] * total[0] + sens[k, 6 + a] * total[1] + sens[k, 9 + a] * total[2]
+            )
             y[3 * k + a] = sens[k, 12 + a] * reading + sens[k, 15 + a]
     return y
 
@@ -396,7 +399,7 @@ def extended_rates(xe, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
         return fast_dynamics(xe, drive, src, coil, rim, par, work)
     n_coils = v.shape[0]
     out = np.empty(xe.shape[0])
-    i_coil = xe[12:12 + n_coils].copy()
+    i_coil = xe[12 : 12 + n_coils].copy()
     out[:12] = fast_dynamics(xe[:12].copy(), i_coil, src, coil, rim, par, work)
     for j in range(n_coils):
         out[12 + j] = (v[j] - coil_r * i_coil[j]) / coil_l
@@ -429,18 +432,15 @@ def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, p
         for i in range(n_x):
             acc[i] = k[i]
             stage[i] = x[i] + 0.5 * h * k[i]
-        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
-                           work)
+        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work)
         for i in range(n_x):
             acc[i] += 2.0 * k[i]
             stage[i] = x[i] + 0.5 * h * k[i]
-        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
-                           work)
+        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work)
         for i in range(n_x):
             acc[i] += 2.0 * k[i]
             stage[i] = x[i] + h * k[i]
-        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par,
-                           work)
+        k = extended_rates(stage, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work)
         for i in range(n_x):
             x[i] += (h / 6.0) * (acc[i] + k[i])
     return x
@@ -465,8 +465,21 @@ def coil_step(xe, drive, dt, coil_mode, electrical):
 
 
 # indices into the simulator configuration ``cfg`` (float array, see :func:`simulator_config`)
-(C_DT, C_SUBSTEPS, C_COIL_MODE, C_CHECK, C_FROZEN, C_R, C_L, C_SUPPLY, C_BASE_TOP,
- C_MAGNET_RADIUS, C_HALF_THICKNESS, C_LOWER, C_UPPER) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14)
+(
+    C_DT,
+    C_SUBSTEPS,
+    C_COIL_MODE,
+    C_CHECK,
+    C_FROZEN,
+    C_R,
+    C_L,
+    C_SUPPLY,
+    C_BASE_TOP,
+    C_MAGNET_RADIUS,
+    C_HALF_THICKNESS,
+    C_LOWER,
+    C_UPPER,
+) = (0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 14)
 CONFIG_SIZE = 17
 
 
@@ -482,7 +495,7 @@ def simulator_config(dt, substeps, coil_mode, check, frozen, electrical, crash) 
     cfg[C_COIL_MODE] = coil_mode
     cfg[C_CHECK] = 1.0 if check else 0.0
     cfg[C_FROZEN] = 1.0 if frozen else 0.0
-    cfg[C_R:C_SUPPLY + 1] = electrical
+    cfg[C_R : C_SUPPLY + 1] = electrical
     cfg[C_BASE_TOP:] = crash
     return cfg
 
@@ -502,18 +515,24 @@ def sample_step(xe, drive, cfg, src, coil, rim, par, work, sens, mag):
             return xe.copy(), STATUS_BAD_INPUT, np.zeros(3 * sens.shape[0])
     dt = cfg[C_DT]
     coil_mode = int(cfg[C_COIL_MODE])
-    electrical = cfg[C_R:C_SUPPLY + 1]
+    electrical = cfg[C_R : C_SUPPLY + 1]
     if cfg[C_FROZEN] != 0.0:
         new = coil_step(xe, drive, dt, coil_mode, electrical)
         currents = new[12:] if coil_mode != COIL_IDEAL else drive
         y = fast_measurement(new[:12].copy(), currents.copy(), src, coil, sens, mag, work)
         return new, STATUS_OK, y
-    new = rk4_sample(xe, drive, dt, int(cfg[C_SUBSTEPS]), coil_mode, electrical, src, coil,
-                     rim, par, work)
+    new = rk4_sample(
+        xe, drive, dt, int(cfg[C_SUBSTEPS]), coil_mode, electrical, src, coil, rim, par, work
+    )
     if cfg[C_CHECK] != 0.0:
-        status = crash_status(new[:12], cfg[C_BASE_TOP], cfg[C_MAGNET_RADIUS],
-                              cfg[C_HALF_THICKNESS], cfg[C_LOWER:C_LOWER + 3],
-                              cfg[C_UPPER:C_UPPER + 3])
+        status = crash_status(
+            new[:12],
+            cfg[C_BASE_TOP],
+            cfg[C_MAGNET_RADIUS],
+            cfg[C_HALF_THICKNESS],
+            cfg[C_LOWER : C_LOWER + 3],
+            cfg[C_UPPER : C_UPPER + 3],
+        )
     else:
         status = STATUS_OK
         for k in range(new.shape[0]):
@@ -547,7 +566,7 @@ def rk4_run(x0, drives, cfg, src, coil, rim, par, work, sens, mag):
     for k in range(n):
         new, status, y = sample_step(x, drives[k], cfg, src, coil, rim, par, work, sens, mag)
         if status != STATUS_OK:
-            return states[:k + 1], outputs[:k + 1], k, status, new
+            return states[: k + 1], outputs[: k + 1], k, status, new
         x = new
         states[k + 1] = x
         outputs[k + 1] = y

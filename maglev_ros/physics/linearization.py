@@ -114,8 +114,15 @@ class LinearModel:
         """Return a python-control continuous ``StateSpace`` with named signals."""
         import control
 
-        return control.ss(self.A, self.B, self.C, self.D, states=list(self.states),
-                          inputs=list(self.inputs), outputs=list(self.outputs))
+        return control.ss(
+            self.A,
+            self.B,
+            self.C,
+            self.D,
+            states=list(self.states),
+            inputs=list(self.inputs),
+            outputs=list(self.outputs),
+        )
 
 
 def linearize(model, x_eq=None, u_eq=None, step: float = FD_STEP) -> LinearModel:
@@ -165,9 +172,17 @@ def linearize(model, x_eq=None, u_eq=None, step: float = FD_STEP) -> LinearModel
     a, b = jacobians(model.dynamics, x0.size)
     c, d = jacobians(model.measurement, model.n_outputs)
     return LinearModel(
-        A=a, B=b, C=c, D=d, x_eq=x0, u_eq=u0, y_eq=model.measurement(x0, u0),
-        states=STATE_NAMES, inputs=input_names(model.n_inputs),
-        outputs=output_names(len(model.params.sensors)), step=step,
+        A=a,
+        B=b,
+        C=c,
+        D=d,
+        x_eq=x0,
+        u_eq=u0,
+        y_eq=model.measurement(x0, u0),
+        states=STATE_NAMES,
+        inputs=input_names(model.n_inputs),
+        outputs=output_names(len(model.params.sensors)),
+        step=step,
     )
 
 

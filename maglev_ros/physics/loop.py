@@ -33,8 +33,15 @@ import math
 import numpy as np
 from numba import njit
 
-__all__ = ['MU0', 'AGM_ITERATIONS', 'LOOP_WORK_ROWS', 'as_points', 'loop_batch',
-           'loop_field_cylindrical', 'loop_field']
+__all__ = [
+    'MU0',
+    'AGM_ITERATIONS',
+    'LOOP_WORK_ROWS',
+    'as_points',
+    'loop_batch',
+    'loop_field_cylindrical',
+    'loop_field',
+]
 
 MU0 = 4e-7 * math.pi  # vacuum permeability, N/A^2 (the model's value, not CODATA 2019)
 
@@ -193,7 +200,14 @@ def loop_field(points, radius: float, current: float) -> np.ndarray:
     n = pts.shape[0]
     brho_over_rho = np.empty(n)
     bz = np.empty(n)
-    loop_batch(np.ascontiguousarray(pts[:, 0]), np.ascontiguousarray(pts[:, 1]),
-               np.ascontiguousarray(pts[:, 2]), np.full(n, float(radius)),
-               np.full(n, float(current)), brho_over_rho, bz, np.empty((LOOP_WORK_ROWS, n)))
+    loop_batch(
+        np.ascontiguousarray(pts[:, 0]),
+        np.ascontiguousarray(pts[:, 1]),
+        np.ascontiguousarray(pts[:, 2]),
+        np.full(n, float(radius)),
+        np.full(n, float(current)),
+        brho_over_rho,
+        bz,
+        np.empty((LOOP_WORK_ROWS, n)),
+    )
     return np.column_stack([brho_over_rho * pts[:, 0], brho_over_rho * pts[:, 1], bz])

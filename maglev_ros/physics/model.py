@@ -95,8 +95,11 @@ class ModelOptions:
     correction: float | str = 'auto'
 
     def __post_init__(self):
-        for name, allowed in (('field', FIELD_MODELS), ('torque', TORQUE_MODES),
-                              ('kinematics', KINEMATICS)):
+        for name, allowed in (
+            ('field', FIELD_MODELS),
+            ('torque', TORQUE_MODES),
+            ('kinematics', KINEMATICS),
+        ):
             value = getattr(self, name)
             if value not in allowed:
                 raise ValueError(f'{name} must be one of {", ".join(allowed)}, got {value!r}')
@@ -104,15 +107,20 @@ class ModelOptions:
             not isinstance(self.rim_points, int) or self.rim_points < 3
         ):
             raise ValueError(f'rim_points must be an integer >= 3, got {self.rim_points!r}')
-        if not isinstance(self.axial_points, int) or self.axial_points < 1 or (
-            self.axial_points % 2 == 0
+        if (
+            not isinstance(self.axial_points, int)
+            or self.axial_points < 1
+            or (self.axial_points % 2 == 0)
         ):
-            raise ValueError(f'axial_points must be an odd integer >= 1, got '
-                             f'{self.axial_points!r}')
+            raise ValueError(
+                f'axial_points must be an odd integer >= 1, got {self.axial_points!r}'
+            )
         if isinstance(self.correction, str):
             if self.correction not in ('auto', 'none'):
-                raise ValueError(f"correction must be 'auto', 'none' or a positive number, "
-                                 f'got {self.correction!r}')
+                raise ValueError(
+                    f"correction must be 'auto', 'none' or a positive number, "
+                    f'got {self.correction!r}'
+                )
         elif not (isinstance(self.correction, (int, float)) and self.correction > 0):
             raise ValueError(f'correction must be positive, got {self.correction!r}')
 
@@ -146,13 +154,14 @@ def rim_angles(n: int) -> tuple[np.ndarray, np.ndarray]:
     cos, sin = np.cos(theta), np.sin(theta)
     if n % 4 == 0:
         q = n // 4
-        c1 = cos[:q + 1].copy()
-        s1 = sin[:q + 1].copy()
+        c1 = cos[: q + 1].copy()
+        s1 = sin[: q + 1].copy()
         c1[q], s1[q] = 0.0, 1.0
         s1[0] = 0.0
         for i in range(q + 1):
-            for j, (c, s) in enumerate(((c1[i], s1[i]), (-c1[i], s1[i]), (-c1[i], -s1[i]),
-                                        (c1[i], -s1[i]))):
+            for j, (c, s) in enumerate(
+                ((c1[i], s1[i]), (-c1[i], s1[i]), (-c1[i], -s1[i]), (c1[i], -s1[i]))
+            ):
                 index = (i, 2 * q - i, 2 * q + i, n - i)[j] % n
                 cos[index], sin[index] = c, s
     return cos, sin
@@ -180,10 +189,14 @@ class MaggyModel:
         default_n = DEFAULT_RIM_POINTS if opts.field == 'fast' else DEFAULT_SURFACE_RIM_POINTS
         self.rim_points = opts.rim_points or default_n
         self._cos, self._sin = rim_angles(self.rim_points)
-        self._torque_mode = (kernels.TORQUE_TRUE if opts.torque == 'true'
-                             else kernels.TORQUE_PUBLISHED)
-        self._kinematics = (kernels.KINEMATICS_RIGID if opts.kinematics == 'rigid'
-                            else kernels.KINEMATICS_PUBLISHED)
+        self._torque_mode = (
+            kernels.TORQUE_TRUE if opts.torque == 'true' else kernels.TORQUE_PUBLISHED
+        )
+        self._kinematics = (
+            kernels.KINEMATICS_RIGID
+            if opts.kinematics == 'rigid'
+            else kernels.KINEMATICS_PUBLISHED
+        )
         self._inertia = np.array(magnet.inertia, dtype=float)
         s = params.sensors
         self._sensor_pos = np.array([x.position for x in s], dtype=float).reshape(-1, 3)
@@ -247,8 +260,7 @@ class MaggyModel:
                     for r in radii:
                         rows.append([cx, cy, cz + dz, r, 0.0, 1.0])
                         coil.append(j)
-        self._loops = (np.array(rows, dtype=float).reshape(-1, 6),
-                       np.array(coil, dtype=np.int64))
+        self._loops = (np.array(rows, dtype=float).reshape(-1, 6), np.array(coil, dtype=np.int64))
         return self._loops
 
     # ------------------------------------------------------------------ field
@@ -275,14 +287,22 @@ class MaggyModel:
             p = self.params
             mags = p.permanent_magnets
             for j in range(mags.count):
-                out += sheet_field(pts - mags.centers[j], mags.radius[j], mags.length[j],
-                                   mags.polarization[j] * mags.length[j] / MU0)
+                out += sheet_field(
+                    pts - mags.centers[j],
+                    mags.radius[j],
+                    mags.length[j],
+                    mags.polarization[j] * mags.length[j] / MU0,
+                )
             if self.options.field == 'accurate':
                 sol = p.solenoids
                 for j in range(sol.count):
                     if current[j] != 0.0:
-                        out += sheet_field(pts - sol.centers[j], sol.radius[j], sol.length[j],
-                                           sol.turns[j] * current[j])
+                        out += sheet_field(
+                            pts - sol.centers[j],
+                            sol.radius[j],
+                            sol.length[j],
+                            sol.turns[j] * current[j],
+                        )
         return out
 
     @property
@@ -310,8 +330,9 @@ class MaggyModel:
         if self.options.field == 'fast':
             b_local = loop_field(local, m.radius, self.magnet_loop_current)
         else:
-            b_local = sheet_field(local, m.radius, m.thickness,
-                                  -m.polarization * m.thickness / MU0)
+            b_local = sheet_field(
+                local, m.radius, m.thickness, -m.polarization * m.thickness / MU0
+            )
         return b_local @ r.T
 
     # ------------------------------------------------------------------ force
@@ -349,8 +370,9 @@ class MaggyModel:
         """Rim-surface quadrature (accurate/filament): trapezoid around and across."""
         m = self.params.magnet
         n_ax = self.options.axial_points
-        heights = np.linspace(-m.thickness / 2, m.thickness / 2, n_ax) if n_ax > 1 else (
-            np.zeros(1))
+        heights = (
+            np.linspace(-m.thickness / 2, m.thickness / 2, n_ax) if n_ax > 1 else (np.zeros(1))
+        )
         w_ax = np.full(n_ax, m.thickness / max(n_ax - 1, 1))
         if n_ax > 1:
             w_ax[[0, -1]] *= 0.5
@@ -387,9 +409,14 @@ class MaggyModel:
         m = self.params.magnet
         if self.options.field == 'fast':
             return kernels.fast_dynamics(state, self._inputs(u), *self.fast_arguments())
-        return kernels.rigid_body_rates(state, self.wrench(state, u), m.mass, self._inertia,
-                                        self._kinematics,
-                                        kernels.rotation_matrix(state[3], state[4], state[5]))
+        return kernels.rigid_body_rates(
+            state,
+            self.wrench(state, u),
+            m.mass,
+            self._inertia,
+            self._kinematics,
+            kernels.rotation_matrix(state[3], state[4], state[5]),
+        )
 
     def measurement(self, x, u=None, with_magnet: bool = True) -> np.ndarray:
         """h(x, u): sensor readings [Bx_0, By_0, Bz_0, Bx_1, ...], T, shape (3 n_sensors,).
@@ -432,8 +459,18 @@ class MaggyModel:
             src, coil = self._loop_sources()
             rim = np.ascontiguousarray(np.vstack([self._cos, self._sin]))
             scale = m.radius * m.thickness * 2.0 * np.pi / self.rim_points
-            par = np.array([m.radius, scale, self.k0, m.mass, *self._inertia,
-                            self._torque_mode, self._kinematics], dtype=float)
+            par = np.array(
+                [
+                    m.radius,
+                    scale,
+                    self.k0,
+                    m.mass,
+                    *self._inertia,
+                    self._torque_mode,
+                    self._kinematics,
+                ],
+                dtype=float,
+            )
             self._fast_args = (src, coil, rim, par, self._workspace())
         return self._fast_args
 
@@ -443,11 +480,22 @@ class MaggyModel:
             m = self.params.magnet
             src, coil = self._loop_sources()
             k = len(self.params.sensors)
-            sens = np.hstack([self._sensor_pos, self._sensor_rot.reshape(k, 9),
-                              self._sensor_gain, self._sensor_offset]).reshape(k, 18)
+            sens = np.hstack(
+                [
+                    self._sensor_pos,
+                    self._sensor_rot.reshape(k, 9),
+                    self._sensor_gain,
+                    self._sensor_offset,
+                ]
+            ).reshape(k, 18)
             mag = np.array([m.radius, self.magnet_loop_current])
-            self._measurement_args = (src, coil, np.ascontiguousarray(sens), mag,
-                                      self._workspace())
+            self._measurement_args = (
+                src,
+                coil,
+                np.ascontiguousarray(sens),
+                mag,
+                self._workspace(),
+            )
         return self._measurement_args
 
     def _workspace(self) -> np.ndarray:
@@ -479,8 +527,9 @@ class MaggyModel:
 
     def inverted(self) -> MaggyModel:
         """Return the same model with the levitating magnet flipped (J -> -J)."""
-        magnet = dataclasses.replace(self.params.magnet,
-                                     polarization=-self.params.magnet.polarization)
+        magnet = dataclasses.replace(
+            self.params.magnet, polarization=-self.params.magnet.polarization
+        )
         model = MaggyModel(self.params.replace(magnet=magnet), self.options)
         if self.options.field == 'fast':
             model._correction = self.correction
@@ -494,8 +543,10 @@ class MaggyModel:
 
     def __repr__(self) -> str:
         o = self.options
-        return (f'MaggyModel({self.params.name}, field={o.field}, torque={o.torque}, '
-                f'kinematics={o.kinematics}, rim_points={self.rim_points})')
+        return (
+            f'MaggyModel({self.params.name}, field={o.field}, torque={o.torque}, '
+            f'kinematics={o.kinematics}, rim_points={self.rim_points})'
+        )
 
 
 def make_model(params: str | MaggyParameters = 'maggy_v2', **options) -> MaggyModel:
@@ -511,4 +562,3 @@ def make_model(params: str | MaggyParameters = 'maggy_v2', **options) -> MaggyMo
     if not isinstance(params, MaggyParameters):
         params = load_parameters(params)
     return MaggyModel(params, ModelOptions(**options))
-

@@ -307,8 +307,10 @@ def _cylinders(reader: _Reader, value: Any, key: str, extra: str) -> tuple:
     for name in (*_CYLINDER_KEYS, extra):
         raw = data[name]
         if isinstance(raw, (list, tuple)) and len(raw) != count:
-            raise reader.fail(f'{key}.{name}', f'expected {count} values (as many as '
-                              f'{key}.{first}), got {len(raw)}')
+            raise reader.fail(
+                f'{key}.{name}',
+                f'expected {count} values (as many as {key}.{first}), got {len(raw)}',
+            )
         positive = name in ('radius', 'length', 'turns')
         columns[name] = reader.vector(raw, f'{key}.{name}', count, positive)
     centers = _frozen(np.column_stack([columns['x'], columns['y'], columns['z']]))
@@ -370,8 +372,9 @@ def parameters_from_mapping(data: Any, source: str = '<memory>') -> MaggyParamet
     magnets = PermanentMagnets(centers, radius, length, pol)
 
     keys = ('radius', 'thickness', 'polarization', 'mass', 'inertia')
-    mdata = reader.mapping(doc['levitating_magnet'], 'levitating_magnet',
-                           dict.fromkeys(keys, True))
+    mdata = reader.mapping(
+        doc['levitating_magnet'], 'levitating_magnet', dict.fromkeys(keys, True)
+    )
     magnet = LevitatingMagnet(
         radius=reader.number(mdata['radius'], 'levitating_magnet.radius', positive=True),
         thickness=reader.number(mdata['thickness'], 'levitating_magnet.thickness', True),

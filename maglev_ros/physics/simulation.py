@@ -188,10 +188,18 @@ class Simulator:
         place). ``absent``: no levitating magnet at all (base and coils only).
     """
 
-    def __init__(self, model, sample_rate: float = 5000.0, substeps: int = 1,
-                 coil: CoilDynamics | None = None, sensor: SensorEffects | None = None,
-                 seed: int | None = None, check_crash: bool = True, x0=None,
-                 magnet: str = 'free'):
+    def __init__(
+        self,
+        model,
+        sample_rate: float = 5000.0,
+        substeps: int = 1,
+        coil: CoilDynamics | None = None,
+        sensor: SensorEffects | None = None,
+        seed: int | None = None,
+        check_crash: bool = True,
+        x0=None,
+        magnet: str = 'free',
+    ):
         if magnet not in MAGNET_MODES:
             raise ValueError(f'magnet must be one of {", ".join(MAGNET_MODES)}, got {magnet!r}')
         self.magnet = magnet
@@ -208,22 +216,27 @@ class Simulator:
         self.seed = seed
         self.check_crash = bool(check_crash)
         p = model.params
-        self._crash = np.concatenate([
-            [p.base_top, p.magnet.radius, p.magnet.thickness / 2],
-            p.workspace.lower, p.workspace.upper,
-        ])
+        self._crash = np.concatenate(
+            [
+                [p.base_top, p.magnet.radius, p.magnet.thickness / 2],
+                p.workspace.lower,
+                p.workspace.upper,
+            ]
+        )
         if coil is None:
             self._coil_mode = kernels.COIL_IDEAL
             self._electrical = np.array([1.0, 1.0, 1.0])
         else:
             self._coil_mode = _COIL_MODES[coil.drive]
-            self._electrical = np.array([coil.resistance, coil.inductance,
-                                         coil.supply_voltage])
-        offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float),
-                                 (model.n_outputs,))
+            self._electrical = np.array([coil.resistance, coil.inductance, coil.supply_voltage])
+        offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float), (model.n_outputs,))
         self._offset = np.array(offset)
-        self._ideal_sensor = (self.sensor.noise_rms == 0 and self.sensor.quantization == 0
-                              and not self.sensor.delay_samples and not np.any(self._offset))
+        self._ideal_sensor = (
+            self.sensor.noise_rms == 0
+            and self.sensor.quantization == 0
+            and not self.sensor.delay_samples
+            and not np.any(self._offset)
+        )
         self._default_x0 = None if x0 is None else self._check_state(x0)
         self._fast = model.options.field == 'fast'
         self._input_shape = (model.n_inputs,)
@@ -233,14 +246,21 @@ class Simulator:
             if magnet == 'absent':
                 mag = np.array([mag[0], 0.0])  # no levitating magnet: its field is zero
             self._sens_args = (sens, mag)
-            cfg = kernels.simulator_config(self.dt, self.substeps, self._coil_mode,
-                                           self.check_crash, magnet != 'free',
-                                           self._electrical, self._crash)
+            cfg = kernels.simulator_config(
+                self.dt,
+                self.substeps,
+                self._coil_mode,
+                self.check_crash,
+                magnet != 'free',
+                self._electrical,
+                self._crash,
+            )
             self._step_args = (cfg, *self._fast_args, *self._sens_args)
         self.reset()
         if self._fast:
-            self._sample_step = _compiled(kernels.sample_step, self._xe,
-                                          np.zeros(model.n_inputs), *self._step_args)
+            self._sample_step = _compiled(
+                kernels.sample_step, self._xe, np.zeros(model.n_inputs), *self._step_args
+            )
 
     # ------------------------------------------------------------------ state
     def reset(self, x0=None) -> np.ndarray:
@@ -310,11 +330,14 @@ class Simulator:
         if self.status != 'ok':
             raise SimulationCrashedError(
                 f'simulation crashed at t = {self.crash_time:.6f} s ({self.reason}); '
-                'reset it first')
+                'reset it first'
+            )
         drive = np.array(u, dtype=float)  # a copy: the caller may reuse its buffer
         if drive.shape != self._input_shape:
-            raise ValueError(f'input must have {self._input_shape[0]} values (x+, x-, y+, y-), '
-                             f'got shape {drive.shape}')
+            raise ValueError(
+                f'input must have {self._input_shape[0]} values (x+, x-, y+, y-), '
+                f'got shape {drive.shape}'
+            )
         if self._fast:
             new, status, y = self._sample_step(self._xe, drive, *self._step_args)
             if status == _OK:  # the hot path: 5000 calls a second, keep it lean
@@ -363,17 +386,20 @@ class Simulator:
             raise ValueError('inputs must be finite')
         self.reset(x0)
         if self._fast:
-            states, truth, done, status, last = kernels.rk4_run(self._xe, drives,
-                                                                *self._step_args)
+            states, truth, done, status, last = kernels.rk4_run(self._xe, drives, *self._step_args)
         else:
             states, done, status, last = self._python_run(drives)
             truth = None
-        currents = (states[:, 12:] if self._coil_mode
-                    else np.vstack([np.zeros((1, n_s)), drives[:done]]))
+        currents = (
+            states[:, 12:] if self._coil_mode else np.vstack([np.zeros((1, n_s)), drives[:done]])
+        )
         if truth is None:
-            truth = np.array([self.model.measurement(x[:12], i,
-                                                     with_magnet=self.magnet != 'absent')
-                              for x, i in zip(states, currents, strict=True)])
+            truth = np.array(
+                [
+                    self.model.measurement(x[:12], i, with_magnet=self.magnet != 'absent')
+                    for x, i in zip(states, currents, strict=True)
+                ]
+            )
         self._rng = np.random.default_rng(self.seed)
         self._pending = []
         outputs = self._observe_many(truth)
@@ -387,9 +413,15 @@ class Simulator:
             self._mark_crash(status, last)
         t = np.arange(done + 1) * self.dt
         return SimulationResult(
-            t=t, x=states[:, :12].copy(), y=outputs, u=drives[:done].copy(),
-            currents=np.array(currents), status=self.status, reason=self.reason,
-            crash_time=self.crash_time, crash_state=self.crash_state,
+            t=t,
+            x=states[:, :12].copy(),
+            y=outputs,
+            u=drives[:done].copy(),
+            currents=np.array(currents),
+            status=self.status,
+            reason=self.reason,
+            crash_time=self.crash_time,
+            crash_state=self.crash_state,
         )
 
     # ------------------------------------------------------------------ internals
@@ -398,14 +430,16 @@ class Simulator:
             return self.model.dynamics(xe, drive)
         i_coil = xe[12:]
         r, inductance = self._electrical[0], self._electrical[1]
-        return np.concatenate([self.model.dynamics(xe[:12], i_coil),
-                               (volts - r * i_coil) / inductance])
+        return np.concatenate(
+            [self.model.dynamics(xe[:12], i_coil), (volts - r * i_coil) / inductance]
+        )
 
     def _python_rk4(self, xe: np.ndarray, drive: np.ndarray) -> np.ndarray:
         if self.magnet != 'free':
             return kernels.coil_step(xe, drive, self.dt, self._coil_mode, self._electrical)
-        volts = kernels.coil_voltages(drive, self._coil_mode, self._electrical[0],
-                                      self._electrical[2])
+        volts = kernels.coil_voltages(
+            drive, self._coil_mode, self._electrical[0], self._electrical[2]
+        )
         h = self.dt / self.substeps
         x = xe.copy()
         for _ in range(self.substeps):
@@ -440,8 +474,9 @@ class Simulator:
         self.crash_state = finite.copy()
 
     def _true_output(self) -> np.ndarray:
-        return self.model.measurement(self._xe[:12], self.currents,
-                                      with_magnet=self.magnet != 'absent')
+        return self.model.measurement(
+            self._xe[:12], self.currents, with_magnet=self.magnet != 'absent'
+        )
 
     def _observe(self, y: np.ndarray) -> np.ndarray:
         fx = self.sensor
@@ -497,8 +532,15 @@ def _compiled(dispatcher, *example):
         return dispatcher
 
 
-def simulate_reference(model, x0, inputs, sample_time: float, rtol: float = 1e-10,
-                       atol: float = 1e-13, check_crash: bool = True) -> SimulationResult:
+def simulate_reference(
+    model,
+    x0,
+    inputs,
+    sample_time: float,
+    rtol: float = 1e-10,
+    atol: float = 1e-13,
+    check_crash: bool = True,
+) -> SimulationResult:
     """Integrate the model with ``solve_ivp`` (DOP853) at tight tolerances.
 
     The input is held constant over each sample (ZOH) and the integration is
@@ -527,8 +569,13 @@ def simulate_reference(model, x0, inputs, sample_time: float, rtol: float = 1e-1
     drives = np.asarray(inputs, dtype=float)
     state = np.asarray(x0, dtype=float).copy()
     p = model.params
-    crash = (p.base_top, p.magnet.radius, p.magnet.thickness / 2, p.workspace.lower,
-             p.workspace.upper)
+    crash = (
+        p.base_top,
+        p.magnet.radius,
+        p.magnet.thickness / 2,
+        p.workspace.lower,
+        p.workspace.upper,
+    )
     states = [state]
     status = kernels.STATUS_OK
     k = 0
@@ -540,11 +587,17 @@ def simulate_reference(model, x0, inputs, sample_time: float, rtol: float = 1e-1
             end += 1
         u = drives[k]
         t_eval = (np.arange(k + 1, end + 1) - k) * sample_time
-        sol = solve_ivp(lambda _t, x, u=u: model.dynamics(x, u), (0.0, t_eval[-1]), states[-1],
-                        method='DOP853', t_eval=t_eval, rtol=rtol, atol=atol)
+        sol = solve_ivp(
+            lambda _t, x, u=u: model.dynamics(x, u),
+            (0.0, t_eval[-1]),
+            states[-1],
+            method='DOP853',
+            t_eval=t_eval,
+            rtol=rtol,
+            atol=atol,
+        )
         for column in sol.y.T:
-            status = (kernels.crash_status(column, *crash) if check_crash
-                      else kernels.STATUS_OK)
+            status = kernels.crash_status(column, *crash) if check_crash else kernels.STATUS_OK
             if status != kernels.STATUS_OK:
                 break
             states.append(column)
@@ -553,10 +606,17 @@ def simulate_reference(model, x0, inputs, sample_time: float, rtol: float = 1e-1
         k = end
     x = np.array(states)
     done = len(states) - 1
-    y = np.array([model.measurement(xi, drives[i - 1] if i else np.zeros(model.n_inputs))
-                  for i, xi in enumerate(x)])
+    y = np.array(
+        [
+            model.measurement(xi, drives[i - 1] if i else np.zeros(model.n_inputs))
+            for i, xi in enumerate(x)
+        ]
+    )
     result = SimulationResult(
-        t=np.arange(done + 1) * sample_time, x=x, y=y, u=drives[:done].copy(),
+        t=np.arange(done + 1) * sample_time,
+        x=x,
+        y=y,
+        u=drives[:done].copy(),
         currents=np.vstack([np.zeros((1, model.n_inputs)), drives[:done]]),
     )
     if status != kernels.STATUS_OK:

@@ -43,8 +43,9 @@ def _row_equation_error(d: IdData, orders: Orders, i: int, theta_ab: np.ndarray)
     return equation_errors(d.y, d.u, orders, theta_ab, rows=[i])[0]
 
 
-def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
-                         extra: int) -> list[np.ndarray] | None:
+def _initial_innovations(
+    experiments: Sequence[IdData], orders: Orders, i: int, extra: int
+) -> list[np.ndarray] | None:
     """Residuals of a high-order ARX row (zeros before its start), one array per experiment."""
     na = orders.na.copy()
     nb = orders.nb.copy()
@@ -53,8 +54,9 @@ def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
     nb[i] = np.where(nb[i] > 0, nb[i] + extra, 0)
     hi = Orders(na, nb, orders.nk, orders.nc * 0, orders.nd * 0, orders.nf * 0)
     start = hi.row_start(i)
-    solved = correlation_solve([signal_matrix(d) for d in experiments], row_blocks(hi, i), i,
-                               start)
+    solved = correlation_solve(
+        [signal_matrix(d) for d in experiments], row_blocks(hi, i), i, start
+    )
     if solved is None:
         return None
     out = []
@@ -65,8 +67,9 @@ def _initial_innovations(experiments: Sequence[IdData], orders: Orders, i: int,
     return out
 
 
-def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: int,
-               tol: float | None) -> tuple[np.ndarray, np.ndarray, int]:
+def _armax_row(
+    experiments: Sequence[IdData], orders: Orders, i: int, max_iter: int, tol: float | None
+) -> tuple[np.ndarray, np.ndarray, int]:
     nc = int(orders.nc[i])
     start = max(orders.row_start(i), nc)
     reg = row_blocks(orders, i)
@@ -88,13 +91,18 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
     blocks = np.vstack([reg, [[e_row, 1, nc, 1]]]).astype(np.int64)
     theta0 = None
     if ehat is not None:
-        first = correlation_solve([signal_matrix(d, e[:, None]) for d, e in
-                                   zip(experiments, ehat, strict=True)], blocks, i, start)
+        first = correlation_solve(
+            [signal_matrix(d, e[:, None]) for d, e in zip(experiments, ehat, strict=True)],
+            blocks,
+            i,
+            start,
+        )
         theta0 = None if first is None else first[0]
     if theta0 is None:  # ill-conditioned start: plain ARX with C = 1
         Phi = stack_rows([arx_regressors(d.y, d.u, orders, i, start) for d in experiments])
-        theta0 = np.r_[least_squares(Phi, join([d.y[start:, i] for d in experiments]))[0],
-                       np.zeros(nc)]
+        theta0 = np.r_[
+            least_squares(Phi, join([d.y[start:, i] for d in experiments]))[0], np.zeros(nc)
+        ]
 
     def project(theta: np.ndarray) -> np.ndarray:
         out = theta.copy()
@@ -109,8 +117,10 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
         if key not in cache:
             cache.clear()
             C = np.concatenate([[1.0], theta[n_ab:]])
-            cache[key] = [inverse_filter(C, _row_equation_error(d, orders, i, theta[:n_ab]))
-                          for d in experiments]
+            cache[key] = [
+                inverse_filter(C, _row_equation_error(d, orders, i, theta[:n_ab]))
+                for d in experiments
+            ]
         return cache[key]
 
     def errors(theta: np.ndarray) -> np.ndarray:
@@ -126,8 +136,8 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
         g = np.zeros(n_ab + nc)
         for d, e_full in zip(experiments, full_errors(theta), strict=True):
             S = np.empty((e_row + 2, d.N))
-            S[:orders.ny] = inverse_filter(C, d.y.T)
-            S[orders.ny:e_row] = inverse_filter(C, d.u.T)
+            S[: orders.ny] = inverse_filter(C, d.y.T)
+            S[orders.ny : e_row] = inverse_filter(C, d.u.T)
             S[e_row] = inverse_filter(C, e_full)
             S[e_row + 1] = e_full
             H += lag_gram(S, blocks, blocks, start)
@@ -140,8 +150,15 @@ def _armax_row(experiments: Sequence[IdData], orders: Orders, i: int, max_iter: 
     return result.theta, result.covariance, result.iterations
 
 
-def armax(data: IdData | Sequence[IdData], na: object, nb: object, nc: object,
-          nk: object = 1, max_iter: int = 50, tol: float | None = None) -> PolyModel:
+def armax(
+    data: IdData | Sequence[IdData],
+    na: object,
+    nb: object,
+    nc: object,
+    nk: object = 1,
+    max_iter: int = 50,
+    tol: float | None = None,
+) -> PolyModel:
     """Estimate an ARMAX model ``A(q) y(t) = B(q) u(t - nk) + C(q) e(t)``.
 
     Parameters
@@ -183,6 +200,12 @@ def armax(data: IdData | Sequence[IdData], na: object, nb: object, nc: object,
         thetas.append(theta)
         covs.append(cov)
         iters = max(iters, it)
-    return finish_model('armax', orders, np.concatenate(thetas), sla.block_diag(*covs),
-                        experiments, 'ARMAX, prediction-error method (Levenberg-Marquardt)',
-                        iters)
+    return finish_model(
+        'armax',
+        orders,
+        np.concatenate(thetas),
+        sla.block_diag(*covs),
+        experiments,
+        'ARMAX, prediction-error method (Levenberg-Marquardt)',
+        iters,
+    )

@@ -41,8 +41,9 @@ CORRELATION_COND_LIMIT = 1e13
 REFINE_ABOVE = 1e10
 
 
-def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
-                  ) -> tuple[np.ndarray, np.ndarray, str]:
+def least_squares(
+    Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
+) -> tuple[np.ndarray, np.ndarray, str]:
     """Solve ``min ||Y - Phi theta||`` and return ``(Phi^T Phi)^-1`` for the covariance.
 
     Parameters
@@ -83,15 +84,16 @@ def least_squares(Phi: np.ndarray, Y: np.ndarray, method: str = 'auto'
                 Rinv = sla.cho_solve(factor, np.eye(p), check_finite=False)
                 return theta, Rinv, 'normal equations (Cholesky, refined)'
     raw = sla.qr(np.column_stack([Phi, Y]), mode='raw', check_finite=False)[0][0]
-    Rfull = np.triu(raw[:p + 1, :p + 1])  # R factor of [Phi, Y] (Householder, no Q)
+    Rfull = np.triu(raw[: p + 1, : p + 1])  # R factor of [Phi, Y] (Householder, no Q)
     Rq = Rfull[:p, :p]
     theta = sla.solve_triangular(Rq, Rfull[:p, p], check_finite=False)
     Rq_inv = sla.solve_triangular(Rq, np.eye(p), check_finite=False)
     return theta, Rq_inv @ Rq_inv.T, 'QR'
 
 
-def arx(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
-        method: str = 'auto') -> PolyModel:
+def arx(
+    data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1, method: str = 'auto'
+) -> PolyModel:
     """Estimate an ARX model ``A(q) y(t) = B(q) u(t - nk) + e(t)``.
 
     Parameters
@@ -126,8 +128,9 @@ def arx(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
     return finish_model('arx', orders, theta, cov, experiments, f'ARX, {used}')
 
 
-def arx_rows(experiments: Sequence[IdData], orders: Orders, method: str = 'auto',
-             refine: bool = True) -> tuple[np.ndarray, np.ndarray, str]:
+def arx_rows(
+    experiments: Sequence[IdData], orders: Orders, method: str = 'auto', refine: bool = True
+) -> tuple[np.ndarray, np.ndarray, str]:
     """Least-squares estimate of the ``A``/``B`` parameters of every output row.
 
     Parameters
@@ -179,8 +182,9 @@ def signal_matrix(data: IdData, *extra: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(np.vstack([data.y.T, data.u.T, *[e.T for e in extra]]))
 
 
-def row_blocks(orders: Orders, i: int, out_base: int = 0, in_base: int | None = None
-               ) -> np.ndarray:
+def row_blocks(
+    orders: Orders, i: int, out_base: int = 0, in_base: int | None = None
+) -> np.ndarray:
     """Regressor blocks of output row ``i`` for :func:`~.correlation.lag_gram`.
 
     Parameters
@@ -199,16 +203,20 @@ def row_blocks(orders: Orders, i: int, out_base: int = 0, in_base: int | None = 
         ``(signal, first lag, count, sign)`` rows in the parameter layout order.
     """
     in_base = orders.ny if in_base is None else in_base
-    rows = [(out_base + j, 1, int(orders.na[i, j]), -1) for j in range(orders.ny)
-            if orders.na[i, j]]
-    rows += [(in_base + j, int(orders.nk[i, j]), int(orders.nb[i, j]), 1)
-             for j in range(orders.nu) if orders.nb[i, j]]
+    rows = [
+        (out_base + j, 1, int(orders.na[i, j]), -1) for j in range(orders.ny) if orders.na[i, j]
+    ]
+    rows += [
+        (in_base + j, int(orders.nk[i, j]), int(orders.nb[i, j]), 1)
+        for j in range(orders.nu)
+        if orders.nb[i, j]
+    ]
     return np.array(rows, dtype=np.int64).reshape(-1, 4)
 
 
-def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target: int,
-                      start: int, refine: bool = True
-                      ) -> tuple[np.ndarray, np.ndarray, float] | None:
+def correlation_solve(
+    signals: Sequence[np.ndarray], blocks: np.ndarray, target: int, start: int, refine: bool = True
+) -> tuple[np.ndarray, np.ndarray, float] | None:
     """Least squares of ``signal[target](t)`` on lagged regressors from correlations.
 
     Parameters
@@ -265,23 +273,26 @@ def correlation_solve(signals: Sequence[np.ndarray], blocks: np.ndarray, target:
         for S, res in zip(signals, residuals, strict=True):
             full = np.zeros(S.shape[1])
             full[start:] = res
-            g += lag_gram(np.vstack([S, full]), blocks, e_blk + [S.shape[0], 0, 0, 0],
-                          start)[:, 0]
+            g += lag_gram(np.vstack([S, full]), blocks, e_blk + [S.shape[0], 0, 0, 0], start)[:, 0]
         theta = theta + sla.cho_solve(factor, g, check_finite=False)
-        sse = float(sum(float(x @ x) for x in (_residual(S, blocks, target, theta, start)
-                                               for S in signals)))
+        sse = float(
+            sum(
+                float(x @ x) for x in (_residual(S, blocks, target, theta, start) for S in signals)
+            )
+        )
     Rinv = sla.cho_solve(factor, np.eye(p), check_finite=False)
     return theta, Rinv, sse / max(1, M - p)
 
 
-def _residual(S: np.ndarray, blocks: np.ndarray, target: int, theta: np.ndarray,
-              start: int) -> np.ndarray:
+def _residual(
+    S: np.ndarray, blocks: np.ndarray, target: int, theta: np.ndarray, start: int
+) -> np.ndarray:
     """``signal[target](t) - phi(t)^T theta`` for ``t >= start`` by FIR filtering, (N - start,)."""
     fitted = np.zeros(S.shape[1])
     pos = 0
     for sig, first, count, sign in blocks:
         h = np.zeros(first + count)
-        h[first:] = sign * theta[pos:pos + count]
+        h[first:] = sign * theta[pos : pos + count]
         pos += count
         fir_add(h, S[sig], fitted)  # compiled FIR (regression.fir_add)
     return S[target, start:] - fitted[start:]

@@ -33,9 +33,20 @@ def block_sizes(blocks: np.ndarray) -> int:
 
 
 @njit(cache=True)
-def _block_pair(x: np.ndarray, lx: int, nx: int, z: np.ndarray, lz: int, nz: int,
-                start: int, out: np.ndarray, r0: int, c0: int,
-                sign: float, upper_only: bool) -> None:  # pragma: no cover - numba
+def _block_pair(
+    x: np.ndarray,
+    lx: int,
+    nx: int,
+    z: np.ndarray,
+    lz: int,
+    nz: int,
+    start: int,
+    out: np.ndarray,
+    r0: int,
+    c0: int,
+    sign: float,
+    upper_only: bool,
+) -> None:  # pragma: no cover - numba
     N = x.shape[0]
     first = 0 if upper_only else -(nx - 1)
     for d in range(first, nz):  # diagonal: column index - row index
@@ -43,7 +54,7 @@ def _block_pair(x: np.ndarray, lx: int, nx: int, z: np.ndarray, lz: int, nz: int
         m = k + d
         i = lx + k
         j = lz + m
-        acc = np.dot(x[start - i:N - i], z[start - j:N - j])
+        acc = np.dot(x[start - i : N - i], z[start - j : N - j])
         out[r0 + k, c0 + m] = sign * acc
         while k + 1 < nx and m + 1 < nz:
             acc += x[start - i - 1] * z[start - j - 1] - x[N - 1 - i] * z[N - 1 - j]
@@ -55,16 +66,33 @@ def _block_pair(x: np.ndarray, lx: int, nx: int, z: np.ndarray, lz: int, nz: int
 
 
 @njit(cache=True)
-def _lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray, start: int,
-              out: np.ndarray, symmetric: bool) -> None:  # pragma: no cover - numba
+def _lag_gram(
+    signals: np.ndarray,
+    left: np.ndarray,
+    right: np.ndarray,
+    start: int,
+    out: np.ndarray,
+    symmetric: bool,
+) -> None:  # pragma: no cover - numba
     r0 = 0
     for a in range(left.shape[0]):
         c0 = 0
         for b in range(right.shape[0]):
             if left[a, 2] > 0 and right[b, 2] > 0 and (not symmetric or b >= a):
-                _block_pair(signals[left[a, 0]], left[a, 1], left[a, 2], signals[right[b, 0]],
-                            right[b, 1], right[b, 2], start, out, r0, c0,
-                            float(left[a, 3] * right[b, 3]), symmetric and a == b)
+                _block_pair(
+                    signals[left[a, 0]],
+                    left[a, 1],
+                    left[a, 2],
+                    signals[right[b, 0]],
+                    right[b, 1],
+                    right[b, 2],
+                    start,
+                    out,
+                    r0,
+                    c0,
+                    float(left[a, 3] * right[b, 3]),
+                    symmetric and a == b,
+                )
             c0 += right[b, 2]
         r0 += left[a, 2]
     if symmetric:  # mirror the computed upper triangle
@@ -74,8 +102,7 @@ def _lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray, start: i
                 out[i, j] = out[j, i]
 
 
-def lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray,
-             start: int) -> np.ndarray:
+def lag_gram(signals: np.ndarray, left: np.ndarray, right: np.ndarray, start: int) -> np.ndarray:
     """Cross-product ``Phi_left^T Phi_right`` of two lagged regressor sets.
 
     Parameters

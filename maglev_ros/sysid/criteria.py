@@ -67,8 +67,7 @@ def aic(e: np.ndarray, n_params: int) -> float:
     """Akaike's information criterion ``N log V + 2 d + N ny (log 2 pi + 1)`` (the toolbox's)."""
     e = np.atleast_2d(np.asarray(e, dtype=float).T).T
     N, ny = e.shape
-    return float(N * np.log(loss_determinant(e)) + 2 * n_params
-                 + N * ny * (np.log(2 * np.pi) + 1))
+    return float(N * np.log(loss_determinant(e)) + 2 * n_params + N * ny * (np.log(2 * np.pi) + 1))
 
 
 def mdl(e: np.ndarray, n_params: int) -> float:

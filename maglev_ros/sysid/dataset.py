@@ -88,8 +88,9 @@ class IdData:
         object.__setattr__(self, 'y', y)
         object.__setattr__(self, 'u', u)
         object.__setattr__(self, 'Ts', Ts)
-        object.__setattr__(self, 'output_names',
-                           _names(self.output_names, 'y', ny, 'output_names'))
+        object.__setattr__(
+            self, 'output_names', _names(self.output_names, 'y', ny, 'output_names')
+        )
         object.__setattr__(self, 'input_names', _names(self.input_names, 'u', nu, 'input_names'))
         units_y = ('',) * ny if self.output_units is None else self.output_units
         units_u = ('',) * nu if self.input_units is None else self.input_units
@@ -129,8 +130,9 @@ class IdData:
             raise ValueError(f'slice step must be positive, got {index.step!r}')
         return replace(self, y=self.y[index], u=self.u[index], Ts=self.Ts * step)
 
-    def select(self, outputs: Sequence[int] | None = None,
-               inputs: Sequence[int] | None = None) -> IdData:
+    def select(
+        self, outputs: Sequence[int] | None = None, inputs: Sequence[int] | None = None
+    ) -> IdData:
         """Keep only some channels (0-based indices), like ``data(:, outputs, inputs)``.
 
         Parameters
@@ -148,9 +150,15 @@ class IdData:
         for name, idx, count in (('outputs', oy, self.ny), ('inputs', iu, self.nu)):
             if any(i < 0 or i >= count for i in idx):
                 raise ValueError(f'{name} indices {idx} out of range 0..{count - 1}')
-        return IdData(self.y[:, oy], self.u[:, iu], self.Ts,
-                      [self.output_names[i] for i in oy], [self.input_names[i] for i in iu],
-                      [self.output_units[i] for i in oy], [self.input_units[i] for i in iu])
+        return IdData(
+            self.y[:, oy],
+            self.u[:, iu],
+            self.Ts,
+            [self.output_names[i] for i in oy],
+            [self.input_names[i] for i in iu],
+            [self.output_units[i] for i in oy],
+            [self.input_units[i] for i in iu],
+        )
 
     def split(self, at: float | int = 0.5) -> tuple[IdData, IdData]:
         """Split into estimation and validation data.
@@ -197,8 +205,9 @@ class IdData:
         u = signal.detrend(self.u, axis=0, type=kind) if self.nu else self.u
         return replace(self, y=y, u=u)
 
-    def filter(self, band: tuple[float, float], order: int = 5,
-               zero_phase: bool = False) -> IdData:
+    def filter(
+        self, band: tuple[float, float], order: int = 5, zero_phase: bool = False
+    ) -> IdData:
         """Butterworth-filter all channels, like the toolbox's ``idfilt(data, order, band)``.
 
         Parameters
@@ -282,8 +291,10 @@ class IdData:
         return load_data(path, **options)  # type: ignore[arg-type]
 
     def __repr__(self) -> str:
-        return (f'IdData(N={self.N}, ny={self.ny}, nu={self.nu}, Ts={self.Ts:g} s, '
-                f'outputs={list(self.output_names)}, inputs={list(self.input_names)})')
+        return (
+            f'IdData(N={self.N}, ny={self.ny}, nu={self.nu}, Ts={self.Ts:g} s, '
+            f'outputs={list(self.output_names)}, inputs={list(self.input_names)})'
+        )
 
 
 def merge(*experiments: IdData) -> tuple[IdData, ...]:
@@ -306,8 +317,10 @@ def merge(*experiments: IdData) -> tuple[IdData, ...]:
         if not isinstance(data, IdData):
             raise TypeError(f'experiment {i} is {type(data).__name__}, expected IdData')
         if (data.ny, data.nu) != (first.ny, first.nu):
-            raise ValueError(f'experiment {i} has ny={data.ny}, nu={data.nu}; '
-                             f'expected ny={first.ny}, nu={first.nu}')
+            raise ValueError(
+                f'experiment {i} has ny={data.ny}, nu={data.nu}; '
+                f'expected ny={first.ny}, nu={first.nu}'
+            )
         if not np.isclose(data.Ts, first.Ts):
             raise ValueError(f'experiment {i} has Ts={data.Ts}, expected {first.Ts}')
     return tuple(experiments)

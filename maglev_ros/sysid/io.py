@@ -44,20 +44,32 @@ def model_to_dict(model: PolyModel) -> dict[str, Any]:
         'F': [[model.polynomial('F', i, j).tolist() for j in range(nu)] for i in range(ny)],
     }
     out: dict[str, Any] = {
-        'format': 'maglev_ros.sysid.PolyModel', 'version': FORMAT_VERSION,
-        'structure': model.structure, 'Ts': model.Ts, 'orders': model.orders.as_dict(),
-        'theta': model.theta.tolist(), 'polynomials': polys,
+        'format': 'maglev_ros.sysid.PolyModel',
+        'version': FORMAT_VERSION,
+        'structure': model.structure,
+        'Ts': model.Ts,
+        'orders': model.orders.as_dict(),
+        'theta': model.theta.tolist(),
+        'polynomials': polys,
         'noise_variance': model.noise_variance.tolist(),
         'covariance': None if model.covariance is None else model.covariance.tolist(),
-        'output_names': list(model.output_names), 'input_names': list(model.input_names),
-        'output_units': list(model.output_units), 'input_units': list(model.input_units),
+        'output_names': list(model.output_names),
+        'input_names': list(model.input_names),
+        'output_units': list(model.output_units),
+        'input_units': list(model.input_units),
         'stable': model.is_stable,
     }
     if model.report is not None:
         r = model.report
-        out['report'] = {'method': r.method, 'n_samples': r.n_samples, 'fit': r.fit.tolist(),
-                         'mse': r.mse.tolist(), 'fpe': r.fpe, 'aic': r.aic,
-                         'iterations': r.iterations}
+        out['report'] = {
+            'method': r.method,
+            'n_samples': r.n_samples,
+            'fit': r.fit.tolist(),
+            'mse': r.mse.tolist(),
+            'fpe': r.fpe,
+            'aic': r.aic,
+            'iterations': r.iterations,
+        }
     return out
 
 
@@ -81,16 +93,29 @@ def model_from_dict(d: dict[str, Any]) -> PolyModel:
         report = None
         if d.get('report'):
             r = d['report']
-            report = EstimationReport(r['method'], int(r['n_samples']), np.asarray(r['fit']),
-                                      np.asarray(r['mse']), float(r['fpe']), float(r['aic']),
-                                      int(r.get('iterations', 0)))
+            report = EstimationReport(
+                r['method'],
+                int(r['n_samples']),
+                np.asarray(r['fit']),
+                np.asarray(r['mse']),
+                float(r['fpe']),
+                float(r['aic']),
+                int(r.get('iterations', 0)),
+            )
         cov = d.get('covariance')
-        return PolyModel(d['structure'], orders, np.asarray(d['theta'], dtype=float),
-                         float(d['Ts']), np.asarray(d['noise_variance'], dtype=float),
-                         None if cov is None else np.asarray(cov, dtype=float),
-                         tuple(d.get('output_names', ())), tuple(d.get('input_names', ())),
-                         tuple(d.get('output_units', ())), tuple(d.get('input_units', ())),
-                         report)
+        return PolyModel(
+            d['structure'],
+            orders,
+            np.asarray(d['theta'], dtype=float),
+            float(d['Ts']),
+            np.asarray(d['noise_variance'], dtype=float),
+            None if cov is None else np.asarray(cov, dtype=float),
+            tuple(d.get('output_names', ())),
+            tuple(d.get('input_names', ())),
+            tuple(d.get('output_units', ())),
+            tuple(d.get('input_units', ())),
+            report,
+        )
     except KeyError as exc:
         raise ValueError(f'model description lacks the field {exc.args[0]!r}') from None
 
@@ -121,8 +146,9 @@ def save_model(model: PolyModel, path: str | Path) -> Path:
     elif suffix == '.mat':
         export_mat(model, path)
     else:
-        raise ValueError(f"model file extension must be .json, .yaml, .yml or .mat, got "
-                         f"{path.name!r}")
+        raise ValueError(
+            f'model file extension must be .json, .yaml, .yml or .mat, got {path.name!r}'
+        )
     return path
 
 
@@ -180,8 +206,13 @@ def export_mat(model: PolyModel, path: str | Path) -> Path:
     d = model_to_dict(model)
 
     def cell(rows: list) -> np.ndarray:
-        flat = [[np.asarray(p, dtype=float)[None, :] for p in
-                 (row if isinstance(row[0], list) else [row])] for row in rows]
+        flat = [
+            [
+                np.asarray(p, dtype=float)[None, :]
+                for p in (row if isinstance(row[0], list) else [row])
+            ]
+            for row in rows
+        ]
         out = np.empty((len(flat), len(flat[0])), dtype=object)
         for i, row in enumerate(flat):
             for j, p in enumerate(row):
@@ -189,10 +220,19 @@ def export_mat(model: PolyModel, path: str | Path) -> Path:
         return out
 
     polys = d['polynomials']
-    content = {key: cell(polys[key]) for key in ('A', 'B', 'C', 'D', 'F') if polys[key]
-               and polys[key][0] != []}
-    content.update({'Ts': model.Ts, 'NoiseVariance': model.noise_variance,
-                    'structure': model.structure, 'theta': model.theta})
+    content = {
+        key: cell(polys[key])
+        for key in ('A', 'B', 'C', 'D', 'F')
+        if polys[key] and polys[key][0] != []
+    }
+    content.update(
+        {
+            'Ts': model.Ts,
+            'NoiseVariance': model.noise_variance,
+            'structure': model.structure,
+            'theta': model.theta,
+        }
+    )
     content.update({k: np.asarray(v, dtype=float) for k, v in d['orders'].items()})
     path = Path(path)
     savemat(path, content)

@@ -51,9 +51,12 @@ __all__ = ['iv4']
 METHODS = ('toolbox', 'extended')
 
 
-def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
-              fallback: np.ndarray | Callable[[], np.ndarray] | None = None
-              ) -> list[np.ndarray]:
+def _simulate(
+    orders: Orders,
+    theta: np.ndarray,
+    experiments: Sequence[IdData],
+    fallback: np.ndarray | Callable[[], np.ndarray] | None = None,
+) -> list[np.ndarray]:
     """Noise-free outputs ``x = A^-1 B u`` used as instruments.
 
     An unstable ``A`` would make the instruments blow up: its roots are
@@ -66,7 +69,7 @@ def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
         A, B, _, _, _ = unpack(orders, theta)
         dens = []
         for i in range(orders.ny):
-            a = A[i, i, :orders.na[i, i] + 1]
+            a = A[i, i, : orders.na[i, i] + 1]
             if len(a) > 1 and not np.all(np.abs(np.roots(a)) < 1.0):
                 a = stabilize(a)
             dens.append(a)
@@ -77,8 +80,9 @@ def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
             for i in range(orders.ny):
                 for j in range(orders.nu):
                     if orders.nb[i, j]:
-                        x[i] += lfilter(B[i, j, :orders.nk[i, j] + orders.nb[i, j]], dens[i],
-                                        ur[j])
+                        x[i] += lfilter(
+                            B[i, j, : orders.nk[i, j] + orders.nb[i, j]], dens[i], ur[j]
+                        )
             out.append(x.T)
         return out
     model = PolyModel('arx', orders, theta, experiments[0].Ts, np.eye(orders.ny))
@@ -87,9 +91,13 @@ def _simulate(orders: Orders, theta: np.ndarray, experiments: Sequence[IdData],
     return [model.simulate(d.u) for d in experiments]
 
 
-def _iv_rows(signals: Sequence[np.ndarray], orders: Orders, start_offset: int = 0,
-             rows: Sequence[int] | None = None, covariance: bool = True
-             ) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _iv_rows(
+    signals: Sequence[np.ndarray],
+    orders: Orders,
+    start_offset: int = 0,
+    rows: Sequence[int] | None = None,
+    covariance: bool = True,
+) -> tuple[list[np.ndarray], list[np.ndarray]]:
     """IV estimate per row from signal matrices ``[y; u; x]`` (x: instruments for y)."""
     ny = orders.ny
     thetas, covs = [], []
@@ -123,12 +131,19 @@ def _iv_rows(signals: Sequence[np.ndarray], orders: Orders, start_offset: int = 
 def _input_instruments(orders: Orders, i: int, count: int) -> np.ndarray:
     """Blocks of ``count`` delayed inputs per input channel of row ``i`` (from its delay)."""
     used = [j for j in range(orders.nu) if orders.nb[i, j]] or list(range(orders.nu))
-    return np.array([(orders.ny + j, max(1, int(orders.nk[i, j])), count, 1) for j in used],
-                    dtype=np.int64).reshape(-1, 4)
+    return np.array(
+        [(orders.ny + j, max(1, int(orders.nk[i, j])), count, 1) for j in used], dtype=np.int64
+    ).reshape(-1, 4)
 
 
-def _weighted_iv(signals: Sequence[np.ndarray], reg: np.ndarray, ins: np.ndarray, target: int,
-                 start: int, covariance: bool = True) -> tuple[np.ndarray, np.ndarray | None]:
+def _weighted_iv(
+    signals: Sequence[np.ndarray],
+    reg: np.ndarray,
+    ins: np.ndarray,
+    target: int,
+    start: int,
+    covariance: bool = True,
+) -> tuple[np.ndarray, np.ndarray | None]:
     """Solve the extended (overdetermined) IV problem with weight ``W = (Z^T Z)^-1``.
 
     Parameters
@@ -162,7 +177,7 @@ def _weighted_iv(signals: Sequence[np.ndarray], reg: np.ndarray, ins: np.ndarray
     for S in signals:
         G += lag_gram(S, blocks if covariance else ins, blocks, start)
         M += S.shape[1] - start
-    ZZ, R, r = G[:q, :q], G[:q, q:q + p], G[:q, -1]
+    ZZ, R, r = G[:q, :q], G[:q, q : q + p], G[:q, -1]
     # W^(1/2) from the eigen-decomposition: Z^T Z is nearly singular when the
     # simulated outputs are almost a combination of the delayed inputs (high SNR).
     s, V = np.linalg.eigh(ZZ)
@@ -173,7 +188,7 @@ def _weighted_iv(signals: Sequence[np.ndarray], reg: np.ndarray, ins: np.ndarray
     theta = sla.solve(RtWR, Rw.T @ rw, assume_a='pos', check_finite=False)
     if not covariance:
         return theta, None
-    PtP, Pty, yy = G[q:q + p, q:q + p], G[q:q + p, -1], G[-1, -1]
+    PtP, Pty, yy = G[q : q + p, q : q + p], G[q : q + p, -1], G[-1, -1]
     sse = max(yy - 2.0 * theta @ Pty + theta @ PtP @ theta, 0.0)
     cov = sse / max(1, M - p) * sla.solve(RtWR, np.eye(p), assume_a='pos', check_finite=False)
     return theta, cov
@@ -188,19 +203,26 @@ def _extended_iv(experiments: Sequence[IdData], orders: Orders) -> tuple[np.ndar
     for i in range(ny):
         ins = _input_instruments(orders, i, max(1, sizes[i]))
         start = max(orders.row_start(i), int((ins[:, 1] + ins[:, 2] - 1).max()))
-        thetas1.append(_weighted_iv(raw, row_blocks(orders, i), ins, i, start,
-                                    covariance=False)[0])
+        thetas1.append(
+            _weighted_iv(raw, row_blocks(orders, i), ins, i, start, covariance=False)[0]
+        )
     theta1 = np.concatenate(thetas1)
     prefilters = _noise_prefilters(experiments, orders, theta1)
-    x = _simulate(orders, theta1, experiments,
-                  fallback=lambda: arx_rows(experiments, orders, refine=False)[0])
+    x = _simulate(
+        orders,
+        theta1,
+        experiments,
+        fallback=lambda: arx_rows(experiments, orders, refine=False)[0],
+    )
     full = [signal_matrix(d, xe) for d, xe in zip(experiments, x, strict=True)]
     thetas, covs = [], []
     for i, L in enumerate(prefilters):
         signals = full if len(L) == 1 else [fir_rows(L, S) for S in full]
         ins_u = _input_instruments(orders, i, max(1, sizes[i]))
-        ins_x = np.array([(ny + nu + j, 1, int(orders.na[i, j]), -1) for j in range(ny)
-                          if orders.na[i, j]], dtype=np.int64).reshape(-1, 4)
+        ins_x = np.array(
+            [(ny + nu + j, 1, int(orders.na[i, j]), -1) for j in range(ny) if orders.na[i, j]],
+            dtype=np.int64,
+        ).reshape(-1, 4)
         ins = np.vstack([ins_x, ins_u])
         start = max(orders.row_start(i), int((ins[:, 1] + ins[:, 2] - 1).max())) + len(L) - 1
         theta, cov = _weighted_iv(signals, row_blocks(orders, i), ins, i, start)
@@ -209,8 +231,9 @@ def _extended_iv(experiments: Sequence[IdData], orders: Orders) -> tuple[np.ndar
     return np.concatenate(thetas), sla.block_diag(*covs)
 
 
-def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
-                      theta: np.ndarray) -> list[np.ndarray]:
+def _noise_prefilters(
+    experiments: Sequence[IdData], orders: Orders, theta: np.ndarray
+) -> list[np.ndarray]:
     """AR model ``L_i`` (order na_i + nb_i) of the equation error of each row."""
     residuals = [equation_errors(d.y, d.u, orders, theta).T for d in experiments]
     filters = []
@@ -226,8 +249,14 @@ def _noise_prefilters(experiments: Sequence[IdData], orders: Orders,
     return filters
 
 
-def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
-        refine: int = 0, method: str = 'toolbox') -> PolyModel:
+def iv4(
+    data: IdData | Sequence[IdData],
+    na: object,
+    nb: object,
+    nk: object = 1,
+    refine: int = 0,
+    method: str = 'toolbox',
+) -> PolyModel:
     """Estimate an ARX model by the four-stage instrumental-variable method.
 
     Parameters
@@ -275,12 +304,21 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
     check_data(experiments, orders)
     if method == 'extended':
         theta, cov = _extended_iv(experiments, orders)
-        return finish_model('iv4', orders, theta, cov, experiments,
-                            'extended IV (2SLS start, prefiltered, weighted [x, u] instruments)')
+        return finish_model(
+            'iv4',
+            orders,
+            theta,
+            cov,
+            experiments,
+            'extended IV (2SLS start, prefiltered, weighted [x, u] instruments)',
+        )
     theta1, _, _ = arx_rows(experiments, orders, refine=False)
     x1 = _simulate(orders, theta1, experiments)
-    thetas2, _ = _iv_rows([signal_matrix(d, x) for d, x in zip(experiments, x1, strict=True)],
-                          orders, covariance=False)
+    thetas2, _ = _iv_rows(
+        [signal_matrix(d, x) for d, x in zip(experiments, x1, strict=True)],
+        orders,
+        covariance=False,
+    )
     theta2 = np.concatenate(thetas2)
     theta_prev, cov = theta2, None
     for _ in range(1 + max(0, int(refine))):
@@ -288,8 +326,9 @@ def iv4(data: IdData | Sequence[IdData], na: object, nb: object, nk: object = 1,
         x2 = _simulate(orders, theta_prev, experiments, fallback=theta1)
         thetas4, covs4 = [], []
         for i, L in enumerate(prefilters):
-            signals = [fir_rows(L, signal_matrix(d, x))
-                       for d, x in zip(experiments, x2, strict=True)]
+            signals = [
+                fir_rows(L, signal_matrix(d, x)) for d, x in zip(experiments, x2, strict=True)
+            ]
             thetas, covs = _iv_rows(signals, orders, len(L) - 1, rows=[i])
             thetas4.append(thetas[0])
             covs4.append(covs[0])

@@ -122,8 +122,9 @@ class PolyModel:
 
     def __post_init__(self) -> None:
         if self.structure not in STRUCTURE_TITLES:
-            raise ValueError(f'structure must be one of {sorted(STRUCTURE_TITLES)}, '
-                             f'got {self.structure!r}')
+            raise ValueError(
+                f'structure must be one of {sorted(STRUCTURE_TITLES)}, got {self.structure!r}'
+            )
         if not self.Ts > 0:
             raise ValueError(f'Ts must be > 0 seconds, got {self.Ts!r}')
         theta = np.asarray(self.theta, dtype=float).copy()
@@ -136,8 +137,9 @@ class PolyModel:
         for name, count in (('output_units', ny), ('input_units', nu)):
             if not getattr(self, name):
                 object.__setattr__(self, name, ('',) * count)
-        object.__setattr__(self, 'noise_variance',
-                           np.atleast_2d(np.asarray(self.noise_variance, dtype=float)))
+        object.__setattr__(
+            self, 'noise_variance', np.atleast_2d(np.asarray(self.noise_variance, dtype=float))
+        )
 
     # --------------------------------------------------------------- accessors
     @property
@@ -199,15 +201,15 @@ class PolyModel:
         """
         o = self.orders
         if name == 'A':
-            return self.A[i, j, :o.na[i, j] + 1].copy()
+            return self.A[i, j, : o.na[i, j] + 1].copy()
         if name == 'B':
-            return self.B[i, j, :o.nk[i, j] + o.nb[i, j]].copy()
+            return self.B[i, j, : o.nk[i, j] + o.nb[i, j]].copy()
         if name == 'C':
-            return self.C[i, :o.nc[i] + 1].copy()
+            return self.C[i, : o.nc[i] + 1].copy()
         if name == 'D':
-            return self.D[i, :o.nd[i] + 1].copy()
+            return self.D[i, : o.nd[i] + 1].copy()
         if name == 'F':
-            return self.F[i, j, :o.nf[i, j] + 1].copy()
+            return self.F[i, j, : o.nf[i, j] + 1].copy()
         raise ValueError(f"polynomial name must be one of 'ABCDF', got {name!r}")
 
     # ------------------------------------------------------------- simulation
@@ -223,8 +225,9 @@ class PolyModel:
         if not isinstance(data, IdData):
             raise TypeError(f'data must be IdData, got {type(data).__name__}')
         if data.ny != self.ny or data.nu != self.nu:
-            raise ValueError(f'data has ny={data.ny}, nu={data.nu}; model has '
-                             f'ny={self.ny}, nu={self.nu}')
+            raise ValueError(
+                f'data has ny={data.ny}, nu={data.nu}; model has ny={self.ny}, nu={self.nu}'
+            )
         return np.asarray(data.y, dtype=float)
 
     def innovations_form(self) -> tuple[np.ndarray, ...]:
@@ -260,8 +263,11 @@ class PolyModel:
                 a = self.polynomial('A', i, i)
                 for j in range(self.nu):
                     if self.orders.nb[i, j]:
-                        rows[i] += lfilter(self.polynomial('B', i, j),
-                                           np.convolve(a, self.polynomial('F', i, j)), ur[j])
+                        rows[i] += lfilter(
+                            self.polynomial('B', i, j),
+                            np.convolve(a, self.polynomial('F', i, j)),
+                            ur[j],
+                        )
             ysim = rows.T
         if ic == 'zero':
             return ysim
@@ -342,9 +348,16 @@ class PolyModel:
         cross-check of the polynomial filters.
         """
         A, B, C, D, K = self.innovations_form()
-        return predictor_errors(A, B, C, D, K, np.zeros(A.shape[0]),
-                                np.ascontiguousarray(self._inputs(data)),
-                                np.ascontiguousarray(self._outputs(data)))
+        return predictor_errors(
+            A,
+            B,
+            C,
+            D,
+            K,
+            np.zeros(A.shape[0]),
+            np.ascontiguousarray(self._inputs(data)),
+            np.ascontiguousarray(self._outputs(data)),
+        )
 
     def predict(self, data: IdData, k: int = 1, ic: str = 'zero') -> np.ndarray:
         """Predict the outputs ``k`` steps ahead, ``yhat(t | t-k)``.
@@ -389,9 +402,9 @@ class PolyModel:
             deg = Ae.shape[2]
             comp = np.zeros((ny * deg, ny * deg))
             for k in range(deg):
-                comp[k * ny:(k + 1) * ny, :ny] = -Ae[:, :, k]
+                comp[k * ny : (k + 1) * ny, :ny] = -Ae[:, :, k]
                 if k + 1 < deg:
-                    comp[k * ny:(k + 1) * ny, (k + 1) * ny:(k + 2) * ny] = np.eye(ny)
+                    comp[k * ny : (k + 1) * ny, (k + 1) * ny : (k + 2) * ny] = np.eye(ny)
             out.append(np.linalg.eigvals(comp))
         else:
             out += [np.roots(self.polynomial('A', i, i)) for i in range(ny)]
@@ -475,8 +488,12 @@ class PolyModel:
         if np.any(self.orders.nf):  # F only with diagonal A: G_ij = B_ij / (A_ii F_ij)
             for i in range(ny):
                 nums.append([self.polynomial('B', i, j) for j in range(nu)])
-                dens.append([np.convolve(self.polynomial('A', i, i), self.polynomial('F', i, j))
-                             for j in range(nu)])
+                dens.append(
+                    [
+                        np.convolve(self.polynomial('A', i, i), self.polynomial('F', i, j))
+                        for j in range(nu)
+                    ]
+                )
         else:
             Apoly = [[self.polynomial('A', i, j) for j in range(ny)] for i in range(ny)]
             det = _poly_det(Apoly)
@@ -485,8 +502,9 @@ class PolyModel:
                 for j in range(nu):
                     num = np.zeros(1)
                     for m in range(ny):
-                        num = _padd(num, np.convolve(_cofactor(Apoly, m, i),
-                                                     self.polynomial('B', m, j)))
+                        num = _padd(
+                            num, np.convolve(_cofactor(Apoly, m, i), self.polynomial('B', m, j))
+                        )
                     row.append(num)
                 nums.append(row)
                 dens.append([det] * nu)
@@ -534,7 +552,7 @@ class PolyModel:
             for name, poly, monic, n, start in entries:
                 lines.append(f'    {name}(z) = {_poly_text(poly, monic)}')
                 if std is not None and n:
-                    s = std[start:start + n]
+                    s = std[start : start + n]
                     lines.append('      std: ' + ' '.join(f'{v:.3g}' for v in s))
         lines.append(f'  Orders: {o.describe()}')
         lines.append(f'  Number of free coefficients: {o.n_params}')
@@ -543,8 +561,11 @@ class PolyModel:
             r = self.report
             fits = ', '.join(f'{f:.2f}%' for f in r.fit)
             mses = ', '.join(f'{m:.4g}' for m in r.mse)
-            lines.append(f'  Estimated with {r.method} on {r.n_samples} samples'
-                         + (f', {r.iterations} iterations' if r.iterations else '') + '.')
+            lines.append(
+                f'  Estimated with {r.method} on {r.n_samples} samples'
+                + (f', {r.iterations} iterations' if r.iterations else '')
+                + '.'
+            )
             lines.append(f'  Fit to estimation data: {fits} (prediction focus)')
             lines.append(f'  FPE: {r.fpe:.4g}, MSE: {mses}')
         return '\n'.join(lines)

@@ -52,13 +52,23 @@ def _arma_start(v: Sequence[np.ndarray], nc: int, nd: int) -> tuple[np.ndarray, 
     return C, D
 
 
-def _box_jenkins(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf: int,
-                 nk: int, max_iter: int, tol: float) -> PolyModel:
+def _box_jenkins(
+    data: IdData | Sequence[IdData],
+    nb: int,
+    nc: int,
+    nd: int,
+    nf: int,
+    nk: int,
+    max_iter: int,
+    tol: float,
+) -> PolyModel:
     experiments = as_experiments(data)
     first = experiments[0]
     if (first.ny, first.nu) != (1, 1):
-        raise OrderError(f'OE and BJ are single-input single-output here; the data have '
-                         f'ny={first.ny}, nu={first.nu} (select one output and one input)')
+        raise OrderError(
+            f'OE and BJ are single-input single-output here; the data have '
+            f'ny={first.ny}, nu={first.nu} (select one output and one input)'
+        )
     orders = make_orders(1, 1, nb=nb, nc=nc, nd=nd, nf=nf, nk=nk)
     check_data(experiments, orders)
     if nb < 1:
@@ -69,31 +79,30 @@ def _box_jenkins(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf:
         b0 = start_model.polynomial('B')[nk:]
     else:
         F0 = np.ones(1)
-        Phi = np.vstack([lagged(d.u[:, 0], range(nk, nk + nb), nk + nb - 1)
-                         for d in experiments])
-        b0, _, _ = least_squares(Phi, np.concatenate([d.y[nk + nb - 1:, 0]
-                                                      for d in experiments]))
+        Phi = np.vstack([lagged(d.u[:, 0], range(nk, nk + nb), nk + nb - 1) for d in experiments])
+        b0, _, _ = least_squares(Phi, np.concatenate([d.y[nk + nb - 1 :, 0] for d in experiments]))
     us = [d.u[:, 0] for d in experiments]
     ys = [d.y[:, 0] for d in experiments]
 
     def split(theta: np.ndarray) -> tuple[np.ndarray, ...]:
         B = np.concatenate([np.zeros(nk), theta[:nb]])
-        C = np.concatenate([[1.0], theta[nb:nb + nc]])
-        D = np.concatenate([[1.0], theta[nb + nc:nb + nc + nd]])
-        F = np.concatenate([[1.0], theta[nb + nc + nd:]])
+        C = np.concatenate([[1.0], theta[nb : nb + nc]])
+        D = np.concatenate([[1.0], theta[nb + nc : nb + nc + nd]])
+        F = np.concatenate([[1.0], theta[nb + nc + nd :]])
         return B, C, D, F
 
     C0, D0 = np.ones(1), np.ones(1)
     if nc or nd:
-        v0 = [y - lfilter(np.concatenate([np.zeros(nk), b0]), F0, u)
-              for y, u in zip(ys, us, strict=True)]
+        v0 = [
+            y - lfilter(np.concatenate([np.zeros(nk), b0]), F0, u)
+            for y, u in zip(ys, us, strict=True)
+        ]
         C0, D0 = _arma_start(v0, nc, nd)
     theta0 = np.concatenate([b0, C0[1:], D0[1:], F0[1:]])
 
     def project(theta: np.ndarray) -> np.ndarray:
         B, C, D, F = split(theta)
-        return np.concatenate([theta[:nb], stabilize(C)[1:], stabilize(D)[1:],
-                               stabilize(F)[1:]])
+        return np.concatenate([theta[:nb], stabilize(C)[1:], stabilize(D)[1:], stabilize(F)[1:]])
 
     def errors(theta: np.ndarray) -> np.ndarray:
         B, C, D, F = split(theta)
@@ -107,7 +116,7 @@ def _box_jenkins(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf:
         B, C, D, F = split(theta)
         blocks, pos = [], 0
         for y, u in zip(ys, us, strict=True):
-            ex = e[pos:pos + len(y)]
+            ex = e[pos : pos + len(y)]
             pos += len(y)
             w = lfilter(B, F, u)
             cf = np.convolve(C, F)
@@ -125,13 +134,25 @@ def _box_jenkins(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf:
     result = levenberg_marquardt(theta0, errors, from_jacobian(gradient), project, max_iter, tol)
     structure = 'bj' if (nc or nd) else 'oe'
     name = 'BJ' if structure == 'bj' else 'OE'
-    return finish_model(structure, orders, result.theta, result.covariance, experiments,
-                        f'{name}, prediction-error method (Levenberg-Marquardt)',
-                        result.iterations)
+    return finish_model(
+        structure,
+        orders,
+        result.theta,
+        result.covariance,
+        experiments,
+        f'{name}, prediction-error method (Levenberg-Marquardt)',
+        result.iterations,
+    )
 
 
-def oe(data: IdData | Sequence[IdData], nb: int, nf: int, nk: int = 1,
-       max_iter: int = 100, tol: float | None = None) -> PolyModel:
+def oe(
+    data: IdData | Sequence[IdData],
+    nb: int,
+    nf: int,
+    nk: int = 1,
+    max_iter: int = 100,
+    tol: float | None = None,
+) -> PolyModel:
     """Estimate an output-error model ``y = B/F u(t - nk) + e`` (SISO).
 
     Parameters
@@ -158,8 +179,16 @@ def oe(data: IdData | Sequence[IdData], nb: int, nf: int, nk: int = 1,
     return _box_jenkins(data, int(nb), 0, 0, int(nf), int(nk), max_iter, tol)
 
 
-def bj(data: IdData | Sequence[IdData], nb: int, nc: int, nd: int, nf: int, nk: int = 1,
-       max_iter: int = 100, tol: float | None = None) -> PolyModel:
+def bj(
+    data: IdData | Sequence[IdData],
+    nb: int,
+    nc: int,
+    nd: int,
+    nf: int,
+    nk: int = 1,
+    max_iter: int = 100,
+    tol: float | None = None,
+) -> PolyModel:
     """Estimate a Box-Jenkins model ``y = B/F u(t - nk) + C/D e`` (SISO).
 
     Parameters

@@ -73,8 +73,10 @@ class Orders:
 
     def row_sizes(self) -> list[int]:
         """Return the number of free parameters of each output row."""
-        return [int(self.na[i].sum() + self.nb[i].sum() + self.nc[i] + self.nd[i]
-                    + self.nf[i].sum()) for i in range(self.ny)]
+        return [
+            int(self.na[i].sum() + self.nb[i].sum() + self.nc[i] + self.nd[i] + self.nf[i].sum())
+            for i in range(self.ny)
+        ]
 
     @property
     def n_params(self) -> int:
@@ -84,8 +86,9 @@ class Orders:
     def row_start(self, i: int) -> int:
         """Index of the first sample with all regressors of output ``i`` available."""
         lags = [int(self.na[i].max(initial=0))]
-        lags += [int(self.nk[i, j] + self.nb[i, j] - 1) for j in range(self.nu)
-                 if self.nb[i, j] > 0]
+        lags += [
+            int(self.nk[i, j] + self.nb[i, j] - 1) for j in range(self.nu) if self.nb[i, j] > 0
+        ]
         return max([0, *lags])
 
     def as_dict(self) -> dict[str, list]:
@@ -106,14 +109,24 @@ class Orders:
             if value.size == 1:
                 parts.append(f'{key}={int(value.ravel()[0])}')
             else:
-                rows = ';'.join(' '.join(str(v) for v in np.atleast_1d(r)) for r in
-                                (value if value.ndim == 2 else value[:, None]))
+                rows = ';'.join(
+                    ' '.join(str(v) for v in np.atleast_1d(r))
+                    for r in (value if value.ndim == 2 else value[:, None])
+                )
                 parts.append(f'{key}=[{rows}]')
         return '  '.join(parts)
 
 
-def make_orders(ny: int, nu: int, na: object = 0, nb: object = 0, nk: object = 1,
-                nc: object = 0, nd: object = 0, nf: object = 0) -> Orders:
+def make_orders(
+    ny: int,
+    nu: int,
+    na: object = 0,
+    nb: object = 0,
+    nk: object = 1,
+    nc: object = 0,
+    nd: object = 0,
+    nf: object = 0,
+) -> Orders:
     """Build and check :class:`Orders`, broadcasting scalars to the full shapes.
 
     Parameters
@@ -140,11 +153,18 @@ def make_orders(ny: int, nu: int, na: object = 0, nb: object = 0, nk: object = 1
     """
     if ny < 1:
         raise OrderError(f'ny must be >= 1, got {ny}')
-    orders = Orders(na=_matrix(na, (ny, ny), 'na'), nb=_matrix(nb, (ny, nu), 'nb'),
-                    nk=_matrix(nk, (ny, nu), 'nk'), nc=_matrix(nc, (ny,), 'nc'),
-                    nd=_matrix(nd, (ny,), 'nd'), nf=_matrix(nf, (ny, nu), 'nf'))
+    orders = Orders(
+        na=_matrix(na, (ny, ny), 'na'),
+        nb=_matrix(nb, (ny, nu), 'nb'),
+        nk=_matrix(nk, (ny, nu), 'nk'),
+        nc=_matrix(nc, (ny,), 'nc'),
+        nd=_matrix(nd, (ny,), 'nd'),
+        nf=_matrix(nf, (ny, nu), 'nf'),
+    )
     offdiag = orders.na[~np.eye(ny, dtype=bool)]
     if (np.any(orders.nf) or np.any(orders.nd)) and np.any(offdiag):
-        raise OrderError('F or D polynomials need a diagonal na (no cross-output A terms), '
-                         f'got na={orders.na.tolist()}')
+        raise OrderError(
+            'F or D polynomials need a diagonal na (no cross-output A terms), '
+            f'got na={orders.na.tolist()}'
+        )
     return orders

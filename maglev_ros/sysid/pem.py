@@ -93,10 +93,14 @@ def from_jacobian(gradient: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> N
     return normal
 
 
-def levenberg_marquardt(theta0: np.ndarray, errors: Callable[[np.ndarray], np.ndarray],
-                        normal: Normal,
-                        project: Callable[[np.ndarray], np.ndarray] | None = None,
-                        max_iter: int = 50, tol: float | None = None) -> PemResult:
+def levenberg_marquardt(
+    theta0: np.ndarray,
+    errors: Callable[[np.ndarray], np.ndarray],
+    normal: Normal,
+    project: Callable[[np.ndarray], np.ndarray] | None = None,
+    max_iter: int = 50,
+    tol: float | None = None,
+) -> PemResult:
     """Minimize ``||e(theta)||^2`` by damped Gauss-Newton steps.
 
     Parameters

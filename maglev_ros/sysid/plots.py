@@ -28,9 +28,14 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return path
 
 
-def compare_plot(data: IdData, models: Sequence[PolyModel], path: str | Path,
-                 labels: Sequence[str] | None = None, horizon: int | None = None,
-                 ic: str = 'zero') -> Path:
+def compare_plot(
+    data: IdData,
+    models: Sequence[PolyModel],
+    path: str | Path,
+    labels: Sequence[str] | None = None,
+    horizon: int | None = None,
+    ic: str = 'zero',
+) -> Path:
     """Plot measured outputs against each model's output, fit % in the legend.
 
     Parameters
@@ -72,9 +77,12 @@ def compare_plot(data: IdData, models: Sequence[PolyModel], path: str | Path,
     return _save(fig, path)
 
 
-def resid_plot(analysis: ResidualAnalysis, path: str | Path,
-               output_names: Sequence[str] | None = None,
-               input_names: Sequence[str] | None = None) -> Path:
+def resid_plot(
+    analysis: ResidualAnalysis,
+    path: str | Path,
+    output_names: Sequence[str] | None = None,
+    input_names: Sequence[str] | None = None,
+) -> Path:
     """Plot residual autocorrelation and input-residual cross-correlation with 99 % bounds.
 
     Parameters
@@ -99,8 +107,9 @@ def resid_plot(analysis: ResidualAnalysis, path: str | Path,
     lags = analysis.lags
     for i in range(ny):
         panels = [(analysis.autocorr[i], f'autocorr e({onames[i]})')]
-        panels += [(analysis.crosscorr[i, j], f'xcorr e({onames[i]}), {inames[j]}')
-                   for j in range(nu)]
+        panels += [
+            (analysis.crosscorr[i, j], f'xcorr e({onames[i]}), {inames[j]}') for j in range(nu)
+        ]
         for ax, (values, title) in zip(axes[i], panels, strict=True):
             ax.vlines(lags, 0, values, lw=1.5)
             ax.axhspan(-analysis.bound, analysis.bound, color='tab:blue', alpha=0.15)
@@ -112,8 +121,12 @@ def resid_plot(analysis: ResidualAnalysis, path: str | Path,
     return _save(fig, path)
 
 
-def bode_plot(models: Sequence[PolyModel], path: str | Path,
-              labels: Sequence[str] | None = None, n_points: int = 400) -> Path:
+def bode_plot(
+    models: Sequence[PolyModel],
+    path: str | Path,
+    labels: Sequence[str] | None = None,
+    n_points: int = 400,
+) -> Path:
     """Bode plot (magnitude in dB, phase in degrees) of every input-output channel.
 
     Parameters
@@ -145,8 +158,9 @@ def bode_plot(models: Sequence[PolyModel], path: str | Path,
                 mag = 20 * np.log10(np.maximum(np.abs(H[:, i, j]), 1e-300))
                 axes[2 * i, j].semilogx(f, mag, label=label)
                 axes[2 * i + 1, j].semilogx(f, np.degrees(np.unwrap(np.angle(H[:, i, j]))))
-                axes[2 * i, j].set_title(f'{first.input_names[j]} -> {first.output_names[i]}',
-                                         fontsize='small')
+                axes[2 * i, j].set_title(
+                    f'{first.input_names[j]} -> {first.output_names[i]}', fontsize='small'
+                )
                 axes[2 * i, j].set_ylabel('magnitude [dB]')
                 axes[2 * i + 1, j].set_ylabel('phase [deg]')
                 axes[2 * i + 1, j].set_xlabel('frequency [Hz]')

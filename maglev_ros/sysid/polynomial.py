@@ -50,19 +50,19 @@ def unpack(orders: Orders, theta: np.ndarray) -> Polynomials:
     for i in range(ny):
         for j in range(ny):
             n = o.na[i, j]
-            A[i, j, 1:n + 1] = theta[pos:pos + n]
+            A[i, j, 1 : n + 1] = theta[pos : pos + n]
             pos += n
         for j in range(nu):
             n, k = o.nb[i, j], o.nk[i, j]
-            B[i, j, k:k + n] = theta[pos:pos + n]
+            B[i, j, k : k + n] = theta[pos : pos + n]
             pos += n
-        C[i, 1:o.nc[i] + 1] = theta[pos:pos + o.nc[i]]
+        C[i, 1 : o.nc[i] + 1] = theta[pos : pos + o.nc[i]]
         pos += o.nc[i]
-        D[i, 1:o.nd[i] + 1] = theta[pos:pos + o.nd[i]]
+        D[i, 1 : o.nd[i] + 1] = theta[pos : pos + o.nd[i]]
         pos += o.nd[i]
         for j in range(nu):
             n = o.nf[i, j]
-            F[i, j, 1:n + 1] = theta[pos:pos + n]
+            F[i, j, 1 : n + 1] = theta[pos : pos + n]
             pos += n
     return A, B, C, D, F
 
@@ -86,21 +86,22 @@ def pack(orders: Orders, polys: Polynomials) -> np.ndarray:
     o = orders
     out: list[np.ndarray] = []
     for i in range(o.ny):
-        out += [A[i, j, 1:o.na[i, j] + 1] for j in range(o.ny)]
-        out += [B[i, j, o.nk[i, j]:o.nk[i, j] + o.nb[i, j]] for j in range(o.nu)]
-        out += [C[i, 1:o.nc[i] + 1], D[i, 1:o.nd[i] + 1]]
-        out += [F[i, j, 1:o.nf[i, j] + 1] for j in range(o.nu)]
+        out += [A[i, j, 1 : o.na[i, j] + 1] for j in range(o.ny)]
+        out += [B[i, j, o.nk[i, j] : o.nk[i, j] + o.nb[i, j]] for j in range(o.nu)]
+        out += [C[i, 1 : o.nc[i] + 1], D[i, 1 : o.nd[i] + 1]]
+        out += [F[i, j, 1 : o.nf[i, j] + 1] for j in range(o.nu)]
     return np.concatenate(out) if out else np.zeros(0)
 
 
 def _pad(p: np.ndarray, n: int) -> np.ndarray:
     out = np.zeros(n)
-    out[:len(p)] = p
+    out[: len(p)] = p
     return out
 
 
-def equivalent_armax(polys: Polynomials, noise: bool = True
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def equivalent_armax(
+    polys: Polynomials, noise: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Rewrite the model as a matrix ARMAX ``Ae(q) y = Be(q) u + Ce(q) e``.
 
     ``F`` and ``D`` (only allowed with a diagonal ``A``) are moved into common
@@ -125,11 +126,11 @@ def equivalent_armax(polys: Polynomials, noise: bool = True
     if trivial_f:
         n = max(A.shape[2], B.shape[2], C.shape[1]) - 1
         Ae = np.zeros((ny, ny, n + 1))
-        Ae[:, :, :A.shape[2]] = A
+        Ae[:, :, : A.shape[2]] = A
         Be = np.zeros((ny, nu, n + 1))
-        Be[:, :, :B.shape[2]] = B
+        Be[:, :, : B.shape[2]] = B
         Ce = np.zeros((ny, n + 1))
-        Ce[:, :C.shape[1]] = C
+        Ce[:, : C.shape[1]] = C
         return Ae, Be, Ce
     rows_a, rows_b, rows_c = [], [], []
     for i in range(ny):
@@ -147,8 +148,14 @@ def equivalent_armax(polys: Polynomials, noise: bool = True
             bs.append(np.convolve(np.convolve(B[i, j], d), others))
         rows_b.append(bs)
         rows_c.append(np.convolve(C[i], fprod))
-    n = max([len(a) for a in rows_a] + [len(b) for r in rows_b for b in r]
-            + [len(c) for c in rows_c]) - 1
+    n = (
+        max(
+            [len(a) for a in rows_a]
+            + [len(b) for r in rows_b for b in r]
+            + [len(c) for c in rows_c]
+        )
+        - 1
+    )
     Ae = np.zeros((ny, ny, n + 1))
     Be = np.zeros((ny, nu, n + 1))
     Ce = np.zeros((ny, n + 1))
@@ -160,8 +167,9 @@ def equivalent_armax(polys: Polynomials, noise: bool = True
     return Ae, Be, Ce
 
 
-def innovations_form(polys: Polynomials, noise: bool = True
-                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def innovations_form(
+    polys: Polynomials, noise: bool = True
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Block observer-canonical innovations form ``x+ = Ax + Bu + Ke``, ``y = Cx + Du + e``.
 
     Parameters
@@ -191,7 +199,7 @@ def innovations_form(polys: Polynomials, noise: bool = True
         Ak = Ae[:, :, k]
         Ass[rows, 0:ny] = -Ak
         if k < deg:
-            Ass[rows, k * ny:(k + 1) * ny] = np.eye(ny)
+            Ass[rows, k * ny : (k + 1) * ny] = np.eye(ny)
         Bss[rows] = Be[:, :, k] - Ak @ B0
         Kss[rows] = np.diag(Ce[:, k]) - Ak
     Css = np.zeros((ny, nx))
@@ -201,8 +209,9 @@ def innovations_form(polys: Polynomials, noise: bool = True
 
 
 @njit(cache=True)
-def simulate_ss(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
-                x0: np.ndarray, u: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def simulate_ss(
+    A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, x0: np.ndarray, u: np.ndarray
+) -> np.ndarray:  # pragma: no cover - numba
     """Simulate ``x+ = Ax + Bu``, ``y = Cx + Du``; ``u`` (N, nu) -> ``y`` (N, ny)."""
     N, nu = u.shape
     ny, n = C.shape
@@ -229,9 +238,16 @@ def simulate_ss(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
 
 
 @njit(cache=True)
-def predictor_errors(A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray,
-                     K: np.ndarray, x0: np.ndarray, u: np.ndarray,
-                     y: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def predictor_errors(
+    A: np.ndarray,
+    B: np.ndarray,
+    C: np.ndarray,
+    D: np.ndarray,
+    K: np.ndarray,
+    x0: np.ndarray,
+    u: np.ndarray,
+    y: np.ndarray,
+) -> np.ndarray:  # pragma: no cover - numba
     """One-step prediction errors of the innovations form (Kalman predictor), (N, ny)."""
     N, nu = u.shape
     ny, n = C.shape

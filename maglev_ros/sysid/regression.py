@@ -26,8 +26,17 @@ from .dataset import IdData
 from .model import EstimationReport, PolyModel
 from .orders import OrderError, Orders
 
-__all__ = ['arx_regressors', 'check_data', 'equation_errors', 'finish_model', 'fir_add',
-           'fir_rows', 'join', 'lagged', 'stack_rows']
+__all__ = [
+    'arx_regressors',
+    'check_data',
+    'equation_errors',
+    'finish_model',
+    'fir_add',
+    'fir_rows',
+    'join',
+    'lagged',
+    'stack_rows',
+]
 
 
 @njit(cache=True)
@@ -37,7 +46,7 @@ def _fir_add(h: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:  # pragma: 
         c = h[k]
         if c != 0.0:
             dst = out[k:]  # slice views: unit-stride loop that LLVM vectorises
-            src = x[:N - k]
+            src = x[: N - k]
             for t in range(N - k):
                 dst[t] += c * src[t]
 
@@ -81,8 +90,13 @@ def fir_rows(h: np.ndarray, X: np.ndarray) -> np.ndarray:
     return out
 
 
-def equation_errors(y: np.ndarray, u: np.ndarray, orders: Orders, theta: np.ndarray,
-                    rows: Sequence[int] | None = None) -> np.ndarray:
+def equation_errors(
+    y: np.ndarray,
+    u: np.ndarray,
+    orders: Orders,
+    theta: np.ndarray,
+    rows: Sequence[int] | None = None,
+) -> np.ndarray:
     """Equation errors ``A_i y - B_i u`` of ARX-layout rows, zero past, shape (len(rows), N).
 
     Parameters
@@ -117,12 +131,12 @@ def equation_errors(y: np.ndarray, u: np.ndarray, orders: Orders, theta: np.ndar
         for j in range(orders.ny):
             n = int(orders.na[i, j])
             if n:
-                _fir_add(np.r_[0.0, theta[pos:pos + n]], yr[j], out[r])
+                _fir_add(np.r_[0.0, theta[pos : pos + n]], yr[j], out[r])
                 pos += n
         for j in range(orders.nu):
             n, k = int(orders.nb[i, j]), int(orders.nk[i, j])
             if n:
-                _fir_add(np.r_[np.zeros(k), -theta[pos:pos + n]], ur[j], out[r])
+                _fir_add(np.r_[np.zeros(k), -theta[pos : pos + n]], ur[j], out[r])
                 pos += n
     return out
 
@@ -157,12 +171,11 @@ def lagged(signal: np.ndarray, lags: Sequence[int], start: int) -> np.ndarray:
     N = signal.shape[0]
     out = np.empty((len(lags), N - start))  # filled row by row, returned transposed
     for c, lag in enumerate(lags):
-        out[c] = signal[start - lag:N - lag]
+        out[c] = signal[start - lag : N - lag]
     return out.T
 
 
-def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int,
-                   start: int) -> np.ndarray:
+def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int, start: int) -> np.ndarray:
     """Regression matrix of the ``A``/``B`` part of output ``i``.
 
     Parameters
@@ -189,12 +202,12 @@ def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int,
     c = 0
     for j in range(orders.ny):
         for lag in range(1, orders.na[i, j] + 1):
-            np.negative(y[start - lag:N - lag, j], out=out[c])
+            np.negative(y[start - lag : N - lag, j], out=out[c])
             c += 1
     for j in range(orders.nu):
         k = orders.nk[i, j]
         for lag in range(k, k + orders.nb[i, j]):
-            out[c] = u[start - lag:N - lag, j]
+            out[c] = u[start - lag : N - lag, j]
             c += 1
     return out.T
 
@@ -211,20 +224,31 @@ def check_data(experiments: Sequence[IdData], orders: Orders) -> None:
     """
     first = experiments[0]
     if (first.ny, first.nu) != (orders.ny, orders.nu):
-        raise OrderError(f'orders are for ny={orders.ny}, nu={orders.nu} but the data have '
-                         f'ny={first.ny}, nu={first.nu}')
+        raise OrderError(
+            f'orders are for ny={orders.ny}, nu={orders.nu} but the data have '
+            f'ny={first.ny}, nu={first.nu}'
+        )
     sizes = orders.row_sizes()
     for i in range(orders.ny):
         start = orders.row_start(i) + int(orders.nc[i] + orders.nd[i] + orders.nf[i].sum())
         usable = sum(max(0, d.N - start) for d in experiments)
         if usable <= sizes[i]:
-            raise ValueError(f'output {i + 1} has {sizes[i]} parameters but only {usable} '
-                             f'usable samples: fewer samples than parameters')
+            raise ValueError(
+                f'output {i + 1} has {sizes[i]} parameters but only {usable} '
+                f'usable samples: fewer samples than parameters'
+            )
 
 
-def finish_model(structure: str, orders: Orders, theta: np.ndarray,
-                 covariance: np.ndarray | None, experiments: Sequence[IdData], method: str,
-                 iterations: int = 0, noise_variance: np.ndarray | None = None) -> PolyModel:
+def finish_model(
+    structure: str,
+    orders: Orders,
+    theta: np.ndarray,
+    covariance: np.ndarray | None,
+    experiments: Sequence[IdData],
+    method: str,
+    iterations: int = 0,
+    noise_variance: np.ndarray | None = None,
+) -> PolyModel:
     """Wrap estimated parameters in a :class:`PolyModel` with its estimation report.
 
     The report's fit, MSE, FPE and AIC use the one-step prediction errors of
@@ -258,17 +282,43 @@ def finish_model(structure: str, orders: Orders, theta: np.ndarray,
     if structure in ('arx', 'iv4'):  # e = A y - B u: compiled FIR instead of convolutions
         errors = [equation_errors(d.y, d.u, orders, theta).T for d in experiments]
     else:
-        draft = PolyModel(structure, orders, theta, first.Ts, np.eye(orders.ny), None,
-                          first.output_names, first.input_names, first.output_units,
-                          first.input_units)
+        draft = PolyModel(
+            structure,
+            orders,
+            theta,
+            first.Ts,
+            np.eye(orders.ny),
+            None,
+            first.output_names,
+            first.input_names,
+            first.output_units,
+            first.input_units,
+        )
         errors = [draft.residuals(d) for d in experiments]
     e = stack_rows(errors)
     y = stack_rows([d.y for d in experiments])
     N = e.shape[0]
     ete = e.T @ e
     lam = ete / N if noise_variance is None else noise_variance
-    report = EstimationReport(method=method, n_samples=N, fit=fit_percent(y, y - e),
-                              mse=np.diag(ete) / N, fpe=fpe(e, orders.n_params),
-                              aic=aic(e, orders.n_params), iterations=iterations)
-    return PolyModel(structure, orders, theta, first.Ts, lam, covariance, first.output_names,
-                     first.input_names, first.output_units, first.input_units, report)
+    report = EstimationReport(
+        method=method,
+        n_samples=N,
+        fit=fit_percent(y, y - e),
+        mse=np.diag(ete) / N,
+        fpe=fpe(e, orders.n_params),
+        aic=aic(e, orders.n_params),
+        iterations=iterations,
+    )
+    return PolyModel(
+        structure,
+        orders,
+        theta,
+        first.Ts,
+        lam,
+        covariance,
+        first.output_names,
+        first.input_names,
+        first.output_units,
+        first.input_units,
+        report,
+    )

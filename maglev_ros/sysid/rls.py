@@ -35,8 +35,9 @@ def _check_forgetting(forgetting: float, p0: float) -> None:
 
 
 @njit(cache=True)
-def _rls_run(Phi: np.ndarray, Y: np.ndarray, lam: float, P: np.ndarray,
-             theta: np.ndarray) -> np.ndarray:  # pragma: no cover - numba
+def _rls_run(
+    Phi: np.ndarray, Y: np.ndarray, lam: float, P: np.ndarray, theta: np.ndarray
+) -> np.ndarray:  # pragma: no cover - numba
     N, p = Phi.shape
     history = np.empty((N, p))
     Pphi = np.empty(p)
@@ -76,8 +77,9 @@ class RlsResult:
     model: PolyModel
 
 
-def rls_arx(data: IdData, na: object, nb: object, nk: object = 1, forgetting: float = 1.0,
-            p0: float = 1e4) -> RlsResult:
+def rls_arx(
+    data: IdData, na: object, nb: object, nk: object = 1, forgetting: float = 1.0, p0: float = 1e4
+) -> RlsResult:
     """Run recursive least-squares ARX over a data set (numba kernel).
 
     Parameters
@@ -107,11 +109,28 @@ def rls_arx(data: IdData, na: object, nb: object, nk: object = 1, forgetting: fl
     for i in range(orders.ny):
         Phi = np.ascontiguousarray(arx_regressors(y, u, orders, i, lag))
         p = Phi.shape[1]
-        histories.append(_rls_run(Phi, np.ascontiguousarray(data.y[:, i]), float(forgetting),
-                                  p0 * np.eye(p), np.zeros(p)))
+        histories.append(
+            _rls_run(
+                Phi,
+                np.ascontiguousarray(data.y[:, i]),
+                float(forgetting),
+                p0 * np.eye(p),
+                np.zeros(p),
+            )
+        )
     theta = np.hstack(histories)
-    model = PolyModel('arx', orders, theta[-1], data.Ts, np.eye(orders.ny), None,
-                      data.output_names, data.input_names, data.output_units, data.input_units)
+    model = PolyModel(
+        'arx',
+        orders,
+        theta[-1],
+        data.Ts,
+        np.eye(orders.ny),
+        None,
+        data.output_names,
+        data.input_names,
+        data.output_units,
+        data.input_units,
+    )
     return RlsResult(theta=theta, model=model)
 
 
@@ -132,8 +151,16 @@ class RecursiveArx:
         Initial covariance scale.
     """
 
-    def __init__(self, na: object, nb: object, nk: object = 1, ny: int = 1, nu: int = 1,
-                 forgetting: float = 0.99, p0: float = 1e4) -> None:
+    def __init__(
+        self,
+        na: object,
+        nb: object,
+        nk: object = 1,
+        ny: int = 1,
+        nu: int = 1,
+        forgetting: float = 0.99,
+        p0: float = 1e4,
+    ) -> None:
         _check_forgetting(forgetting, p0)
         self.orders: Orders = make_orders(ny, nu, na=na, nb=nb, nk=nk)
         self.forgetting = float(forgetting)
@@ -150,15 +177,18 @@ class RecursiveArx:
         """Current parameter vector, shape (n_params,)."""
         return np.concatenate(self._theta)
 
-    def update(self, y: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray
-               ) -> np.ndarray:
+    def update(
+        self, y: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray
+    ) -> np.ndarray:
         """Add one sample ``y(t)`` (ny,) and ``u(t)`` (nu,); return the new parameters."""
         y = np.atleast_1d(np.asarray(y, dtype=float))
         u = np.atleast_1d(np.asarray(u, dtype=float))
         o = self.orders
         if y.shape != (o.ny,) or u.shape != (o.nu,):
-            raise ValueError(f'update needs y of shape ({o.ny},) and u of shape ({o.nu},), '
-                             f'got {y.shape} and {u.shape}')
+            raise ValueError(
+                f'update needs y of shape ({o.ny},) and u of shape ({o.nu},), '
+                f'got {y.shape} and {u.shape}'
+            )
         self._u = np.roll(self._u, 1, axis=0)
         self._u[0] = u
         self._y = np.roll(self._y, 1, axis=0)

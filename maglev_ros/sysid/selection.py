@@ -54,9 +54,13 @@ def _grid(values: int | Iterable[int], name: str) -> list[int]:
     return out
 
 
-def arxstruc(estimation: IdData, validation: IdData | None = None,
-             na: int | Iterable[int] = range(1, 11), nb: int | Iterable[int] = range(1, 11),
-             nk: int | Iterable[int] = 1) -> OrderSearch:
+def arxstruc(
+    estimation: IdData,
+    validation: IdData | None = None,
+    na: int | Iterable[int] = range(1, 11),
+    nb: int | Iterable[int] = range(1, 11),
+    nk: int | Iterable[int] = 1,
+) -> OrderSearch:
     """Fit all ARX structures of a grid and tabulate their losses (SISO).
 
     Parameters
@@ -74,8 +78,10 @@ def arxstruc(estimation: IdData, validation: IdData | None = None,
         One row per candidate.
     """
     if (estimation.ny, estimation.nu) != (1, 1):
-        raise OrderError(f'arxstruc searches SISO structures; data have ny={estimation.ny}, '
-                         f'nu={estimation.nu} (select one output and one input)')
+        raise OrderError(
+            f'arxstruc searches SISO structures; data have ny={estimation.ny}, '
+            f'nu={estimation.nu} (select one output and one input)'
+        )
     validation = estimation if validation is None else validation
     rows, loss, aics, mdls, npar = [], [], [], [], []
     for a, b, k in product(_grid(na, 'na'), _grid(nb, 'nb'), _grid(nk, 'nk')):
@@ -86,12 +92,17 @@ def arxstruc(estimation: IdData, validation: IdData | None = None,
         e_val = model.residuals(validation)[start:]
         e_est = model.residuals(estimation)[start:]
         rows.append((a, b, k))
-        loss.append(float(np.mean(e_val ** 2)))
+        loss.append(float(np.mean(e_val**2)))
         aics.append(aic(e_est, a + b))
         mdls.append(mdl(e_est, a + b))
         npar.append(a + b)
-    return OrderSearch(np.array(rows, dtype=int), np.array(loss), np.array(aics),
-                       np.array(mdls), np.array(npar, dtype=int))
+    return OrderSearch(
+        np.array(rows, dtype=int),
+        np.array(loss),
+        np.array(aics),
+        np.array(mdls),
+        np.array(npar, dtype=int),
+    )
 
 
 def selstruc(search: OrderSearch, criterion: str = 'val') -> tuple[int, int, int]:

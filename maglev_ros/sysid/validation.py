@@ -45,8 +45,9 @@ class CompareResult:
     horizon: int | None
 
 
-def compare(model: PolyModel, data: IdData, horizon: int | None = None,
-            ic: str = 'zero') -> CompareResult:
+def compare(
+    model: PolyModel, data: IdData, horizon: int | None = None, ic: str = 'zero'
+) -> CompareResult:
     """Compare model output with measured output, as the toolbox's ``compare``.
 
     Parameters
@@ -127,11 +128,13 @@ class ResidualAnalysis:
         verdict = 'PASS' if self.passed else 'FAIL'
         white = 'ok' if self.white else 'failed'
         indep = 'ok' if self.independent else 'failed'
-        return (f'residual analysis {verdict} (99 %): whiteness {white} '
-                f'(statistic {self.whiteness_stat.max():.1f}, limit {self.whiteness_limit:.1f}), '
-                f'input independence {indep} (statistic '
-                f'{self.independence_stat.max(initial=0):.1f}, limit '
-                f'{self.independence_limit:.1f})')
+        return (
+            f'residual analysis {verdict} (99 %): whiteness {white} '
+            f'(statistic {self.whiteness_stat.max():.1f}, limit {self.whiteness_limit:.1f}), '
+            f'input independence {indep} (statistic '
+            f'{self.independence_stat.max(initial=0):.1f}, limit '
+            f'{self.independence_limit:.1f})'
+        )
 
 
 def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
@@ -142,11 +145,12 @@ def _xcorr(a: np.ndarray, b: np.ndarray, max_lag: int) -> np.ndarray:
     scale = N * a.std() * b.std()
     if scale == 0:
         return np.zeros(max_lag + 1)
-    return np.array([a[tau:] @ b[:N - tau] for tau in range(max_lag + 1)]) / scale
+    return np.array([a[tau:] @ b[: N - tau] for tau in range(max_lag + 1)]) / scale
 
 
-def resid(model: PolyModel, data: IdData | Sequence[IdData], max_lag: int = 25,
-          skip: int | None = None) -> ResidualAnalysis:
+def resid(
+    model: PolyModel, data: IdData | Sequence[IdData], max_lag: int = 25, skip: int | None = None
+) -> ResidualAnalysis:
     """Residual analysis: whiteness and input independence of the prediction errors.
 
     Parameters
@@ -171,19 +175,40 @@ def resid(model: PolyModel, data: IdData | Sequence[IdData], max_lag: int = 25,
     if max_lag < 1:
         raise ValueError(f'max_lag must be >= 1, got {max_lag!r}')
     e = model.residuals(data)
-    start = int(max(model.A.shape[2], model.B.shape[2], model.C.shape[1], model.D.shape[1],
-                    model.F.shape[2])) if skip is None else int(skip)
+    start = (
+        int(
+            max(
+                model.A.shape[2],
+                model.B.shape[2],
+                model.C.shape[1],
+                model.D.shape[1],
+                model.F.shape[2],
+            )
+        )
+        if skip is None
+        else int(skip)
+    )
     e_used, u_used = e[start:], data.u[start:]
     N = e_used.shape[0]
     if N <= 2 * max_lag:
         raise ValueError(f'max_lag={max_lag} is too large for {N} residual samples')
     auto = np.array([_xcorr(e_used[:, i], e_used[:, i], max_lag) for i in range(model.ny)])
-    cross = np.array([[_xcorr(e_used[:, i], u_used[:, j], max_lag) for j in range(model.nu)]
-                      for i in range(model.ny)]).reshape(model.ny, model.nu, max_lag + 1)
+    cross = np.array(
+        [
+            [_xcorr(e_used[:, i], u_used[:, j], max_lag) for j in range(model.nu)]
+            for i in range(model.ny)
+        ]
+    ).reshape(model.ny, model.nu, max_lag + 1)
     white_stat = N * np.sum(auto[:, 1:] ** 2, axis=1)
-    indep_stat = N * np.sum(cross ** 2, axis=2)
+    indep_stat = N * np.sum(cross**2, axis=2)
     return ResidualAnalysis(
-        residuals=e, lags=np.arange(max_lag + 1), autocorr=auto, crosscorr=cross,
-        bound=float(stats.norm.ppf(0.995) / np.sqrt(N)), whiteness_stat=white_stat,
-        independence_stat=indep_stat, whiteness_limit=float(stats.chi2.ppf(0.99, max_lag)),
-        independence_limit=float(stats.chi2.ppf(0.99, max_lag + 1)))
+        residuals=e,
+        lags=np.arange(max_lag + 1),
+        autocorr=auto,
+        crosscorr=cross,
+        bound=float(stats.norm.ppf(0.995) / np.sqrt(N)),
+        whiteness_stat=white_stat,
+        independence_stat=indep_stat,
+        whiteness_limit=float(stats.chi2.ppf(0.99, max_lag)),
+        independence_limit=float(stats.chi2.ppf(0.99, max_lag + 1)),
+    )

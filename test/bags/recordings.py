@@ -19,8 +19,14 @@ TS_NS = 200_000
 SENSOR = '/maglev/sensor_0/field'
 CURRENTS = '/maglev/currents'
 COMMAND = '/maglev/currents/command'
-METADATA = {'params': 'maggy_v4', 'model': 'fast', 'seed': 42, 'version': '0.1.0',
-            'rate_hz': 5000.0, 'lockstep': True}
+METADATA = {
+    'params': 'maggy_v4',
+    'model': 'fast',
+    'seed': 42,
+    'version': '0.1.0',
+    'rate_hz': 5000.0,
+    'lockstep': True,
+}
 
 
 def field_msg(stamp_ns: int, b: np.ndarray) -> bytes:
@@ -64,10 +70,15 @@ def lockstep_data(n: int, seed: int = 1) -> Lockstep:
     return Lockstep(stamps, field, currents, command)
 
 
-def write_lockstep_bag(path: Path, run: Lockstep, storage: str = 'mcap',
-                       drop: dict[str, list[int]] | None = None,
-                       command_delay_ns: int = 0, metadata: dict | None = None,
-                       log: dict[str, list] | None = None) -> Path:
+def write_lockstep_bag(
+    path: Path,
+    run: Lockstep,
+    storage: str = 'mcap',
+    drop: dict[str, list[int]] | None = None,
+    command_delay_ns: int = 0,
+    metadata: dict | None = None,
+    log: dict[str, list] | None = None,
+) -> Path:
     """Write a lockstep run: sensor and currents stamped, commands by log time.
 
     ``drop`` maps a topic to sample indices not written (dropped samples);
@@ -80,8 +91,9 @@ def write_lockstep_bag(path: Path, run: Lockstep, storage: str = 'mcap',
         log.setdefault(handle.name, []).append((stamp, raw))
         bag.write(handle, stamp, raw)
 
-    with BagWriter(path, storage=storage, metadata=METADATA if metadata is None
-                   else metadata) as bag:
+    with BagWriter(
+        path, storage=storage, metadata=METADATA if metadata is None else metadata
+    ) as bag:
         sensor = bag.add_topic(SENSOR, 'sensor_msgs/msg/MagneticField')
         currents = bag.add_topic(CURRENTS, 'sensor_msgs/msg/JointState')
         command = bag.add_topic(COMMAND, 'std_msgs/msg/Float64MultiArray')

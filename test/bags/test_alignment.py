@@ -21,8 +21,10 @@ def record(stamps, seed=0):
     rng = np.random.default_rng(seed)
     y = rng.standard_normal((stamps.size, 3)) * 1e-3
     u = rng.integers(-4096, 4096, (stamps.size, 4)) / 1000.0
-    return (Source('/maglev/sensor_0/field', stamps, y, 'output'),
-            Source('/maglev/currents', stamps, u, 'input'))
+    return (
+        Source('/maglev/sensor_0/field', stamps, y, 'output'),
+        Source('/maglev/currents', stamps, u, 'input'),
+    )
 
 
 def slewed_stamps(n, seed=0):
@@ -76,10 +78,11 @@ def test_board_clock_stamps_are_exact():
     while board_us < 21_000_000:
         times = board_us + 200 * np.arange(int(rng.integers(1, 40)))
         board_us = int(times[-1]) + 200
-        latency_us = 20 + rng.exponential(300) + (600 if (board_us // 1_000_000) % 4 == 3
-                                                  else 0)
-        clock.observe(int(times[-1]), T0_NS + round(int(times[-1]) * 1000 * (1 + 30e-6))
-                      + int(latency_us * 1000))
+        latency_us = 20 + rng.exponential(300) + (600 if (board_us // 1_000_000) % 4 == 3 else 0)
+        clock.observe(
+            int(times[-1]),
+            T0_NS + round(int(times[-1]) * 1000 * (1 + 30e-6)) + int(latency_us * 1000),
+        )
         stamps.append(clock.to_host(times))
     stamps = np.concatenate(stamps)
     y, u = record(stamps, seed=2)
@@ -99,11 +102,11 @@ def test_an_input_on_its_own_clock_is_still_held():
     assert al.base == 'stamps'
     assert [r.method for r in al.reports] == ['exact', 'zoh']
     # the last command stamped at or before each sample (tolerance 10 us)
-    base = stamps[al.trimmed[0]: stamps.size - al.trimmed[1]]
+    base = stamps[al.trimmed[0] : stamps.size - al.trimmed[1]]
     held = np.searchsorted(log, base + 10_000, side='right') - 1
     assert held.min() == 0
     np.testing.assert_array_equal(al.values[1][:, 0], commands[held, 0])
-    np.testing.assert_array_equal(al.values[0], y.values[al.trimmed[0]:][:al.N])
+    np.testing.assert_array_equal(al.values[0], y.values[al.trimmed[0] :][: al.N])
 
 
 def test_an_output_on_its_own_clock_is_interpolated_at_the_base_stamps():
@@ -113,7 +116,7 @@ def test_an_output_on_its_own_clock_is_interpolated_at_the_base_stamps():
     other = Source('/other', other_t, np.sin((other_t - T0_NS) * 1e-8)[:, None], 'output')
     al = align([y, other])
     assert [r.method for r in al.reports] == ['exact', 'linear']
-    base = stamps[al.trimmed[0]: stamps.size - al.trimmed[1]]
+    base = stamps[al.trimmed[0] : stamps.size - al.trimmed[1]]
     np.testing.assert_allclose(al.values[1][:, 0], np.sin((base - T0_NS) * 1e-8), atol=1e-4)
 
 

@@ -10,10 +10,18 @@ from maglev_ros.sysid import load_data
 
 from .recordings import METADATA, SENSOR, TS, lockstep_data, write_lockstep_bag
 
-OUT = ['--output', 'bx=maglev/sensor_0/field:magnetic_field.x',
-       '--output', 'maglev/sensor_0/field:magnetic_field.z']
-IN = ['--input', 'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]',
-      '--input', 'maglev/currents/command:data[2]']
+OUT = [
+    '--output',
+    'bx=maglev/sensor_0/field:magnetic_field.x',
+    '--output',
+    'maglev/sensor_0/field:magnetic_field.z',
+]
+IN = [
+    '--input',
+    'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]',
+    '--input',
+    'maglev/currents/command:data[2]',
+]
 
 
 @pytest.fixture(scope='module')
@@ -28,8 +36,7 @@ def bag(tmp_path_factory, run):
 
 def _expected(run):
     y = run.field[:, [0, 2]]
-    u = np.column_stack([0.5 * run.currents[:, 0] - 0.5 * run.currents[:, 1],
-                         run.command[:, 2]])
+    u = np.column_stack([0.5 * run.currents[:, 0] - 0.5 * run.currents[:, 1], run.command[:, 2]])
     return y, u
 
 
@@ -51,7 +58,11 @@ def test_mat_file_has_the_lab_data_layout(bag, run, tmp_path, capsys):
     np.testing.assert_array_equal(mat['DATA'], np.vstack([y.T, u.T]))  # one channel per row
     assert mat['Ts'].item() == TS
     assert [str(n[0]) for n in mat['names'][0]] == [
-        'bx', 'maglev/sensor_0/field:magnetic_field.z', 'ux', 'maglev/currents/command:data[2]']
+        'bx',
+        'maglev/sensor_0/field:magnetic_field.z',
+        'ux',
+        'maglev/currents/command:data[2]',
+    ]
     est = loadmat(tmp_path / 'data_est.mat')['DATA']
     val = loadmat(tmp_path / 'data_val.mat')['DATA']
     np.testing.assert_array_equal(np.hstack([est, val]), mat['DATA'])
@@ -69,8 +80,9 @@ def test_npz_and_csv_load_back_exactly(bag, run, tmp_path, capsys):
     assert load_data(tmp_path / 'd_est.npz').N == 100
     assert main([bag, *OUT, *IN, '--out', str(tmp_path / 'd.csv')]) == 0
     names = ['bx', 'maglev/sensor_0/field:magnetic_field.z']
-    data = load_data(tmp_path / 'd.csv', outputs=names,
-                     inputs=['ux', 'maglev/currents/command:data[2]'])
+    data = load_data(
+        tmp_path / 'd.csv', outputs=names, inputs=['ux', 'maglev/currents/command:data[2]']
+    )
     np.testing.assert_array_equal(data.y, y)
     np.testing.assert_array_equal(data.u, u)
     assert data.Ts == pytest.approx(TS)
@@ -87,17 +99,22 @@ def test_json_summary_and_topic_listing(bag, capsys):
     assert {t['topic']: t['messages'] for t in listing['topics']}[SENSOR] == 400
 
 
-@pytest.mark.parametrize(('argv', 'message'), [
-    (['--output', 'maglev/sensor_9/field:magnetic_field.x'],
-     r"no topic '/maglev/sensor_9/field'; its topics: /maglev/currents "),
-    (['--output', 'maglev/sensor_0/field:magnetic_field.q'], r"has no field 'q'"),
-    (['--output', 'maglev/sensor_0/field'], 'invalid channel spec'),
-    ([], 'choose at least one --output'),
-    (OUT + ['--split', '1.5'], r'argument --split: a split fraction must be in \(0, 1\)'),
-    (OUT + ['--ts', '-1'], 'argument --ts: must be positive'),
-    (OUT + ['--out', 'data.xlsx'], "unknown data file type '.xlsx'"),
-    (OUT + ['--split', '400'], r'split index must be in 1\.\.399'),
-])
+@pytest.mark.parametrize(
+    ('argv', 'message'),
+    [
+        (
+            ['--output', 'maglev/sensor_9/field:magnetic_field.x'],
+            r"no topic '/maglev/sensor_9/field'; its topics: /maglev/currents ",
+        ),
+        (['--output', 'maglev/sensor_0/field:magnetic_field.q'], r"has no field 'q'"),
+        (['--output', 'maglev/sensor_0/field'], 'invalid channel spec'),
+        ([], 'choose at least one --output'),
+        (OUT + ['--split', '1.5'], r'argument --split: a split fraction must be in \(0, 1\)'),
+        (OUT + ['--ts', '-1'], 'argument --ts: must be positive'),
+        (OUT + ['--out', 'data.xlsx'], "unknown data file type '.xlsx'"),
+        (OUT + ['--split', '400'], r'split index must be in 1\.\.399'),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(bag, capsys, argv, message):
     assert main([bag, *argv]) == 2
     assert re.search(message, _error(capsys))
@@ -131,8 +148,14 @@ def test_sysid_wiring(bag, run, tmp_path):
     add_channel_arguments(parser)
     args = parser.parse_args([bag, *OUT, *IN])
     assert is_bag_path(args.data) and not is_bag_path(tmp_path / 'data.mat')
-    data = load_bag_dataset(args.data, outputs=args.output, inputs=args.input, Ts=None,
-                            allow_gaps=args.allow_gaps, tolerance=args.tolerance)
+    data = load_bag_dataset(
+        args.data,
+        outputs=args.output,
+        inputs=args.input,
+        Ts=None,
+        allow_gaps=args.allow_gaps,
+        tolerance=args.tolerance,
+    )
     y, u = _expected(run)
     np.testing.assert_array_equal(data.y, y)
     np.testing.assert_array_equal(data.u, u)

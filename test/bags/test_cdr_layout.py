@@ -52,16 +52,37 @@ def _multiarray(k):
 
 
 CASES = [
-    ('sensor_msgs/msg/MagneticField', lambda k: field_msg(10**9 * k + 3, [k, 2.0 * k, -k]),
-     [('magnetic_field', 'x'), ('magnetic_field', 'z'), ('header', 'stamp', 'sec'),
-      ('header', 'stamp', 'nanosec'), ('magnetic_field_covariance', 8)]),
-    ('sensor_msgs/msg/JointState', lambda k: currents_msg(k, [k, 1.0, -k, 0.25]),
-     [('effort', 0), ('effort', 3), ('header', 'stamp', 'nanosec')]),
-    ('std_msgs/msg/Float64MultiArray', _multiarray,
-     [('data', 0), ('data', 3), ('layout', 'data_offset'), ('layout', 'dim', 0, 'size')]),
-    ('nav_msgs/msg/Odometry', _odometry,
-     [('pose', 'pose', 'position', 'z'), ('pose', 'covariance', 35),
-      ('twist', 'twist', 'angular', 'y'), ('header', 'stamp', 'sec')]),
+    (
+        'sensor_msgs/msg/MagneticField',
+        lambda k: field_msg(10**9 * k + 3, [k, 2.0 * k, -k]),
+        [
+            ('magnetic_field', 'x'),
+            ('magnetic_field', 'z'),
+            ('header', 'stamp', 'sec'),
+            ('header', 'stamp', 'nanosec'),
+            ('magnetic_field_covariance', 8),
+        ],
+    ),
+    (
+        'sensor_msgs/msg/JointState',
+        lambda k: currents_msg(k, [k, 1.0, -k, 0.25]),
+        [('effort', 0), ('effort', 3), ('header', 'stamp', 'nanosec')],
+    ),
+    (
+        'std_msgs/msg/Float64MultiArray',
+        _multiarray,
+        [('data', 0), ('data', 3), ('layout', 'data_offset'), ('layout', 'dim', 0, 'size')],
+    ),
+    (
+        'nav_msgs/msg/Odometry',
+        _odometry,
+        [
+            ('pose', 'pose', 'position', 'z'),
+            ('pose', 'covariance', 35),
+            ('twist', 'twist', 'angular', 'y'),
+            ('header', 'stamp', 'sec'),
+        ],
+    ),
 ]
 
 
@@ -80,6 +101,7 @@ def test_different_layouts_fall_back():
     raws = [field_msg(1, [1.0, 2.0, 3.0]), field_msg(2, [4.0, 5.0, 6.0])]
     layout = cdr_layout(STORE, 'sensor_msgs/msg/MagneticField', raws[0], paths)
     from sensor_msgs.msg import MagneticField
+
     other = MagneticField()
     other.header.frame_id = 'maglev_sensor_1x'  # 4 bytes longer: everything after moves
     assert decode_columns([raws[0], serialize_message(other)], layout, paths) is None
@@ -87,18 +109,27 @@ def test_different_layouts_fall_back():
     short.header.frame_id = 'maglev_sensor_'  # one byte shorter, padding keeps the size
     assert len(serialize_message(short)) == len(raws[0])
     assert decode_columns([raws[0], serialize_message(short)], layout, paths) is None
-    big = bytes(STORE.serialize_cdr(STORE.deserialize_cdr(raws[0], 'sensor_msgs/msg/'
-                                                          'MagneticField'),
-                                    'sensor_msgs/msg/MagneticField', little_endian=False))
+    big = bytes(
+        STORE.serialize_cdr(
+            STORE.deserialize_cdr(raws[0], 'sensor_msgs/msg/MagneticField'),
+            'sensor_msgs/msg/MagneticField',
+            little_endian=False,
+        )
+    )
     assert cdr_layout(STORE, 'sensor_msgs/msg/MagneticField', big, paths) is None
-    assert cdr_layout(STORE, 'sensor_msgs/msg/JointState', currents_msg(1, [1.0]),
-                      [('effort', 3)]) is None  # index beyond the sequence
+    assert (
+        cdr_layout(STORE, 'sensor_msgs/msg/JointState', currents_msg(1, [1.0]), [('effort', 3)])
+        is None
+    )  # index beyond the sequence
 
 
 def test_fast_and_slow_paths_agree_on_a_bag(tmp_path):
     bag = write_lockstep_bag(tmp_path / 'run', lockstep_data(300, seed=3), 'sqlite3')
-    specs = ['maglev/sensor_0/field:magnetic_field.y', 'maglev/currents:effort[2]',
-             'maglev/currents/command:data[1]']
+    specs = [
+        'maglev/sensor_0/field:magnetic_field.y',
+        'maglev/currents:effort[2]',
+        'maglev/currents/command:data[1]',
+    ]
     refs = {}
     for spec in specs:
         ref = parse_channel(spec).terms[0][1]
@@ -120,9 +151,12 @@ def test_fields_inside_arrays_of_messages(tmp_path, fast):
         topic = bag.add_topic('/maglev/identifier/model', 'std_msgs/msg/Float64MultiArray')
         for k in range(10):
             bag.write(topic, 1000 * k, _multiarray(k))
-    refs = {'/maglev/identifier/model': [
-        parse_channel('maglev/identifier/model:layout.dim[0].size').terms[0][1],
-        parse_channel('maglev/identifier/model:data[3]').terms[0][1]]}
+    refs = {
+        '/maglev/identifier/model': [
+            parse_channel('maglev/identifier/model:layout.dim[0].size').terms[0][1],
+            parse_channel('maglev/identifier/model:data[3]').terms[0][1],
+        ]
+    }
     with BagReader(tmp_path / f'arr{fast}') as reader:
         got = read_topics(reader, refs, fast=fast)['/maglev/identifier/model']
     np.testing.assert_array_equal(got.values[:, 0], np.full(10, 4.0))

@@ -15,8 +15,10 @@ from .recordings import (
 )
 
 OUTPUTS = ['maglev/sensor_0/field:magnetic_field.x', 'maglev/sensor_0/field:magnetic_field.z']
-INPUTS = ['maglev/currents:effort[0]', 'ux=0.5*maglev/currents:effort[0]'
-          '-0.5*maglev/currents:effort[1]']
+INPUTS = [
+    'maglev/currents:effort[0]',
+    'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]',
+]
 
 
 @pytest.fixture(scope='module')
@@ -26,8 +28,7 @@ def run():
 
 @pytest.fixture(scope='module', params=['mcap', 'sqlite3'])
 def lockstep_bag(request, tmp_path_factory, run):
-    return write_lockstep_bag(tmp_path_factory.mktemp(request.param) / 'run', run,
-                              request.param)
+    return write_lockstep_bag(tmp_path_factory.mktemp(request.param) / 'run', run, request.param)
 
 
 def test_lockstep_run_gives_back_the_exact_sequence(lockstep_bag, run):
@@ -36,14 +37,18 @@ def test_lockstep_run_gives_back_the_exact_sequence(lockstep_bag, run):
     assert data.N == 1000 and data.Ts == TS
     np.testing.assert_array_equal(data.y, run.field[:, [0, 2]])
     np.testing.assert_array_equal(data.u[:, 0], run.currents[:, 0])
-    np.testing.assert_array_equal(data.u[:, 1],
-                                  0.5 * run.currents[:, 0] - 0.5 * run.currents[:, 1])
+    np.testing.assert_array_equal(
+        data.u[:, 1], 0.5 * run.currents[:, 0] - 0.5 * run.currents[:, 1]
+    )
     np.testing.assert_array_equal(data.u[:, 2], run.command[:, 3])
     assert data.input_names[1] == 'ux'
     assert data.output_units == ('T', 'T') and data.input_units == ('A', 'A', 'A')
     assert ds.t0_ns == run.stamps[0]
     assert [(r.topic, r.clock, r.method) for r in ds.alignment.reports] == [
-        (SENSOR, 'header', 'exact'), (CURRENTS, 'header', 'exact'), (COMMAND, 'log', 'exact')]
+        (SENSOR, 'header', 'exact'),
+        (CURRENTS, 'header', 'exact'),
+        (COMMAND, 'log', 'exact'),
+    ]
     assert ds.gaps == () and ds.alignment.trimmed == (0, 0)
     assert ds.alignment.base == 'stamps'  # uniform: the sensor's own stamps, on the grid
     assert ds.metadata == METADATA
@@ -78,23 +83,29 @@ def test_zoh_of_slower_inputs():
 
 
 def test_gaps_are_refused_then_filled(tmp_path, run):
-    bag = write_lockstep_bag(tmp_path / 'gaps', run,
-                             drop={SENSOR: [300, 301, 302], COMMAND: [700]})
+    bag = write_lockstep_bag(
+        tmp_path / 'gaps', run, drop={SENSOR: [300, 301, 302], COMMAND: [700]}
+    )
     specs = (OUTPUTS[:1], ['maglev/currents/command:data[0]'])
-    with pytest.raises(BagError, match=r"gap in topic '/maglev/sensor_0/field': 3 missing "
-                       r"samples after t = 0\.059800 s \(2 gaps, 4 samples in all\); "
-                       r"pass allow_gaps=True"):
+    with pytest.raises(
+        BagError,
+        match=r"gap in topic '/maglev/sensor_0/field': 3 missing "
+        r'samples after t = 0\.059800 s \(2 gaps, 4 samples in all\); '
+        r'pass allow_gaps=True',
+    ):
         read_bag(bag, *specs)
     ds = read_bag(bag, *specs, allow_gaps=True)
     assert [g.describe() for g in ds.gaps] == [
         '/maglev/sensor_0/field: 3 missing samples after t = 0.059800 s, filled by linear',
-        '/maglev/currents/command: 1 missing sample after t = 0.139800 s, filled by zoh']
+        '/maglev/currents/command: 1 missing sample after t = 0.139800 s, filled by zoh',
+    ]
     y, u = ds.data.y[:, 0], ds.data.u[:, 0]
     assert ds.data.N == 1000
     keep = np.setdiff1d(np.arange(1000), [300, 301, 302])
     np.testing.assert_array_equal(y[keep], run.field[keep, 0])
-    np.testing.assert_allclose(y[300:303], np.interp([300, 301, 302], [299, 303],
-                                                     run.field[[299, 303], 0]), rtol=1e-12)
+    np.testing.assert_allclose(
+        y[300:303], np.interp([300, 301, 302], [299, 303], run.field[[299, 303], 0]), rtol=1e-12
+    )
     assert u[700] == run.command[699, 0]  # held
     assert ds.alignment.reports[0].method == 'exact'
 
@@ -107,7 +118,7 @@ def test_jittery_outputs_are_resampled_linearly():
     other = Source('/y2', jitter, np.sin(jitter * 1e-9)[:, None], 'output')
     al = align([Source('/y', stamps, np.zeros(200), 'output'), other])
     assert [r.method for r in al.reports] == ['exact', 'linear']
-    np.testing.assert_allclose(al.values[1][:, 0], np.sin(stamps[:al.N] * 1e-9), atol=1e-6)
+    np.testing.assert_allclose(al.values[1][:, 0], np.sin(stamps[: al.N] * 1e-9), atol=1e-6)
 
 
 def test_duplicates_are_dropped_and_counted():
@@ -126,21 +137,36 @@ def test_period_estimate_does_not_drift_at_3khz():
 
 
 def test_unknown_topic_field_and_bad_specs(lockstep_bag):
-    with pytest.raises(BagError, match=r"no topic '/maglev/sensor_3/field'; its topics: "
-                       r"/maglev/currents \(sensor_msgs/msg/JointState\)"):
+    with pytest.raises(
+        BagError,
+        match=r"no topic '/maglev/sensor_3/field'; its topics: "
+        r'/maglev/currents \(sensor_msgs/msg/JointState\)',
+    ):
         read_bag(lockstep_bag, ['maglev/sensor_3/field:magnetic_field.x'])
-    with pytest.raises(BagError, match=r"sensor_msgs/msg/MagneticField has no field "
-                       r"'magnetic_fild'; its fields: header, magnetic_field, "
-                       r"magnetic_field_covariance"):
+    with pytest.raises(
+        BagError,
+        match=r'sensor_msgs/msg/MagneticField has no field '
+        r"'magnetic_fild'; its fields: header, magnetic_field, "
+        r'magnetic_field_covariance',
+    ):
         read_bag(lockstep_bag, ['maglev/sensor_0/field:magnetic_fild.x'])
-    with pytest.raises(BagError, match=r"magnetic_field \(geometry_msgs/msg/Vector3\) has no "
-                       r"field 'w'; its fields: x, y, z"):
+    with pytest.raises(
+        BagError,
+        match=r'magnetic_field \(geometry_msgs/msg/Vector3\) has no '
+        r"field 'w'; its fields: x, y, z",
+    ):
         read_bag(lockstep_bag, ['maglev/sensor_0/field:magnetic_field.w'])
-    with pytest.raises(BagError, match=r'is a geometry_msgs/msg/Vector3 message, not a '
-                       r'number; choose one of its fields: x, y, z'):
+    with pytest.raises(
+        BagError,
+        match=r'is a geometry_msgs/msg/Vector3 message, not a '
+        r'number; choose one of its fields: x, y, z',
+    ):
         read_bag(lockstep_bag, ['maglev/sensor_0/field:magnetic_field'])
-    with pytest.raises(BagError, match=r'effort\[4\]: index 4 out of range, the messages '
-                       r'have 4 elements'):
+    with pytest.raises(
+        BagError,
+        match=r'effort\[4\]: index 4 out of range, the messages '
+        r'have 4 elements',
+    ):
         read_bag(lockstep_bag, OUTPUTS, ['maglev/currents:effort[4]'])
     with pytest.raises(BagError, match=r'currents:name\[0\] is a string, not a number'):
         read_bag(lockstep_bag, OUTPUTS, ['maglev/currents:name[0]'])
@@ -153,8 +179,12 @@ def test_unknown_topic_field_and_bad_specs(lockstep_bag):
 def test_slower_output_on_grid_points_is_reported_as_interpolated():
     base = np.arange(50, dtype=np.int64) * 200_000
     slow = base[::5]
-    al = align([Source('/fast', base, np.zeros(50), 'output'),
-                Source('/slow', slow, np.arange(10.0), 'output')])
+    al = align(
+        [
+            Source('/fast', base, np.zeros(50), 'output'),
+            Source('/slow', slow, np.arange(10.0), 'output'),
+        ]
+    )
     assert [r.method for r in al.reports] == ['exact', 'linear']
     np.testing.assert_allclose(al.values[1][:46, 0], np.arange(46) / 5.0)
     assert al.trimmed == (0, 4)  # the slow topic ends at sample 45
@@ -162,8 +192,12 @@ def test_slower_output_on_grid_points_is_reported_as_interpolated():
 
 def test_an_input_sent_once_is_held_to_the_end():
     stamps = np.arange(20, dtype=np.int64) * 1_000_000
-    al = align([Source('/y', stamps, np.zeros(20), 'output'),
-                Source('/setpoint', np.array([4_500_000]), np.array([0.7]), 'input', 'log')])
+    al = align(
+        [
+            Source('/y', stamps, np.zeros(20), 'output'),
+            Source('/setpoint', np.array([4_500_000]), np.array([0.7]), 'input', 'log'),
+        ]
+    )
     assert al.trimmed == (5, 0)
     np.testing.assert_array_equal(al.values[1][:, 0], np.full(15, 0.7))
 
@@ -171,7 +205,14 @@ def test_an_input_sent_once_is_held_to_the_end():
 def test_topics_on_different_clocks_do_not_overlap():
     sim = np.arange(10, dtype=np.int64) * 1_000_000  # simulated time from 0
     wall = 1_700_000_000_000_000_000 + sim  # a recorder stamping with the wall clock
-    with pytest.raises(BagError, match=r'do not overlap in time: /y 0\.000\.\.0\.009 s, '
-                       r'/u .*different clocks'):
-        align([Source('/y', sim, np.zeros(10), 'output'),
-               Source('/u', wall, np.zeros(10), 'input', 'log')])
+    with pytest.raises(
+        BagError,
+        match=r'do not overlap in time: /y 0\.000\.\.0\.009 s, '
+        r'/u .*different clocks',
+    ):
+        align(
+            [
+                Source('/y', sim, np.zeros(10), 'output'),
+                Source('/u', wall, np.zeros(10), 'input', 'log'),
+            ]
+        )

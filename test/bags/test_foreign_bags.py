@@ -19,11 +19,14 @@ def _store():
     return store
 
 
-@pytest.mark.parametrize(('storage', 'mode'), [
-    (StoragePlugin.MCAP, CompressionMode.STORAGE),
-    (StoragePlugin.SQLITE3, CompressionMode.MESSAGE),
-    (StoragePlugin.MCAP, CompressionMode.FILE),
-])
+@pytest.mark.parametrize(
+    ('storage', 'mode'),
+    [
+        (StoragePlugin.MCAP, CompressionMode.STORAGE),
+        (StoragePlugin.SQLITE3, CompressionMode.MESSAGE),
+        (StoragePlugin.MCAP, CompressionMode.FILE),
+    ],
+)
 def test_compressed_bag_with_a_custom_type(tmp_path, storage, mode):
     store = _store()
     Sample, Header = store.types[SAMPLE], store.types['std_msgs/msg/Header']
@@ -35,12 +38,18 @@ def test_compressed_bag_with_a_custom_type(tmp_path, storage, mode):
         conn = writer.add_connection('/maglev/sample', SAMPLE, typestore=store)
         for k in range(n):
             note = 'x' * (k % 3)  # the layout changes from message to message
-            msg = Sample(header=Header(stamp=Time(sec=5, nanosec=1_000_000 * k), frame_id=''),
-                         current=np.array([k, -k, 0.5 * k, 1.0]), note=note,
-                         level=np.float32(0.25 * k))
+            msg = Sample(
+                header=Header(stamp=Time(sec=5, nanosec=1_000_000 * k), frame_id=''),
+                current=np.array([k, -k, 0.5 * k, 1.0]),
+                note=note,
+                level=np.float32(0.25 * k),
+            )
             writer.write(conn, 10**9 * k, bytes(store.serialize_cdr(msg, SAMPLE)))
-    ds = read_bag(tmp_path / 'rec', ['maglev/sample:level'],
-                  ['u=maglev/sample:current[0]-maglev/sample:current[1]'])
+    ds = read_bag(
+        tmp_path / 'rec',
+        ['maglev/sample:level'],
+        ['u=maglev/sample:current[0]-maglev/sample:current[1]'],
+    )
     np.testing.assert_array_equal(ds.data.y[:, 0], 0.25 * np.arange(n))
     np.testing.assert_array_equal(ds.data.u[:, 0], 2.0 * np.arange(n))
     assert ds.data.Ts == pytest.approx(1e-3)  # header stamps, not the 1 s log times
@@ -50,8 +59,9 @@ def test_compressed_bag_with_a_custom_type(tmp_path, storage, mode):
 def test_unfilled_headers_fall_back_to_log_time(tmp_path):
     store = get_typestore(Stores.ROS2_JAZZY)
     with Writer(tmp_path / 'zero', version=8, storage_plugin=StoragePlugin.MCAP) as writer:
-        conn = writer.add_connection('/maglev/currents', 'sensor_msgs/msg/JointState',
-                                     typestore=store)
+        conn = writer.add_connection(
+            '/maglev/currents', 'sensor_msgs/msg/JointState', typestore=store
+        )
         for k in range(20):
             writer.write(conn, 1000 + 2_000_000 * k, currents_msg(0, [k, 0.0, 0.0, 0.0]))
     ds = read_bag(tmp_path / 'zero', ['maglev/currents:effort[0]'])
@@ -63,8 +73,9 @@ def test_unfilled_headers_fall_back_to_log_time(tmp_path):
 def test_a_single_storage_file_opens_too(tmp_path):
     store = get_typestore(Stores.ROS2_JAZZY)
     with Writer(tmp_path / 'one', version=8, storage_plugin=StoragePlugin.MCAP) as writer:
-        conn = writer.add_connection('/maglev/sensor_0/field', 'sensor_msgs/msg/MagneticField',
-                                     typestore=store)
+        conn = writer.add_connection(
+            '/maglev/sensor_0/field', 'sensor_msgs/msg/MagneticField', typestore=store
+        )
         for k in range(5):
             writer.write(conn, k, field_msg(k, [k, 0.0, 0.0]))
     with BagReader(tmp_path / 'one' / 'one.mcap') as reader:

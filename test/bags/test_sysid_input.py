@@ -23,8 +23,18 @@ def arx_bag(tmp_path_factory):
 
 
 def test_sysid_identifies_from_a_bag(arx_bag, capsys):
-    argv = [str(arx_bag), '--output', f'{SENSOR}:magnetic_field.x',
-            '--input', f'{COMMAND}:data[0]', '--arx', '1', '1', '1', '--json']
+    argv = [
+        str(arx_bag),
+        '--output',
+        f'{SENSOR}:magnetic_field.x',
+        '--input',
+        f'{COMMAND}:data[0]',
+        '--arx',
+        '1',
+        '1',
+        '1',
+        '--json',
+    ]
     assert main(argv) == 0
     result = json.loads(capsys.readouterr().out)
     model = result['models'][0]

@@ -28,8 +28,10 @@ def test_every_message_and_stamp_reads_back(tmp_path, storage):
     with BagReader(bag) as reader:
         assert reader.storage == storage
         assert {t: i.msgtype for t, i in reader.topics.items()} == {
-            SENSOR: 'sensor_msgs/msg/MagneticField', CURRENTS: 'sensor_msgs/msg/JointState',
-            COMMAND: 'std_msgs/msg/Float64MultiArray'}
+            SENSOR: 'sensor_msgs/msg/MagneticField',
+            CURRENTS: 'sensor_msgs/msg/JointState',
+            COMMAND: 'std_msgs/msg/Float64MultiArray',
+        }
         assert reader.message_count == 600
         for topic, expected in written.items():
             got = [(stamp, bytes(raw)) for _, stamp, raw in reader.messages([topic])]
@@ -96,7 +98,7 @@ def test_truncated_bag_is_one_clear_error(tmp_path, storage):
     bag = write_lockstep_bag(tmp_path / 'run', lockstep_data(500), storage)
     (store,) = [p for p in bag.iterdir() if p.suffix in ('.mcap', '.db3')]
     data = store.read_bytes()
-    store.write_bytes(data[:len(data) // 2])
+    store.write_bytes(data[: len(data) // 2])
     with pytest.raises(BagError, match='truncated or corrupt'):
         with BagReader(bag) as reader:
             for _ in reader.messages([SENSOR, CURRENTS]):
@@ -122,9 +124,12 @@ def test_missing_empty_and_unfinished_bags(tmp_path):
 def test_unknown_topic_lists_the_bags_topics(tmp_path):
     bag = write_lockstep_bag(tmp_path / 'run', lockstep_data(10))
     with BagReader(bag) as reader:
-        with pytest.raises(BagError, match=r"no topic '/maglev/sensor_1/field'; its topics: "
-                           r"/maglev/currents \(sensor_msgs/msg/JointState\), "
-                           r"/maglev/currents/command .*/maglev/sensor_0/field"):
+        with pytest.raises(
+            BagError,
+            match=r"no topic '/maglev/sensor_1/field'; its topics: "
+            r'/maglev/currents \(sensor_msgs/msg/JointState\), '
+            r'/maglev/currents/command .*/maglev/sensor_0/field',
+        ):
             reader.topic('maglev/sensor_1/field')
 
 

@@ -13,7 +13,7 @@ from maglev_ros.bags import BagReader, BagWriter
 
 from .recordings import SENSOR, field_msg
 
-RECORDER = textwrap.dedent('''
+RECORDER = textwrap.dedent("""
     import signal, sys
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import MagneticField
@@ -34,15 +34,20 @@ RECORDER = textwrap.dedent('''
             k += 1
             if k == 200:
                 print('recording', flush=True)
-''')
+""")
 
 
-@pytest.mark.parametrize(('storage', 'sig'), [('mcap', signal.SIGTERM),
-                                              ('sqlite3', signal.SIGINT)])
+@pytest.mark.parametrize(
+    ('storage', 'sig'), [('mcap', signal.SIGTERM), ('sqlite3', signal.SIGINT)]
+)
 def test_bag_is_readable_after_a_signal(tmp_path, storage, sig):
     path = tmp_path / 'rec'
-    proc = subprocess.Popen([sys.executable, '-c', RECORDER, str(path), storage],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, '-c', RECORDER, str(path), storage],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         assert proc.stdout.readline().strip() == 'recording'
         proc.send_signal(sig)
@@ -59,8 +64,10 @@ def test_bag_is_readable_after_a_signal(tmp_path, storage, sig):
 
 def test_threads_write_while_another_closes(tmp_path):
     bag = BagWriter(tmp_path / 'mt', storage='sqlite3').open()
-    topics = [bag.add_topic(f'/maglev/sensor_{k}/field', 'sensor_msgs/msg/MagneticField')
-              for k in range(3)]
+    topics = [
+        bag.add_topic(f'/maglev/sensor_{k}/field', 'sensor_msgs/msg/MagneticField')
+        for k in range(3)
+    ]
     raw = field_msg(1, np.zeros(3))
 
     def publish(topic):
@@ -76,4 +83,5 @@ def test_threads_write_while_another_closes(tmp_path):
     bag.close()
     with BagReader(tmp_path / 'mt') as reader:
         assert {t: i.count for t, i in reader.topics.items()} == {
-            f'/maglev/sensor_{k}/field': 300 for k in range(3)}
+            f'/maglev/sensor_{k}/field': 300 for k in range(3)
+        }

@@ -42,8 +42,9 @@ def test_linearize_text_shows_published_torque_stiffness(capsys):
 
 def test_simulate_writes_plot_and_csv(capsys, tmp_path):
     png, csv = tmp_path / 'sim.png', tmp_path / 'sim.csv'
-    out = _json(capsys, ['simulate', '--duration', '0.05', '--json', '--plot', str(png),
-                         '--csv', str(csv)])
+    out = _json(
+        capsys, ['simulate', '--duration', '0.05', '--json', '--plot', str(png), '--csv', str(csv)]
+    )
     assert out['status'] == 'ok' and out['samples'] == 250
     assert png.read_bytes()[:4] == b'\x89PNG'
     table = np.loadtxt(csv, delimiter=',', skiprows=1)
@@ -57,15 +58,18 @@ def test_simulate_reports_a_crash(capsys):
     assert all(np.isfinite(out['crash_state']))
 
 
-@pytest.mark.parametrize('argv, message', [
-    (['equilibria', '--params', 'missing.yaml'], 'missing.yaml: parameter file not found'),
-    (['simulate', '--perturb', 'q=1'], 'expected NAME=VALUE'),
-    (['simulate', '--duration', '-1'], 'must be positive'),
-    (['simulate', '--currents', '1', '2'], 'expected 4 values'),
-    (['linearize', '--model', 'exact'], "invalid choice: 'exact'"),
-    (['equilibria', '--correction', 'big'], '--correction: expected auto, none or a number'),
-    ([], 'required: command'),
-])
+@pytest.mark.parametrize(
+    'argv, message',
+    [
+        (['equilibria', '--params', 'missing.yaml'], 'missing.yaml: parameter file not found'),
+        (['simulate', '--perturb', 'q=1'], 'expected NAME=VALUE'),
+        (['simulate', '--duration', '-1'], 'must be positive'),
+        (['simulate', '--currents', '1', '2'], 'expected 4 values'),
+        (['linearize', '--model', 'exact'], "invalid choice: 'exact'"),
+        (['equilibria', '--correction', 'big'], '--correction: expected auto, none or a number'),
+        ([], 'required: command'),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(capsys, argv, message):
     assert main(argv) == 2
     captured = capsys.readouterr()

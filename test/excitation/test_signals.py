@@ -68,14 +68,17 @@ def test_antisymmetric_pairs_and_independent_channels():
     assert np.all(x_only[:, 2:] == 0.1)
 
 
-@pytest.mark.parametrize('call, match', [
-    (lambda: excitation('noise', 10), 'signal must be one of prbs, random_binary'),
-    (lambda: apply_pattern(np.zeros((5, 1)), 'pairs'), r"pattern 'pairs' takes 2 signal"),
-    (lambda: apply_pattern(np.zeros((5, 1)), 'diagonal'), 'pattern must be one of'),
-    (lambda: multisine(10, band=(0.5, 0.4)), 'band must be'),
-    (lambda: chirp(0), 'length must be an integer >= 1, got 0'),
-    (lambda: prbs(10, amplitude=-1.0), 'amplitude must be a finite number >= 0'),
-])
+@pytest.mark.parametrize(
+    'call, match',
+    [
+        (lambda: excitation('noise', 10), 'signal must be one of prbs, random_binary'),
+        (lambda: apply_pattern(np.zeros((5, 1)), 'pairs'), r"pattern 'pairs' takes 2 signal"),
+        (lambda: apply_pattern(np.zeros((5, 1)), 'diagonal'), 'pattern must be one of'),
+        (lambda: multisine(10, band=(0.5, 0.4)), 'band must be'),
+        (lambda: chirp(0), 'length must be an integer >= 1, got 0'),
+        (lambda: prbs(10, amplitude=-1.0), 'amplitude must be a finite number >= 0'),
+    ],
+)
 def test_errors(call, match):
     with pytest.raises(ValueError, match=match):
         call()

@@ -15,8 +15,9 @@ def observe_stream(clock, seconds, drift=0.0, offset_ns=5 * 10**17, seed=0, max_
     return offset_ns
 
 
-def board_run(clock, seconds, drift=50e-6, offset_ns=5 * 10**17, seed=0, batch=(1, 40),
-              latency_steps=True):
+def board_run(
+    clock, seconds, drift=50e-6, offset_ns=5 * 10**17, seed=0, batch=(1, 40), latency_steps=True
+):
     """A board clock running ``drift`` fast, read in batches with random latency.
 
     The board samples every 200 us; each read returns 1..39 records and is
@@ -74,8 +75,9 @@ def test_first_observation_sets_the_offset():
     clock = BoardClock()
     clock.observe(5_000_000, 1_700_000_000_000_000_000 + 5_000_000_000 + 120_000)
     stamps = clock.to_host(4_000_000 + 200 * np.arange(20))
-    np.testing.assert_array_equal(stamps, 1_700_000_000_000_000_000 + 120_000
-                                  + 1000 * (4_000_000 + 200 * np.arange(20)))
+    np.testing.assert_array_equal(
+        stamps, 1_700_000_000_000_000_000 + 120_000 + 1000 * (4_000_000 + 200 * np.arange(20))
+    )
     assert clock.pending_ns == 0
 
 
@@ -175,8 +177,9 @@ def test_board_run_never_steps(seed):
 def test_board_run_converges_to_the_true_offset_and_drift(seed, latency_steps):
     drift = 50e-6
     clock = BoardClock()
-    board, stamps, truth, _, _ = board_run(clock, 40.0, drift=drift, seed=seed,
-                                           latency_steps=latency_steps)
+    board, stamps, truth, _, _ = board_run(
+        clock, 40.0, drift=drift, seed=seed, latency_steps=latency_steps
+    )
     assert np.all(np.diff(stamps) > 0)
     assert np.abs(np.diff(stamps) - 200_000 * (1 + drift)).max() <= SLEW * 200_000 + 100
     assert clock.drift == pytest.approx(drift, abs=0.5e-6)
@@ -244,14 +247,18 @@ def test_scalar_and_vector_paths_agree_while_slewing():
         times = board_us + 200 * np.arange(int(rng.integers(17, 60)))
         board_us = int(times[-1]) + 200
         floor_us = 5 if (board_us // 500_000) % 2 else 400
-        host = 10**18 + round(int(times[-1]) * 1000 * (1 - 80e-6)) \
+        host = (
+            10**18
+            + round(int(times[-1]) * 1000 * (1 - 80e-6))
             + int((floor_us + rng.exponential(50)) * 1000)
+        )
         whole.observe(int(times[-1]), host)
         single.observe(int(times[-1]), host)
         pending.append(whole.pending_ns)  # the correction these samples are mapped with
         out_whole.append(whole.to_host(times))
-        out_single.append(np.concatenate([single.to_host(times[i : i + 1])
-                                          for i in range(times.size)]))
+        out_single.append(
+            np.concatenate([single.to_host(times[i : i + 1]) for i in range(times.size)])
+        )
         assert single.pending_ns == whole.pending_ns
     np.testing.assert_array_equal(np.concatenate(out_single), np.concatenate(out_whole))
     pending = np.array(pending)
@@ -305,8 +312,10 @@ def test_a_stalled_bucket_at_the_start_is_left_out():
     for k in range(4_500):  # one read per ms of board time, 5 records each
         times = 1_000_000 + 1000 * k + 200 * np.arange(-4, 1)
         late_ns = 850_000_000 if 3_000_000 <= times[-1] < 4_300_000 else 0
-        clock.observe(int(times[-1]), 10**18 + 1000 * int(times[-1]) + late_ns
-                      + int(rng.uniform(50_000, 300_000)))
+        clock.observe(
+            int(times[-1]),
+            10**18 + 1000 * int(times[-1]) + late_ns + int(rng.uniform(50_000, 300_000)),
+        )
         boards.append(times)
         stamps.append(clock.to_host(times))
         drifts.append(clock.drift)

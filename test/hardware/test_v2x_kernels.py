@@ -58,8 +58,9 @@ def test_first_bad_record_matches_the_rules(n_sensors):
         prev_ts = (int(stamps[0]) - 200) & MASK
         rows = rows_of(stamps, field, pwm)
         expected = reference_first_bad(stamps, field.astype(np.float64), pwm, start, prev_ts)
-        got = first_bad_record(rows, start, prev_ts, 3 * n_sensors, 100, 10_000, FIELD_BITS,
-                               PWM_FULL_SCALE)
+        got = first_bad_record(
+            rows, start, prev_ts, 3 * n_sensors, 100, 10_000, FIELD_BITS, PWM_FULL_SCALE
+        )
         assert got == expected, trial
 
 
@@ -76,7 +77,7 @@ def test_unwrap_run_continues_across_wraps_and_restarts():
     # the board restarted: its clock is back near zero; time goes on one period later
     again = np.array([1000, 1200], np.uint32)
     times, restarts, wraps = unwrap_run(again, int(nxt[-1]), int(times[-1]), 200)
-    np.testing.assert_array_equal(times, [2 ** 32 + 1300, 2 ** 32 + 1500])
+    np.testing.assert_array_equal(times, [2**32 + 1300, 2**32 + 1500])
     assert (restarts, wraps) == (1, 0)
 
 
@@ -87,8 +88,9 @@ def test_one_compiled_signature_whatever_the_stream():
 
     rng = np.random.default_rng(0)
     n = 400
-    data = pack_records(200 * np.arange(n), rng.normal(0.0, 10.0, (n, 1, 3)),
-                        rng.integers(-100, 100, (n, 4)))
+    data = pack_records(
+        200 * np.arange(n), rng.normal(0.0, 10.0, (n, 1, 3)), rng.integers(-100, 100, (n, 4))
+    )
     size = record_size(1)
     decoder = RecordDecoder(1)
     for start in range(0, 100 * size, 5 * size):  # bursts

@@ -42,12 +42,21 @@ def test_batches_equal_message_objects(stamps):
     odometry = np.array([contract.odometry_values(x) for x in states])
     t_ns = stamps.tolist()
     fields = RawMessageBatch(contract.field_layout(contract.sensor_frame(11)))
-    check(fields.serialise(stamps, field), MagneticField,
-          lambda i: contract.field_message(11, t_ns[i], field[i]))
-    check(RawMessageBatch(contract.currents_layout()).serialise(stamps, currents),
-          JointState, lambda i: contract.currents_message(t_ns[i], currents[i]))
-    check(RawMessageBatch(contract.odometry_layout()).serialise(stamps, odometry),
-          Odometry, lambda i: contract.odometry_message(t_ns[i], states[i]))
+    check(
+        fields.serialise(stamps, field),
+        MagneticField,
+        lambda i: contract.field_message(11, t_ns[i], field[i]),
+    )
+    check(
+        RawMessageBatch(contract.currents_layout()).serialise(stamps, currents),
+        JointState,
+        lambda i: contract.currents_message(t_ns[i], currents[i]),
+    )
+    check(
+        RawMessageBatch(contract.odometry_layout()).serialise(stamps, odometry),
+        Odometry,
+        lambda i: contract.odometry_message(t_ns[i], states[i]),
+    )
 
 
 def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
@@ -56,10 +65,10 @@ def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
     currents = rng.normal(0.0, 1.0, (N, 4))
     serialiser = SampleSerialiser(
         [RawMessageBatch(contract.field_layout(contract.sensor_frame(k))) for k in (0, 1)]
-        + [RawMessageBatch(contract.currents_layout())])
+        + [RawMessageBatch(contract.currents_layout())]
+    )
     for n in (N, 5, N):  # reused rows per burst length keep nothing from earlier calls
-        messages = serialiser.serialise(stamps[:n], [fields[:n, 0], fields[:n, 1],
-                                                     currents[:n]])
+        messages = serialiser.serialise(stamps[:n], [fields[:n, 0], fields[:n, 1], currents[:n]])
         assert len(messages) == 3 * n
         for i in range(n):
             t_ns = int(stamps[i])
@@ -80,11 +89,14 @@ def test_raw_template_equals_message_objects():
         check([got], Odometry, lambda i, expected=expected: expected)
 
 
-@pytest.mark.parametrize('values', [
-    [('effort', 2)],  # beyond the two efforts of this template
-    [('no_such_field',)],
-    [('header', 'stamp', 'sec')],  # an int32, not a float64
-])
+@pytest.mark.parametrize(
+    'values',
+    [
+        [('effort', 2)],  # beyond the two efforts of this template
+        [('no_such_field',)],
+        [('header', 'stamp', 'sec')],  # an int32, not a float64
+    ],
+)
 def test_layout_refuses_what_it_cannot_locate(values):
     msg = JointState(name=['a'], effort=[0.0, 0.0])
     with pytest.raises(ValueError, match='cannot locate'):
@@ -104,14 +116,18 @@ def test_layout_offsets_match_the_walked_bytes():
 
 
 def test_values_as_one_matrix_and_wrong_shapes(stamps):
-    serialiser = SampleSerialiser([RawMessageBatch(contract.field_layout('f')),
-                                   RawMessageBatch(contract.currents_layout())])
+    serialiser = SampleSerialiser(
+        [RawMessageBatch(contract.field_layout('f')), RawMessageBatch(contract.currents_layout())]
+    )
     values = np.random.default_rng(4).normal(size=(N, 7))
     as_matrix = serialiser.serialise(stamps, values)
     as_parts = serialiser.serialise(stamps, [values[:, :3], values[:, 3:]])
-    assert [deserialize_message(m, JointState if i % 2 else MagneticField)
-            for i, m in enumerate(as_matrix)] == [
+    assert [
         deserialize_message(m, JointState if i % 2 else MagneticField)
-        for i, m in enumerate(as_parts)]
+        for i, m in enumerate(as_matrix)
+    ] == [
+        deserialize_message(m, JointState if i % 2 else MagneticField)
+        for i, m in enumerate(as_parts)
+    ]
     with pytest.raises(ValueError, match=r'values must have shape \(50, 7\)'):
         serialiser.serialise(stamps, values[:, :6])

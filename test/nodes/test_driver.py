@@ -36,8 +36,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-
-
 class Harness:
     """The driver node and a peer node, each spun by its own executor thread."""
 
@@ -296,8 +294,13 @@ def test_faults_cost_at_most_the_damaged_records(make_harness):
         with board.lock:
             written = board.firmware.records_since_open
         # drained: every record on the wire decoded (a loaded machine may lag behind)
-        wait_for(lambda: h.driver.decoder_stats.records >= written - 2 - 1
-                 and h.driver._decoder.buffered == size, what='the driver to drain')
+        wait_for(
+            lambda: (
+                h.driver.decoder_stats.records >= written - 2 - 1
+                and h.driver._decoder.buffered == size
+            ),
+            what='the driver to drain',
+        )
         time.sleep(0.1)
         stats = h.driver.decoder_stats
         assert board.status.bytes_dropped == 0  # the driver kept up: every fault is ours
@@ -521,8 +524,13 @@ def test_a_backlog_at_start_is_stamped_evenly_and_kept(make_harness, monkeypatch
         assert np.all(np.abs(steps - 200_000) <= 0.02 * 200_000 + 100), steps.min()
         assert stamps[-1] - stamps[0] > 10**9  # over a second: the backlog is in
         board.pause()  # then every decoded record is published, none kept back
-        wait_for(lambda: h.driver.counters['records'] == h.driver.decoder_stats.records
-                 and h.driver.decoder_stats.records > 5000, what='every record published')
+        wait_for(
+            lambda: (
+                h.driver.counters['records'] == h.driver.decoder_stats.records
+                and h.driver.decoder_stats.records > 5000
+            ),
+            what='every record published',
+        )
 
 
 def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypatch):
@@ -599,8 +607,12 @@ def test_unconfirmed_records_are_published_at_once(make_harness):
         with board.lock:
             written = board.firmware.records_since_open
         # drained: every record on the wire decoded (a loaded machine may lag behind)
-        wait_for(lambda: h.driver.decoder_stats.records >= written - 1
-                 and h.driver._decoder.buffered == 0, what='the driver to drain')
+        wait_for(
+            lambda: (
+                h.driver.decoder_stats.records >= written - 1 and h.driver._decoder.buffered == 0
+            ),
+            what='the driver to drain',
+        )
         time.sleep(0.1)
         stats = h.driver.decoder_stats
         assert stats.dropped_bytes == (size - 7) + len(garbage)

@@ -64,25 +64,50 @@ def record(ctx, board, bag, read_interval=0.0):
     topics = [contract.field_topic(0), contract.CURRENTS_TOPIC, contract.COMMAND_TOPIC]
     nodes, spinner = [], None
     try:
-        recorder = RecorderNode(context=ctx, parameter_overrides=overrides(
-            path=str(bag), topics=topics, metadata_node='maglev_driver'))
+        recorder = RecorderNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                path=str(bag), topics=topics, metadata_node='maglev_driver'
+            ),
+        )
         nodes.append(recorder)
-        driver = DriverNode(context=ctx, parameter_overrides=overrides(
-            port=board.path, n_sensors=1, counts_per_ampere=COUNTS_PER_AMPERE,
-            start_enabled=True, command_timeout=5.0, read_interval=read_interval))
+        driver = DriverNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                port=board.path,
+                n_sensors=1,
+                counts_per_ampere=COUNTS_PER_AMPERE,
+                start_enabled=True,
+                command_timeout=5.0,
+                read_interval=read_interval,
+            ),
+        )
         nodes.append(driver)
-        excite = ExcitationNode(context=ctx, parameter_overrides=overrides(
-            trigger='timer', sample_rate=1000.0, signal='prbs', amplitude=AMPLITUDE,
-            pattern='pairs', length=1023, seed=5))
+        excite = ExcitationNode(
+            context=ctx,
+            parameter_overrides=overrides(
+                trigger='timer',
+                sample_rate=1000.0,
+                signal='prbs',
+                amplitude=AMPLITUDE,
+                pattern='pairs',
+                length=1023,
+                seed=5,
+            ),
+        )
         nodes.append(excite)
         spinner = contract.Spinner(ctx, nodes)
-        wait_for(lambda: len(recorder.subscribed) == len(topics) and recorder.metadata_complete,
-                 what='the recorder to subscribe and store the driver parameters')
+        wait_for(
+            lambda: len(recorder.subscribed) == len(topics) and recorder.metadata_complete,
+            what='the recorder to subscribe and store the driver parameters',
+        )
         # the excitation reached the board: the applied PWM follows the pairs pattern
         wait_for(lambda: len(board.firmware.accepted) > 10, what='commands at the board')
         start = recorder.counts['/maglev/currents']
-        wait_for(lambda: recorder.counts['/maglev/currents'] - start >= RECORD_S * 5000,
-                 what='samples in the bag')
+        wait_for(
+            lambda: recorder.counts['/maglev/currents'] - start >= RECORD_S * 5000,
+            what='samples in the bag',
+        )
         recorder.close()  # finalised: index and metadata.yaml
         return dict(recorder.counts), dict(driver.counters), driver.decoder_stats
     finally:
@@ -138,8 +163,12 @@ def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path, read_in
     # stamps never step: no gaps, the field and currents of a record share their stamp,
     # so both topics are taken sample by sample on the fields' own stamps
     methods = [r.method for r in dataset.alignment.reports]
-    print('converter report:', [g.describe() for g in dataset.gaps] or 'no gaps', methods,
-          f'max spacing deviation {np.abs(spacing - 200_000).max()} ns')
+    print(
+        'converter report:',
+        [g.describe() for g in dataset.gaps] or 'no gaps',
+        methods,
+        f'max spacing deviation {np.abs(spacing - 200_000).max()} ns',
+    )
     assert dataset.gaps == ()
     assert methods == ['exact', 'exact'] and dataset.alignment.base == 'stamps'
     pwm = np.rint(np.asarray(data.u) * COUNTS_PER_AMPERE)  # every sample as the board sent it
@@ -165,21 +194,23 @@ def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path, read_in
         np.testing.assert_array_equal(idle, np.arange(idle.size))  # a leading stretch
 
     # the command topic (no header: log times) converts too, next to the applied current
-    commanded = load_bag_dataset(bag, outputs[:1], ['u=maglev/currents/command:data[0]'],
-                                 allow_gaps=True)  # a wall-clock timer: jitter, late ticks
+    commanded = load_bag_dataset(
+        bag, outputs[:1], ['u=maglev/currents/command:data[0]'], allow_gaps=True
+    )  # a wall-clock timer: jitter, late ticks
     assert list(commanded.input_units) == ['A']
     assert set(np.unique(np.abs(np.asarray(commanded.u)))) == {AMPLITUDE}
 
 
 def raw_samples(bag):
     """Header stamps and values of every field and currents message in the bag."""
-    field_refs = [parse_channel(f'maglev/sensor_0/field:magnetic_field.{a}').terms[0][1]
-                  for a in AXES]
-    current_refs = [parse_channel(f'maglev/currents:effort[{j}]').terms[0][1]
-                    for j in range(4)]
+    field_refs = [
+        parse_channel(f'maglev/sensor_0/field:magnetic_field.{a}').terms[0][1] for a in AXES
+    ]
+    current_refs = [parse_channel(f'maglev/currents:effort[{j}]').terms[0][1] for j in range(4)]
     with BagReader(bag) as reader:
-        samples = read_topics(reader, {'/maglev/sensor_0/field': field_refs,
-                                       '/maglev/currents': current_refs})
+        samples = read_topics(
+            reader, {'/maglev/sensor_0/field': field_refs, '/maglev/currents': current_refs}
+        )
     return samples['/maglev/sensor_0/field'], samples['/maglev/currents']
 
 

@@ -29,29 +29,58 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-
 def params(**values):
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
 def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
-    excite = ExcitationNode(context=ctx, parameter_overrides=params(
-        signal='prbs', amplitude=0.3, band=[0.0, 0.5], pattern='pairs', seed=4, length=200,
-        cycles=1, offset=[0.0, 0.0, 0.05, 0.05]))
-    sim = SimulatorNode(context=ctx, parameter_overrides=params(
-        mode='lockstep', magnet='fixed', coil_dynamics=False, start_paused=True,
-        marker_rate=0.0, sensors=[0]))
+    excite = ExcitationNode(
+        context=ctx,
+        parameter_overrides=params(
+            signal='prbs',
+            amplitude=0.3,
+            band=[0.0, 0.5],
+            pattern='pairs',
+            seed=4,
+            length=200,
+            cycles=1,
+            offset=[0.0, 0.0, 0.05, 0.05],
+        ),
+    )
+    sim = SimulatorNode(
+        context=ctx,
+        parameter_overrides=params(
+            mode='lockstep',
+            magnet='fixed',
+            coil_dynamics=False,
+            start_paused=True,
+            marker_rate=0.0,
+            sensors=[0],
+        ),
+    )
     peer = rclpy.create_node('excitation_test_peer', context=ctx)
     commands, currents = [], []
-    peer.create_subscription(Float64MultiArray, contract.COMMAND_TOPIC,
-                             lambda m: commands.append(list(m.data)),
-                             contract.LOCKSTEP_COMMAND_QOS)
-    peer.create_subscription(JointState, contract.CURRENTS_TOPIC,
-                             lambda m: currents.append(list(m.effort)), contract.SENSOR_QOS)
+    peer.create_subscription(
+        Float64MultiArray,
+        contract.COMMAND_TOPIC,
+        lambda m: commands.append(list(m.data)),
+        contract.LOCKSTEP_COMMAND_QOS,
+    )
+    peer.create_subscription(
+        JointState,
+        contract.CURRENTS_TOPIC,
+        lambda m: currents.append(list(m.effort)),
+        contract.SENSOR_QOS,
+    )
     spinner = contract.Spinner(ctx, [excite, sim, peer])
     try:
-        wait_for(lambda: excite._pub.get_subscription_count() >= 2
-                 and sim._current_pub.get_subscription_count() >= 2, what='discovery')
+        wait_for(
+            lambda: (
+                excite._pub.get_subscription_count() >= 2
+                and sim._current_pub.get_subscription_count() >= 2
+            ),
+            what='discovery',
+        )
         sim.set_paused(False)
         wait_for(lambda: len(currents) > 260, what='samples')
         expected = commands_of(excite.config)
@@ -67,12 +96,20 @@ def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
 
 
 def test_timer_trigger_publishes_at_its_rate(ctx):
-    excite = ExcitationNode(context=ctx, parameter_overrides=params(
-        signal='multisine', trigger='timer', sample_rate=200.0, length=64, band=[0.1, 0.4]))
+    excite = ExcitationNode(
+        context=ctx,
+        parameter_overrides=params(
+            signal='multisine', trigger='timer', sample_rate=200.0, length=64, band=[0.1, 0.4]
+        ),
+    )
     peer = rclpy.create_node('excitation_timer_peer', context=ctx)
     got = []
-    peer.create_subscription(Float64MultiArray, contract.COMMAND_TOPIC,
-                             lambda m: got.append(list(m.data)), contract.COMMAND_QOS)
+    peer.create_subscription(
+        Float64MultiArray,
+        contract.COMMAND_TOPIC,
+        lambda m: got.append(list(m.data)),
+        contract.COMMAND_QOS,
+    )
     spinner = contract.Spinner(ctx, [excite, peer])
     try:
         wait_for(lambda: len(got) > 20, what='timer commands')
@@ -83,17 +120,29 @@ def test_timer_trigger_publishes_at_its_rate(ctx):
         peer.destroy_node()
 
 
-@pytest.mark.parametrize('changes, match', [
-    ({'signal': 'noise'}, "signal must be one of prbs, random_binary, multisine, chirp"),
-    ({'band': [0.5, 0.2]}, r'band must be \[low, high\]'),
-    ({'offset': [0.0]}, 'offset must be 4 finite currents'),
-    ({'length': 0}, 'length must be an integer >= 1, got 0'),
-    ({'trigger': 'clock'}, "trigger must be one of sample, timer, got 'clock'"),
-])
+@pytest.mark.parametrize(
+    'changes, match',
+    [
+        ({'signal': 'noise'}, 'signal must be one of prbs, random_binary, multisine, chirp'),
+        ({'band': [0.5, 0.2]}, r'band must be \[low, high\]'),
+        ({'offset': [0.0]}, 'offset must be 4 finite currents'),
+        ({'length': 0}, 'length must be an integer >= 1, got 0'),
+        ({'trigger': 'clock'}, "trigger must be one of sample, timer, got 'clock'"),
+    ],
+)
 def test_config_errors(changes, match):
-    values = {'signal': 'prbs', 'amplitude': 0.5, 'band': [0.0, 1.0], 'pattern': 'pairs',
-              'offset': [0.0] * 4, 'seed': 0, 'length': 100, 'cycles': 0, 'trigger': 'sample',
-              'sample_rate': 5000.0}
+    values = {
+        'signal': 'prbs',
+        'amplitude': 0.5,
+        'band': [0.0, 1.0],
+        'pattern': 'pairs',
+        'offset': [0.0] * 4,
+        'seed': 0,
+        'length': 100,
+        'cycles': 0,
+        'trigger': 'sample',
+        'sample_rate': 5000.0,
+    }
     with pytest.raises(ExcitationParameterError, match=match):
         build_config(values | changes)
 
@@ -105,11 +154,21 @@ def test_prbs_band_error_is_a_parameter_error(ctx):
 
 def test_main_exits_2_on_invalid_parameters():
     proc = subprocess.run(
-        [sys.executable, '-m', 'maglev_ros.nodes.excitation', '--ros-args', '-p',
-         'pattern:=diagonal'], capture_output=True, text=True, timeout=60,
-        env=dict(os.environ, ROS_DOMAIN_ID='97', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST'))
+        [
+            sys.executable,
+            '-m',
+            'maglev_ros.nodes.excitation',
+            '--ros-args',
+            '-p',
+            'pattern:=diagonal',
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=dict(os.environ, ROS_DOMAIN_ID='97', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST'),
+    )
     assert proc.returncode == 2
-    assert "pattern must be one of pairs" in proc.stdout + proc.stderr
+    assert 'pattern must be one of pairs' in proc.stdout + proc.stderr
     assert 'Traceback' not in proc.stdout + proc.stderr
 
 
@@ -121,14 +180,28 @@ def test_sigterm_ends_the_node_cleanly(ctx):
     domain = os.environ['ROS_DOMAIN_ID']
     env = dict(os.environ, ROS_DOMAIN_ID=domain, ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'maglev_ros.nodes.excitation', '--ros-args', '-p',
-         'trigger:=timer', '-p', 'sample_rate:=100.0'], env=env, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        [
+            sys.executable,
+            '-m',
+            'maglev_ros.nodes.excitation',
+            '--ros-args',
+            '-p',
+            'trigger:=timer',
+            '-p',
+            'sample_rate:=100.0',
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
     try:
         node = rclpy.create_node('excitation_signal_peer', context=ctx)
         got = []
-        node.create_subscription(Float64MultiArray, contract.COMMAND_TOPIC, got.append,
-                                 contract.COMMAND_QOS)
+        node.create_subscription(
+            Float64MultiArray, contract.COMMAND_TOPIC, got.append, contract.COMMAND_QOS
+        )
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0

@@ -9,8 +9,24 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
     # magnet fixed, coil dynamics and the one-sample sensor delay on, noise off;
     # input: the commanded current, read from the bag by log time
     out = tmp_path / 'lab'
-    status = lab.main(['--duration', '0.6', '--magnet', 'fixed', '--delay', '1', '--noise', '0',
-                       '--excitation', 'prbs', '--out', str(out), '--seed', '3'])
+    status = lab.main(
+        [
+            '--duration',
+            '0.6',
+            '--magnet',
+            'fixed',
+            '--delay',
+            '1',
+            '--noise',
+            '0',
+            '--excitation',
+            'prbs',
+            '--out',
+            str(out),
+            '--seed',
+            '3',
+        ]
+    )
     captured = capfd.readouterr()
     printed = captured.out
     assert status == 0, captured.err
@@ -25,11 +41,14 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
     assert 'fit val. %' in printed and (out / 'bag' / 'metadata.yaml').is_file()
 
 
-@pytest.mark.parametrize('argv, match', [
-    (['--split', '1.5'], '--split must be in (0, 1)'),
-    (['--magnet', 'glued'], "invalid choice: 'glued'"),
-    (['--band', '0.5', '0.1'], '--band must be LOW HIGH'),
-])
+@pytest.mark.parametrize(
+    'argv, match',
+    [
+        (['--split', '1.5'], '--split must be in (0, 1)'),
+        (['--magnet', 'glued'], "invalid choice: 'glued'"),
+        (['--band', '0.5', '0.1'], '--band must be LOW HIGH'),
+    ],
+)
 def test_bad_input_is_one_line_and_status_2(argv, match, capfd):
     assert lab.main(argv) == 2
     err = capfd.readouterr().err

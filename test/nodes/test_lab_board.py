@@ -16,9 +16,27 @@ def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capf
     # applied currents (same record), so ARX 1 1 0 (nk 0 is the board default) fits it;
     # higher orders are not identifiable on such noise-free data
     out = tmp_path / 'lab'
-    status = lab.main(['--virtual-board', '--magnet', 'fixed', '--duration', '2',
-                       '--amplitude', '0.2', '--excitation', 'prbs', '--seed', '3',
-                       '--na', '1', '--nb', '1', '--out', str(out)])
+    status = lab.main(
+        [
+            '--virtual-board',
+            '--magnet',
+            'fixed',
+            '--duration',
+            '2',
+            '--amplitude',
+            '0.2',
+            '--excitation',
+            'prbs',
+            '--seed',
+            '3',
+            '--na',
+            '1',
+            '--nb',
+            '1',
+            '--out',
+            str(out),
+        ]
+    )
     captured = capfd.readouterr()
     printed = captured.out
     print(printed)
@@ -42,11 +60,14 @@ def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capf
     assert (out / 'bag' / 'metadata.yaml').is_file()
 
 
-@pytest.mark.parametrize('argv, match', [
-    (['--board', '/dev/null', '--virtual-board'], 'not allowed with argument'),
-    (['--virtual-board', '--sensors', '5'], '--sensors must be in 0 .. 2'),
-    (['--board', '/dev/null', '--board-sensors', '0'], '--board-sensors must be >= 1'),
-])
+@pytest.mark.parametrize(
+    'argv, match',
+    [
+        (['--board', '/dev/null', '--virtual-board'], 'not allowed with argument'),
+        (['--virtual-board', '--sensors', '5'], '--sensors must be in 0 .. 2'),
+        (['--board', '/dev/null', '--board-sensors', '0'], '--board-sensors must be >= 1'),
+    ],
+)
 def test_bad_board_input_is_one_line_and_status_2(argv, match, tmp_path, capfd):
     assert lab.main(argv + ['--out', str(tmp_path / 'o')]) == 2
     err = capfd.readouterr().err

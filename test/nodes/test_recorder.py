@@ -29,29 +29,51 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-
-
 def params(**values):
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-TOPICS = ['maglev/sensor_0/field', 'maglev/currents', 'maglev/currents/command',
-          'maglev/state/true', '/clock']
+TOPICS = [
+    'maglev/sensor_0/field',
+    'maglev/currents',
+    'maglev/currents/command',
+    'maglev/state/true',
+    '/clock',
+]
 
 
 def record_lockstep(ctx, bag, n, storage='mcap'):
-    sim = SimulatorNode(context=ctx, parameter_overrides=params(
-        mode='lockstep', magnet='fixed', start_paused=True, marker_rate=0.0, sensors=[0],
-        seed=3))
-    excite = ExcitationNode(context=ctx, parameter_overrides=params(
-        signal='prbs', amplitude=0.5, length=1023, seed=2))
-    recorder = RecorderNode(context=ctx, parameter_overrides=params(
-        path=str(bag), storage=storage, topics=TOPICS, log_clock='topic'))
+    sim = SimulatorNode(
+        context=ctx,
+        parameter_overrides=params(
+            mode='lockstep',
+            magnet='fixed',
+            start_paused=True,
+            marker_rate=0.0,
+            sensors=[0],
+            seed=3,
+        ),
+    )
+    excite = ExcitationNode(
+        context=ctx, parameter_overrides=params(signal='prbs', amplitude=0.5, length=1023, seed=2)
+    )
+    recorder = RecorderNode(
+        context=ctx,
+        parameter_overrides=params(
+            path=str(bag), storage=storage, topics=TOPICS, log_clock='topic'
+        ),
+    )
     spinner = contract.Spinner(ctx, [sim, excite, recorder])
     try:
-        wait_for(lambda: len(recorder.subscribed) == 5 and recorder.metadata_complete
-                 and excite._pub.get_subscription_count() >= 2
-                 and sim._current_pub.get_subscription_count() >= 2, what='the graph')
+        wait_for(
+            lambda: (
+                len(recorder.subscribed) == 5
+                and recorder.metadata_complete
+                and excite._pub.get_subscription_count() >= 2
+                and sim._current_pub.get_subscription_count() >= 2
+            ),
+            what='the graph',
+        )
         sim.set_paused(True)
         sim.set_paused(False)
         wait_for(lambda: recorder.counts['/maglev/currents'] > n, what=f'{n} samples')
@@ -67,8 +89,11 @@ def record_lockstep(ctx, bag, n, storage='mcap'):
 def test_lockstep_experiment_recorded_with_metadata_and_exact_alignment(ctx, tmp_path):
     bag = tmp_path / 'run'
     commands = record_lockstep(ctx, bag, 600)
-    data = read_bag(bag, ['maglev/sensor_0/field:magnetic_field.z'],
-                    [f'maglev/currents/command:data[{j}]' for j in range(4)])
+    data = read_bag(
+        bag,
+        ['maglev/sensor_0/field:magnetic_field.z'],
+        [f'maglev/currents/command:data[{j}]' for j in range(4)],
+    )
     assert data.data.Ts == pytest.approx(2e-4)
     assert data.alignment.gaps == () if hasattr(data.alignment, 'gaps') else True
     u = np.asarray(data.data.u)
@@ -93,12 +118,14 @@ def test_sqlite3_storage(ctx, tmp_path):
 def test_player_republishes_a_bag_with_its_clock(ctx, tmp_path):
     bag = tmp_path / 'run'
     record_lockstep(ctx, bag, 200)
-    player = PlayerNode(context=ctx, parameter_overrides=params(path=str(bag), rate=0.0,
-                                                                start_delay=1.0))
+    player = PlayerNode(
+        context=ctx, parameter_overrides=params(path=str(bag), rate=0.0, start_delay=1.0)
+    )
     peer = rclpy.create_node('player_peer', context=ctx)
     fields = []
-    peer.create_subscription(MagneticField, 'maglev/sensor_0/field', fields.append,
-                             contract.SENSOR_QOS)
+    peer.create_subscription(
+        MagneticField, 'maglev/sensor_0/field', fields.append, contract.SENSOR_QOS
+    )
     spinner = contract.Spinner(ctx, [player, peer])
     try:
         wait_for(player.done.is_set, what='playback')
@@ -114,9 +141,15 @@ def test_player_republishes_a_bag_with_its_clock(ctx, tmp_path):
 
 
 def test_config_errors(tmp_path):
-    base = {'path': str(tmp_path / 'b'), 'storage': 'mcap', 'topics': ['/a'], 'depth': 10,
-            'log_clock': 'ros', 'metadata_node': ''}
-    with pytest.raises(RecorderParameterError, match="storage must be one of mcap, sqlite3"):
+    base = {
+        'path': str(tmp_path / 'b'),
+        'storage': 'mcap',
+        'topics': ['/a'],
+        'depth': 10,
+        'log_clock': 'ros',
+        'metadata_node': '',
+    }
+    with pytest.raises(RecorderParameterError, match='storage must be one of mcap, sqlite3'):
         build_config(base | {'storage': 'rosbag1'})
     with pytest.raises(RecorderParameterError, match='log_clock topic needs /clock'):
         build_config(base | {'log_clock': 'topic'})
@@ -129,14 +162,29 @@ def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
     bag = tmp_path / f'sig{int(signum)}'
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     proc = subprocess.Popen(
-        [sys.executable, '-m', 'maglev_ros.nodes.recorder', '--ros-args', '-p',
-         f'path:={bag}', '-p', 'topics:=[maglev/currents/command]', '-p', 'metadata_node:=""'],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-        start_new_session=True)
+        [
+            sys.executable,
+            '-m',
+            'maglev_ros.nodes.recorder',
+            '--ros-args',
+            '-p',
+            f'path:={bag}',
+            '-p',
+            'topics:=[maglev/currents/command]',
+            '-p',
+            'metadata_node:=""',
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
     try:
         node = rclpy.create_node('recorder_signal_peer', context=ctx)
-        pub = node.create_publisher(Float64MultiArray, 'maglev/currents/command',
-                                    contract.LOCKSTEP_COMMAND_QOS)
+        pub = node.create_publisher(
+            Float64MultiArray, 'maglev/currents/command', contract.LOCKSTEP_COMMAND_QOS
+        )
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0

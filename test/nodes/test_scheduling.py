@@ -13,7 +13,8 @@ from maglev_ros.nodes.scheduling import EVENT_THREAD_PREFIX, relax_event_threads
 
 pytestmark = pytest.mark.skipif(
     not (sys.platform.startswith('linux') and hasattr(os, 'SCHED_BATCH')),
-    reason='SCHED_BATCH and /proc/self/task are Linux features')
+    reason='SCHED_BATCH and /proc/self/task are Linux features',
+)
 
 
 def policies() -> dict[int, tuple[str, int]]:
@@ -21,8 +22,10 @@ def policies() -> dict[int, tuple[str, int]]:
     out = {}
     for task in Path('/proc/self/task').iterdir():
         try:
-            out[int(task.name)] = ((task / 'comm').read_text().strip(),
-                                   os.sched_getscheduler(int(task.name)))
+            out[int(task.name)] = (
+                (task / 'comm').read_text().strip(),
+                os.sched_getscheduler(int(task.name)),
+            )
         except OSError:  # the thread ended meanwhile
             continue
     return out
@@ -64,4 +67,5 @@ def test_no_match_changes_nothing():
     before = policies()
     assert relax_event_threads(prefix='no-such-thread-name.') == []
     assert {tid: p for tid, (_, p) in policies().items() if tid in before} == {
-        tid: p for tid, (_, p) in before.items() if tid in policies()}
+        tid: p for tid, (_, p) in before.items() if tid in policies()
+    }

@@ -37,8 +37,6 @@ def wait_for(predicate, timeout=TIMEOUT, what='condition'):
         time.sleep(0.005)
 
 
-
-
 class Peer:
     """The simulator and a test peer on one executor; the peer answers each sample."""
 
@@ -56,26 +54,39 @@ class Peer:
         self.markers = deque(maxlen=2)
         qos = contract.SENSOR_QOS
         self.pub = self.node.create_publisher(
-            Float64MultiArray, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS)
+            Float64MultiArray, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS
+        )
         for k in self.sim.sensors:
-            self.node.create_subscription(MagneticField, contract.field_topic(k),
-                                          self.fields[k].append, qos, raw=raw)
-        self.node.create_subscription(Odometry, contract.TRUE_STATE_TOPIC, self.states.append,
-                                      qos, raw=raw)
-        self.node.create_subscription(Clock, contract.CLOCK_TOPIC, self.clock.append, qos,
-                                      raw=raw)
-        self.node.create_subscription(JointState, contract.CURRENTS_TOPIC, self._on_sample,
-                                      qos, raw=raw)
-        self.node.create_subscription(DiagnosticArray, '/diagnostics',
-                                      lambda m: self.diagnostics.append(m), 10)
-        self.node.create_subscription(MarkerArray, contract.MARKERS_TOPIC,
-                                      lambda m: self.markers.append(m), contract.MARKERS_QOS)
+            self.node.create_subscription(
+                MagneticField, contract.field_topic(k), self.fields[k].append, qos, raw=raw
+            )
+        self.node.create_subscription(
+            Odometry, contract.TRUE_STATE_TOPIC, self.states.append, qos, raw=raw
+        )
+        self.node.create_subscription(Clock, contract.CLOCK_TOPIC, self.clock.append, qos, raw=raw)
+        self.node.create_subscription(
+            JointState, contract.CURRENTS_TOPIC, self._on_sample, qos, raw=raw
+        )
+        self.node.create_subscription(
+            DiagnosticArray, '/diagnostics', lambda m: self.diagnostics.append(m), 10
+        )
+        self.node.create_subscription(
+            MarkerArray,
+            contract.MARKERS_TOPIC,
+            lambda m: self.markers.append(m),
+            contract.MARKERS_QOS,
+        )
         self.reset_client = self.node.create_client(Trigger, 'maglev/simulator/reset')
         self.pause_client = self.node.create_client(SetBool, 'maglev/simulator/pause')
         self.closed = False
         self.spinner = contract.Spinner(ctx, [self.sim, self.node])
-        wait_for(lambda: self.pub.get_subscription_count() > 0
-                 and self.sim._current_pub.get_subscription_count() > 0, what='discovery')
+        wait_for(
+            lambda: (
+                self.pub.get_subscription_count() > 0
+                and self.sim._current_pub.get_subscription_count() > 0
+            ),
+            what='discovery',
+        )
 
     def _on_sample(self, msg):
         self.currents.append(msg)
@@ -174,12 +185,16 @@ def test_true_state_as_odometry():
 
     R = rot(2, g) @ rot(1, b) @ rot(0, a)
     w, v = q.w, np.array([q.x, q.y, q.z])
-    Rq = (w * w - v @ v) * np.eye(3) + 2 * np.outer(v, v) + 2 * w * np.array(
-        [[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    Rq = (
+        (w * w - v @ v) * np.eye(3)
+        + 2 * np.outer(v, v)
+        + 2 * w * np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    )
     np.testing.assert_allclose(Rq, R, atol=1e-14)
     twist = msg.twist.twist
-    np.testing.assert_allclose([twist.linear.x, twist.linear.y, twist.linear.z],
-                               R.T @ x[6:9], atol=1e-14)
+    np.testing.assert_allclose(
+        [twist.linear.x, twist.linear.y, twist.linear.z], R.T @ x[6:9], atol=1e-14
+    )
     assert [twist.angular.x, twist.angular.y, twist.angular.z] == [1.0, 2.0, 3.0]
     raw = contract.odometry_template().serialise(123, contract.odometry_values(x).tolist())
     assert raw == serialize_message(msg)
@@ -188,14 +203,27 @@ def test_true_state_as_odometry():
 
 def _lockstep_run(make_peer, seed, n=400):
     commands = np.random.default_rng(5).uniform(-1.0, 1.0, (n, 4))
-    peer = make_peer(commands, seed=seed, sensor_noise=2e-5, sensor_delay=1,
-                     coil_dynamics=True, magnet='fixed', marker_rate=0.0)
+    peer = make_peer(
+        commands,
+        seed=seed,
+        sensor_noise=2e-5,
+        sensor_delay=1,
+        coil_dynamics=True,
+        magnet='fixed',
+        marker_rate=0.0,
+    )
     peer.run(n + 1)
-    fields = np.array([[stamp_ns(m), m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z]
-                       for k in peer.sim.sensors for m in peer.fields[k][: n + 1]])
+    fields = np.array(
+        [
+            [stamp_ns(m), m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z]
+            for k in peer.sim.sensors
+            for m in peer.fields[k][: n + 1]
+        ]
+    )
     currents = np.array([[stamp_ns(m), *m.effort] for m in peer.currents[: n + 1]])
-    states = np.array([[m.pose.pose.position.z, m.twist.twist.linear.z]
-                       for m in peer.states[: n + 1]])
+    states = np.array(
+        [[m.pose.pose.position.z, m.twist.twist.linear.z] for m in peer.states[: n + 1]]
+    )
     assert peer.sim.counters['timeouts'] == 0
     peer.close()
     return fields.tobytes(), currents.tobytes(), states.tobytes()  # bit patterns
@@ -213,18 +241,27 @@ def test_lockstep_is_bit_for_bit_reproducible(make_peer):
 
 def test_crash_is_reported_and_reset_recovers(make_peer):
     x0 = [0.001, 0.0, 0.0365] + [0.0] * 9
-    peer = make_peer(np.zeros((100000, 4)), initial_state=x0, diagnostics_period=0.2,
-                     publish_state=True, marker_rate=0.0)
+    peer = make_peer(
+        np.zeros((100000, 4)),
+        initial_state=x0,
+        diagnostics_period=0.2,
+        publish_state=True,
+        marker_rate=0.0,
+    )
     peer.run(1)
     sim = peer.sim
 
     def crashed():
-        return any(s.level == DiagnosticStatus.ERROR and 'crashed' in s.message
-                   for d in list(peer.diagnostics) for s in d.status)
+        return any(
+            s.level == DiagnosticStatus.ERROR and 'crashed' in s.message
+            for d in list(peer.diagnostics)
+            for s in d.status
+        )
 
     wait_for(crashed, what='the crash on /diagnostics')
-    status = next(s for d in list(peer.diagnostics) for s in d.status
-                  if s.level == DiagnosticStatus.ERROR)
+    status = next(
+        s for d in list(peer.diagnostics) for s in d.status if s.level == DiagnosticStatus.ERROR
+    )
     values = {kv.key: kv.value for kv in status.values}
     assert values['crash reason'] == 'touched the base'
     assert 0.05 < float(values['crash time (s)']) < 1.0
@@ -247,9 +284,11 @@ def test_crash_is_reported_and_reset_recovers(make_peer):
 def euler_of(q):
     """ZYX Euler angles (alpha, beta, gamma) of a geometry_msgs Quaternion."""
     w, x, y, z = q.w, q.x, q.y, q.z
-    return (np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
-            np.arcsin(2 * (w * y - z * x)),
-            np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    return (
+        np.arctan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y)),
+        np.arcsin(2 * (w * y - z * x)),
+        np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)),
+    )
 
 
 def test_realtime_bursts_publish_the_core_h_until_the_crash(make_peer):
@@ -257,8 +296,14 @@ def test_realtime_bursts_publish_the_core_h_until_the_crash(make_peer):
     # free, falling magnet arrives, its fields are h(x, i) of its own published state,
     # /clock comes once per burst, and the burst that crashes publishes up to the crash
     x0 = [0.001, 0.0, 0.0365] + [0.0] * 9
-    peer = make_peer(lockstep=False, initial_state=x0, coil_dynamics=False, sensor_delay=0,
-                     marker_rate=0.0, diagnostics_period=0.2)
+    peer = make_peer(
+        lockstep=False,
+        initial_state=x0,
+        coil_dynamics=False,
+        sensor_delay=0,
+        marker_rate=0.0,
+        diagnostics_period=0.2,
+    )
     sim = peer.sim
     peer.call(peer.pause_client, SetBool.Request(data=False))
     wait_for(lambda: sim.counters['crashes'] == 1, what='the crash')
@@ -279,8 +324,9 @@ def test_realtime_bursts_publish_the_core_h_until_the_crash(make_peer):
         h = model.measurement(x, np.array(msg.effort))
         for j, k in enumerate(sim.sensors):
             field = by_stamp[k][t_ns].magnetic_field
-            np.testing.assert_allclose([field.x, field.y, field.z], h[3 * j : 3 * j + 3],
-                                       rtol=1e-9, atol=1e-15)
+            np.testing.assert_allclose(
+                [field.x, field.y, field.z], h[3 * j : 3 * j + 3], rtol=1e-9, atol=1e-15
+            )
     assert np.ptp([states[t].pose.pose.position.x for t in stamps]) > 1e-4  # it moved
     clock = np.array([stamp_ns(m) for m in peer.clock])
     clock = clock[(clock >= stamps[0]) & (clock <= stamps[-1])]
@@ -288,21 +334,33 @@ def test_realtime_bursts_publish_the_core_h_until_the_crash(make_peer):
 
 
 def test_lockstep_timeout_holds_the_last_command(make_peer):
-    peer = make_peer([[0.2, 0.0, 0.0, 0.0]], coil_dynamics=False, command_timeout=0.1,
-                     marker_rate=0.0)
+    peer = make_peer(
+        [[0.2, 0.0, 0.0, 0.0]], coil_dynamics=False, command_timeout=0.1, marker_rate=0.0
+    )
     peer.run(4)
     assert peer.sim.counters['timeouts'] >= 2
     assert list(peer.currents[3].effort) == [0.2, 0.0, 0.0, 0.0]
 
 
 def test_realtime_follows_commands_and_pauses(make_peer):
-    peer = make_peer(lockstep=False, coil_dynamics=False, marker_rate=0.0, start_paused=False,
-                     magnet='fixed', sensors=[0], publish_clock=False,
-                     diagnostics_period=0.5)
+    peer = make_peer(
+        lockstep=False,
+        coil_dynamics=False,
+        marker_rate=0.0,
+        start_paused=False,
+        magnet='fixed',
+        sensors=[0],
+        publish_clock=False,
+        diagnostics_period=0.5,
+    )
     wait_for(lambda: len(peer.currents) > 500, what='real-time samples')
-    wait_for(lambda: any(list(m.effort) == [0.5, -0.5, 0.0, 0.0] for m in peer.currents[-50:])
-             or peer.pub.publish(Float64MultiArray(data=[0.5, -0.5, 0.0, 0.0])),
-             what='the command applied')
+    wait_for(
+        lambda: (
+            any(list(m.effort) == [0.5, -0.5, 0.0, 0.0] for m in peer.currents[-50:])
+            or peer.pub.publish(Float64MultiArray(data=[0.5, -0.5, 0.0, 0.0]))
+        ),
+        what='the command applied',
+    )
     stamps = np.array([stamp_ns(m) for m in peer.currents])
     assert np.all(np.diff(stamps) > 0) and np.all(stamps % 200_000 == 0)
     peer.call(peer.pause_client, SetBool.Request(data=True))
@@ -312,37 +370,63 @@ def test_realtime_follows_commands_and_pauses(make_peer):
     assert len(peer.currents) == count
     peer.call(peer.pause_client, SetBool.Request(data=False))
     wait_for(lambda: len(peer.currents) > count + 100, what='samples after resume')
-    wait_for(lambda: any(float(kv.value) > 0 for d in list(peer.diagnostics)
-                         for s in d.status for kv in s.values if kv.key == 'real-time factor'),
-             what='a real-time factor')
+    wait_for(
+        lambda: any(
+            float(kv.value) > 0
+            for d in list(peer.diagnostics)
+            for s in d.status
+            for kv in s.values
+            if kv.key == 'real-time factor'
+        ),
+        what='a real-time factor',
+    )
     for key in ('late commands', 'held samples', 'overruns'):
         assert any(kv.key == key for kv in peer.diagnostics[-1].status[0].values)
 
 
 def _values(**changes):
     values = {
-        'params': 'maggy_v2', 'field_model': 'fast', 'torque': 'true', 'kinematics': 'rigid',
-        'sample_rate': 5000.0, 'substeps': 1, 'magnet': 'free', 'initial_state': None,
-        'coil_dynamics': True, 'sensor_noise': 0.0, 'sensor_quantization': 0.0,
-        'sensor_delay': 1, 'seed': 0, 'mode': 'realtime', 'command_timeout': 1.0,
+        'params': 'maggy_v2',
+        'field_model': 'fast',
+        'torque': 'true',
+        'kinematics': 'rigid',
+        'sample_rate': 5000.0,
+        'substeps': 1,
+        'magnet': 'free',
+        'initial_state': None,
+        'coil_dynamics': True,
+        'sensor_noise': 0.0,
+        'sensor_quantization': 0.0,
+        'sensor_delay': 1,
+        'seed': 0,
+        'mode': 'realtime',
+        'command_timeout': 1.0,
         'pace_period': 0.001,
-        'start_paused': False, 'start_subscribers': 0, 'sensors': None, 'publish_state': True,
-        'publish_clock': True, 'marker_rate': 10.0, 'diagnostics_period': 1.0,
+        'start_paused': False,
+        'start_subscribers': 0,
+        'sensors': None,
+        'publish_state': True,
+        'publish_clock': True,
+        'marker_rate': 10.0,
+        'diagnostics_period': 1.0,
     }
     return values | changes
 
 
-@pytest.mark.parametrize('changes, match', [
-    ({'mode': 'fast'}, "mode must be one of realtime, lockstep, got 'fast'"),
-    ({'magnet': 'glued'}, "magnet must be one of free, fixed, absent, got 'glued'"),
-    ({'sample_rate': 0.0}, 'sample_rate must be a finite number > 0, got 0.0'),
-    ({'sensor_noise': -1.0}, 'sensor_noise must be a finite number >= 0'),
-    ({'initial_state': [0.0] * 3}, 'initial_state must be 12 finite numbers'),
-    ({'sensors': [0, 0]}, 'sensors must be distinct sensor indices'),
-    ({'field_model': 'slow'}, 'field_model must be one of fast, accurate, filament'),
-    ({'substeps': 0}, 'substeps must be an integer >= 1, got 0'),
-    ({'seed': -3}, 'seed must be an integer >= 0, got -3'),
-])
+@pytest.mark.parametrize(
+    'changes, match',
+    [
+        ({'mode': 'fast'}, "mode must be one of realtime, lockstep, got 'fast'"),
+        ({'magnet': 'glued'}, "magnet must be one of free, fixed, absent, got 'glued'"),
+        ({'sample_rate': 0.0}, 'sample_rate must be a finite number > 0, got 0.0'),
+        ({'sensor_noise': -1.0}, 'sensor_noise must be a finite number >= 0'),
+        ({'initial_state': [0.0] * 3}, 'initial_state must be 12 finite numbers'),
+        ({'sensors': [0, 0]}, 'sensors must be distinct sensor indices'),
+        ({'field_model': 'slow'}, 'field_model must be one of fast, accurate, filament'),
+        ({'substeps': 0}, 'substeps must be an integer >= 1, got 0'),
+        ({'seed': -3}, 'seed must be an integer >= 0, got -3'),
+    ],
+)
 def test_config_errors(changes, match):
     with pytest.raises(SimulatorParameterError, match=match):
         build_config(_values(**changes))
@@ -360,8 +444,14 @@ def _process(domain, *params):
     cmd = [sys.executable, '-m', 'maglev_ros.nodes.simulator', '--ros-args']
     for item in params:
         cmd += ['-p', item]
-    return subprocess.Popen(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                            text=True, start_new_session=True)
+    return subprocess.Popen(
+        cmd,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
 
 
 def test_main_exits_2_on_invalid_parameters(domain):
@@ -378,8 +468,9 @@ def test_signal_ends_the_node_cleanly(ctx, domain, signum):
     try:
         node = rclpy.create_node('simulator_signal_peer', context=ctx)
         got = []
-        node.create_subscription(JointState, contract.CURRENTS_TOPIC, got.append,
-                                 contract.SENSOR_QOS)
+        node.create_subscription(
+            JointState, contract.CURRENTS_TOPIC, got.append, contract.SENSOR_QOS
+        )
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)
         deadline = time.monotonic() + 60.0

@@ -12,8 +12,9 @@ from maglev_ros.physics.sheet import sheet_field
 def _points(rng, scale):
     near = rng.normal(size=(300, 3)) * scale
     on_axis = np.column_stack([np.zeros(20), np.zeros(20), np.linspace(-5, 5, 20) * scale])
-    near_axis = np.column_stack([np.geomspace(1e-12, 1e-3, 20) * scale, np.zeros(20),
-                                 np.full(20, 0.7 * scale)])
+    near_axis = np.column_stack(
+        [np.geomspace(1e-12, 1e-3, 20) * scale, np.zeros(20), np.full(20, 0.7 * scale)]
+    )
     far = rng.normal(size=(50, 3)) * 200 * scale
     return np.vstack([near, on_axis, near_axis, far])
 
@@ -54,15 +55,17 @@ def test_loop_field_is_finite_off_the_wire():
     assert np.all(np.isfinite(loop_field(pts, a, 1.0)))
 
 
-@pytest.mark.parametrize('radius, length, polarization',
-                         [(0.01, 0.009, 1.1), (0.025, 0.004, -1.1)])
+@pytest.mark.parametrize(
+    'radius, length, polarization', [(0.01, 0.009, 1.1), (0.025, 0.004, -1.1)]
+)
 def test_sheet_field_matches_magpylib_cylinder(radius, length, polarization):
     pts = _points(np.random.default_rng(2), radius * 2)
     rho = np.hypot(pts[:, 0], pts[:, 1])
     on_sheet = (np.abs(rho - radius) < 1e-6 * radius) & (np.abs(pts[:, 2]) <= length / 2)
     pts = pts[~on_sheet]
-    ref = magpy.magnet.Cylinder(polarization=(0, 0, polarization),
-                                dimension=(2 * radius, length)).getB(pts)
+    ref = magpy.magnet.Cylinder(
+        polarization=(0, 0, polarization), dimension=(2 * radius, length)
+    ).getB(pts)
     field = sheet_field(pts, radius, length, polarization * length / MU0)
     assert np.max(_relative_error(field, ref)) < 1e-4
 
@@ -89,9 +92,17 @@ def test_filament_solenoid_far_field_matches_its_own_moment():
     moment = heights.size * np.sum(np.pi * radii**2) * current
     pts = np.array([[0.0, 0.0, 2.0], [1.2, 0.5, 0.9]])
     total = sum(loop_field(pts - [0, 0, dz], a, current) for dz in heights for a in radii)
-    dipole = np.array([MU0 / (4 * np.pi) * (3 * p * (moment * p[2]) / np.linalg.norm(p) ** 5
-                                            - np.array([0, 0, moment]) / np.linalg.norm(p) ** 3)
-                       for p in pts])
+    dipole = np.array(
+        [
+            MU0
+            / (4 * np.pi)
+            * (
+                3 * p * (moment * p[2]) / np.linalg.norm(p) ** 5
+                - np.array([0, 0, moment]) / np.linalg.norm(p) ** 3
+            )
+            for p in pts
+        ]
+    )
     assert np.max(_relative_error(total, dipole)) < 1e-4
     # smaller than a full-radius solenoid of the same turns: the loops fill the section
     assert moment < turns * np.pi * r**2 * current

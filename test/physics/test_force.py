@@ -58,8 +58,9 @@ def test_inverted_equilibria_are_reported():
     assert any(e.stiffness > 0 for e in inverted)
 
 
-@pytest.mark.parametrize('name, published', [('maggy_v2', 0.558361865282244),
-                                             ('maggy_v4', 0.564394804131228)])
+@pytest.mark.parametrize(
+    'name, published', [('maggy_v2', 0.558361865282244), ('maggy_v4', 0.564394804131228)]
+)
 def test_solenoid_radius_correction_reproduces_the_published_factor(name, published):
     # the published values come from fmincon (tolerance ~1e-8 on c); ours is a root
     assert solenoid_radius_correction(load_parameters(name)) == pytest.approx(published, rel=1e-7)
@@ -115,8 +116,9 @@ def _linkage(model, x):
     radii = (np.arange(n_r) + 0.5) / n_r * m.radius
     theta = 2 * np.pi * np.arange(n_t) / n_t
     rr, tt = np.meshgrid(radii, theta, indexing='ij')
-    local = np.column_stack([(rr * np.cos(tt)).ravel(), (rr * np.sin(tt)).ravel(),
-                             np.zeros(rr.size)])
+    local = np.column_stack(
+        [(rr * np.cos(tt)).ravel(), (rr * np.sin(tt)).ravel(), np.zeros(rr.size)]
+    )
     field = model.field_at(x[:3] + local @ r.T)
     normal = r[:, 2]
     flux = np.sum(field @ normal * (rr.ravel() * (m.radius / n_r) * (2 * np.pi / n_t)))

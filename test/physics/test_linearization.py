@@ -69,9 +69,9 @@ def test_on_axis_sensor_jacobian_does_not_depend_on_the_step():
 
 def test_published_kinematics_linearise_the_same_at_zero_angles():
     v2 = make_model('maggy_v2')
-    np.testing.assert_allclose(linearize(v2).A,
-                               linearize(v2.with_options(kinematics='published')).A,
-                               rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(
+        linearize(v2).A, linearize(v2.with_options(kinematics='published')).A, rtol=1e-9, atol=1e-9
+    )
 
 
 def test_statespace_conversion_keeps_names(linear):

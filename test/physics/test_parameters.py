@@ -51,24 +51,46 @@ def _write(tmp_path, doc):
     return path
 
 
-@pytest.mark.parametrize('mutate, key', [
-    (lambda d: d['solenoids'].pop('turns'), r'solenoids\.turns: missing key'),
-    (lambda d: d['levitating_magnet'].pop('mass'), r'levitating_magnet\.mass: missing key'),
-    (lambda d: d.pop('workspace'), r'workspace: missing key'),
-    (lambda d: d['solenoids']['radius'].pop(), r'solenoids\.radius: expected 4 values .*got 3'),
-    (lambda d: d['permanent_magnets']['y'].append(0.0),
-     r'permanent_magnets\.y: expected 4 values \(as many as permanent_magnets\.x\), got 5'),
-    (lambda d: d['sensors'][0]['position'].pop(), r'sensors\[0\]\.position: expected 3'),
-    (lambda d: d['solenoids']['radius'].__setitem__(1, 0.0), r'solenoids\.radius\[1\]: must be'),
-    (lambda d: d['solenoids']['turns'].__setitem__(2, -480), r'solenoids\.turns\[2\]: must be'),
-    (lambda d: d['levitating_magnet'].__setitem__('mass', 0), r'levitating_magnet\.mass: must be'),
-    (lambda d: d['levitating_magnet'].__setitem__('radius', -0.02), r'levitating_magnet\.radius'),
-    (lambda d: d['permanent_magnets'].__setitem__('colour', 'red'),
-     r'permanent_magnets\.colour: unknown key'),
-    (lambda d: d.__setitem__('gravity', 9.81), r'gravity: unknown key'),
-    (lambda d: d['coils'].__setitem__('resistance', 'three'), r'coils\.resistance: expected'),
-    (lambda d: d['workspace'].__setitem__('max', [0.06, 0.06, -1.0]), r'workspace: max must'),
-])
+@pytest.mark.parametrize(
+    'mutate, key',
+    [
+        (lambda d: d['solenoids'].pop('turns'), r'solenoids\.turns: missing key'),
+        (lambda d: d['levitating_magnet'].pop('mass'), r'levitating_magnet\.mass: missing key'),
+        (lambda d: d.pop('workspace'), r'workspace: missing key'),
+        (
+            lambda d: d['solenoids']['radius'].pop(),
+            r'solenoids\.radius: expected 4 values .*got 3',
+        ),
+        (
+            lambda d: d['permanent_magnets']['y'].append(0.0),
+            r'permanent_magnets\.y: expected 4 values \(as many as permanent_magnets\.x\), got 5',
+        ),
+        (lambda d: d['sensors'][0]['position'].pop(), r'sensors\[0\]\.position: expected 3'),
+        (
+            lambda d: d['solenoids']['radius'].__setitem__(1, 0.0),
+            r'solenoids\.radius\[1\]: must be',
+        ),
+        (
+            lambda d: d['solenoids']['turns'].__setitem__(2, -480),
+            r'solenoids\.turns\[2\]: must be',
+        ),
+        (
+            lambda d: d['levitating_magnet'].__setitem__('mass', 0),
+            r'levitating_magnet\.mass: must be',
+        ),
+        (
+            lambda d: d['levitating_magnet'].__setitem__('radius', -0.02),
+            r'levitating_magnet\.radius',
+        ),
+        (
+            lambda d: d['permanent_magnets'].__setitem__('colour', 'red'),
+            r'permanent_magnets\.colour: unknown key',
+        ),
+        (lambda d: d.__setitem__('gravity', 9.81), r'gravity: unknown key'),
+        (lambda d: d['coils'].__setitem__('resistance', 'three'), r'coils\.resistance: expected'),
+        (lambda d: d['workspace'].__setitem__('max', [0.06, 0.06, -1.0]), r'workspace: max must'),
+    ],
+)
 def test_bad_files_name_the_file_and_the_key(tmp_path, document, mutate, key):
     doc = copy.deepcopy(document)
     mutate(doc)

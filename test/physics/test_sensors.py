@@ -11,8 +11,9 @@ def test_reading_is_base_plus_feedthrough_plus_magnet(v2, v2_equilibrium):
     u = np.array([0.5, -0.2, 0.1, 0.3])
     positions = np.array([s.position for s in v2.params.sensors])
     expected = v2.field_at(positions, u) + v2.magnet_field_at(positions, v2_equilibrium)
-    np.testing.assert_allclose(v2.measurement(v2_equilibrium, u), expected.ravel(), rtol=1e-12,
-                               atol=1e-15)
+    np.testing.assert_allclose(
+        v2.measurement(v2_equilibrium, u), expected.ravel(), rtol=1e-12, atol=1e-15
+    )
     # the solenoids feed through linearly in the currents
     y0 = v2.measurement(v2_equilibrium)
     y1 = v2.measurement(v2_equilibrium, u)
@@ -23,8 +24,12 @@ def test_reading_is_base_plus_feedthrough_plus_magnet(v2, v2_equilibrium):
 def test_mounting_rotation_gain_and_offset():
     params = load_parameters('maggy_v2')
     quarter = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])  # 90 deg about z
-    mounted = Sensor(position=params.sensors[1].position, rotation=quarter,
-                     gain=np.array([2.0, 1.0, 0.5]), offset=np.array([1e-3, 0.0, -1e-3]))
+    mounted = Sensor(
+        position=params.sensors[1].position,
+        rotation=quarter,
+        gain=np.array([2.0, 1.0, 0.5]),
+        offset=np.array([1e-3, 0.0, -1e-3]),
+    )
     plain = MaggyModel(params.replace(sensors=(params.sensors[1],)))
     model = MaggyModel(params.replace(sensors=(mounted,)))
     x = plain.hover_state(0.0365)

@@ -121,8 +121,9 @@ def test_published_kinematics_drift_away_from_zero_angles():
     x0[3], x0[4] = 0.3, -0.2
     x0[9:12] = [2.0, -1.5, 10.0]
     rigid = Simulator(MaggyModel(params), check_crash=False, x0=x0).run(np.zeros((500, 0)))
-    published = Simulator(make_model(params, kinematics='published'), check_crash=False,
-                          x0=x0).run(np.zeros((500, 0)))
+    published = Simulator(
+        make_model(params, kinematics='published'), check_crash=False, x0=x0
+    ).run(np.zeros((500, 0)))
     assert np.max(np.abs(rigid.x[:, 3:6] - published.x[:, 3:6])) > 1e-2
 
 
@@ -141,7 +142,7 @@ def test_coil_dynamics_follow_l_over_r_and_saturate(v2, v2_equilibrium):
 
 
 def test_coil_drive_modes():
-    with pytest.raises(ValueError, match="drive must be one of"):
+    with pytest.raises(ValueError, match='drive must be one of'):
         CoilDynamics('pwm')
     with pytest.raises(ValueError, match='inductance must be positive'):
         CoilDynamics('duty', inductance=0.0)
@@ -191,12 +192,16 @@ def test_fixed_and_absent_magnet_only_the_coils_move(field):
         np.testing.assert_array_equal(result.x, np.tile(x0, (51, 1)))
         tau = 0.004 / 3.0
         t = result.t[1:]
-        np.testing.assert_allclose(result.currents[1:, 0], 0.5 * (1 - np.exp(-t / tau)),
-                                   rtol=1e-12)
+        np.testing.assert_allclose(
+            result.currents[1:, 0], 0.5 * (1 - np.exp(-t / tau)), rtol=1e-12
+        )
     # the difference of the readings is exactly the levitating magnet's own field
     positions = np.array([s.position for s in model.params.sensors])
-    np.testing.assert_allclose(fixed.y - absent.y,
-                               np.tile(model.magnet_field_at(positions, x0).ravel(), (51, 1)),
-                               rtol=1e-9, atol=1e-15)
+    np.testing.assert_allclose(
+        fixed.y - absent.y,
+        np.tile(model.magnet_field_at(positions, x0).ravel(), (51, 1)),
+        rtol=1e-9,
+        atol=1e-15,
+    )
     with pytest.raises(ValueError, match='magnet must be one of free, fixed, absent'):
         Simulator(model, magnet='glued')

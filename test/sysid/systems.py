@@ -10,15 +10,14 @@ TS = 2e-4
 # SISO systems, polynomials in q^-1 (B with its nk leading zeros).
 A2 = np.array([1.0, -1.5, 0.7])
 B2 = np.array([0.0, 1.0, 0.5])
-C_COLORED = np.array([1.0, -1.2, 0.5])      # strongly colored MA noise
+C_COLORED = np.array([1.0, -1.2, 0.5])  # strongly colored MA noise
 C_ARMAX = np.array([1.0, 0.5])
 F_OE = np.array([1.0, -1.2, 0.5])
 C_BJ = np.array([1.0, 0.4])
 D_BJ = np.array([1.0, -0.85])
 
 
-def simulate_siso(N, seed, A=A2, B=B2, C=(1.0,), D=(1.0,), F=(1.0,), noise=0.2,
-                  u_std=1.0):
+def simulate_siso(N, seed, A=A2, B=B2, C=(1.0,), D=(1.0,), F=(1.0,), noise=0.2, u_std=1.0):
     """y = B/(A F) u + C/(A D) e with white Gaussian u and e."""
     rng = np.random.default_rng(seed)
     u = u_std * rng.standard_normal(N)
@@ -38,8 +37,9 @@ MIMO_B22 = np.array([0.0, 0.8, 0.2])
 
 def mimo_arx_truth():
     """True parameter vector in the package layout (row 1: A11 A12 B11 B12; row 2: A22 B22)."""
-    return np.concatenate([MIMO_A11[1:], MIMO_A12[1:], MIMO_B11[1:], MIMO_B12[1:],
-                           MIMO_A22[1:], MIMO_B22[1:]])
+    return np.concatenate(
+        [MIMO_A11[1:], MIMO_A12[1:], MIMO_B11[1:], MIMO_B12[1:], MIMO_A22[1:], MIMO_B22[1:]]
+    )
 
 
 def simulate_mimo_arx(N, seed, noise=0.1):
@@ -48,8 +48,12 @@ def simulate_mimo_arx(N, seed, noise=0.1):
     u = rng.standard_normal((N, 2))
     e = noise * rng.standard_normal((N, 2))
     y2 = lfilter(MIMO_B22, MIMO_A22, u[:, 1]) + lfilter([1.0], MIMO_A22, e[:, 1])
-    rhs = (lfilter(MIMO_B11, [1.0], u[:, 0]) + lfilter(MIMO_B12, [1.0], u[:, 1])
-           - lfilter(MIMO_A12, [1.0], y2) + e[:, 0])
+    rhs = (
+        lfilter(MIMO_B11, [1.0], u[:, 0])
+        + lfilter(MIMO_B12, [1.0], u[:, 1])
+        - lfilter(MIMO_A12, [1.0], y2)
+        + e[:, 0]
+    )
     y1 = lfilter([1.0], MIMO_A11, rhs)
     return IdData(np.column_stack([y1, y2]), u, TS)
 
@@ -67,8 +71,18 @@ MA_C2 = np.array([1.0, -0.5])
 
 def mimo_armax_truth():
     """Row 1: A11 A12 B11 B12 C1; row 2: A22 B22 C2."""
-    return np.concatenate([MA_A11[1:], MA_A12[1:], MA_B11[1:], MA_B12[1:], MA_C1[1:],
-                           MA_A22[1:], MA_B22[1:], MA_C2[1:]])
+    return np.concatenate(
+        [
+            MA_A11[1:],
+            MA_A12[1:],
+            MA_B11[1:],
+            MA_B12[1:],
+            MA_C1[1:],
+            MA_A22[1:],
+            MA_B22[1:],
+            MA_C2[1:],
+        ]
+    )
 
 
 def simulate_mimo_armax(N, seed, noise=0.3):
@@ -76,13 +90,18 @@ def simulate_mimo_armax(N, seed, noise=0.3):
     u = rng.standard_normal((N, 2))
     e = noise * rng.standard_normal((N, 2))
     y2 = lfilter(MA_B22, MA_A22, u[:, 1]) + lfilter(MA_C2, MA_A22, e[:, 1])
-    rhs = (lfilter(MA_B11, [1.0], u[:, 0]) + lfilter(MA_B12, [1.0], u[:, 1])
-           - lfilter(MA_A12, [1.0], y2) + lfilter(MA_C1, [1.0], e[:, 0]))
+    rhs = (
+        lfilter(MA_B11, [1.0], u[:, 0])
+        + lfilter(MA_B12, [1.0], u[:, 1])
+        - lfilter(MA_A12, [1.0], y2)
+        + lfilter(MA_C1, [1.0], e[:, 0])
+    )
     y1 = lfilter([1.0], MA_A11, rhs)
     return IdData(np.column_stack([y1, y2]), u, TS)
 
 
 def mean_error(estimate, sizes, seeds, truth):
     """Mean parameter-error norm over seeds, for each data length."""
-    return np.array([np.mean([np.linalg.norm(estimate(N, s) - truth) for s in seeds])
-                     for N in sizes])
+    return np.array(
+        [np.mean([np.linalg.norm(estimate(N, s) - truth) for s in seeds]) for N in sizes]
+    )

@@ -17,8 +17,12 @@ from .systems import (
 
 def test_siso_armax_converges_like_one_over_sqrt_n():
     truth = np.concatenate([A2[1:], B2[1:], C_ARMAX[1:]])
-    errors = mean_error(lambda N, s: armax(simulate_siso(N, s, C=C_ARMAX, noise=0.5),
-                                           2, 2, 1, 1).theta, [1000, 16000], [0, 1, 2], truth)
+    errors = mean_error(
+        lambda N, s: armax(simulate_siso(N, s, C=C_ARMAX, noise=0.5), 2, 2, 1, 1).theta,
+        [1000, 16000],
+        [0, 1, 2],
+        truth,
+    )
     assert 0.1 < errors[1] / errors[0] < 0.5
 
 
@@ -36,8 +40,12 @@ def test_armax_removes_arx_bias_and_keeps_c_minimum_phase():
 def test_mimo_armax_diagonal_c_converges():
     na, nb, nc = [[2, 2], [0, 2]], [[1, 1], [0, 1]], [1, 1]
     truth = mimo_armax_truth()
-    errors = mean_error(lambda N, s: armax(simulate_mimo_armax(N, s), na, nb, nc, 1).theta,
-                        [1500, 24000], [0, 1], truth)
+    errors = mean_error(
+        lambda N, s: armax(simulate_mimo_armax(N, s), na, nb, nc, 1).theta,
+        [1500, 24000],
+        [0, 1],
+        truth,
+    )
     assert errors[1] < 0.45 * errors[0]
     model = armax(simulate_mimo_armax(24000, 9), na, nb, nc, 1)
     assert np.all(np.abs(model.theta - truth) < 5 * model.std)

@@ -18,8 +18,9 @@ TRUTH = np.concatenate([A2[1:], B2[1:]])
 
 
 def test_siso_arx_converges_like_one_over_sqrt_n():
-    errors = mean_error(lambda N, s: arx(simulate_siso(N, s), 2, 2, 1).theta,
-                        [1000, 16000], [0, 1, 2], TRUTH)
+    errors = mean_error(
+        lambda N, s: arx(simulate_siso(N, s), 2, 2, 1).theta, [1000, 16000], [0, 1, 2], TRUTH
+    )
     ratio = errors[1] / errors[0]
     assert 0.12 < ratio < 0.5  # sqrt(1000/16000) = 0.25
 
@@ -35,8 +36,9 @@ def test_siso_arx_error_within_reported_std():
 def test_mimo_arx_lab_structure_converges():
     na, nb, nk = [[4, 4], [0, 4]], [[2, 2], [0, 2]], [[1, 1], [1, 1]]
     truth = mimo_arx_truth()
-    errors = mean_error(lambda N, s: arx(simulate_mimo_arx(N, s), na, nb, nk).theta,
-                        [1500, 24000], [0, 1], truth)
+    errors = mean_error(
+        lambda N, s: arx(simulate_mimo_arx(N, s), na, nb, nk).theta, [1500, 24000], [0, 1], truth
+    )
     assert errors[1] < 0.5 * errors[0]
     model = arx(simulate_mimo_arx(24000, 5), na, nb, nk)
     assert model.orders.n_params == truth.size
@@ -71,8 +73,9 @@ def test_regressor_layout_matches_definition():
     Phi = arx_regressors(data.y, data.u, orders, 0, 4)
     t = 10
     row = Phi[t - 4]
-    assert np.allclose(row, [-data.y[t - 1, 0], -data.y[t - 2, 0], data.u[t - 3, 0],
-                             data.u[t - 4, 0]])
+    assert np.allclose(
+        row, [-data.y[t - 1, 0], -data.y[t - 2, 0], data.u[t - 3, 0], data.u[t - 4, 0]]
+    )
 
 
 def test_colored_noise_biases_arx():

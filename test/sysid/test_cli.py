@@ -26,9 +26,41 @@ def run(argv, capsys):
 
 
 def test_siso_models_text(lab_mat, capsys):
-    code, out, err = run([lab_mat, '--rows', '2', '5', '--ts', '2e-4', '--detrend',
-                          '--arx', 4, 2, 1, '--iv', 4, 2, 1, '--armax', 4, 2, 1, 1,
-                          '--oe', 2, 4, 1, '--bj', 2, 1, 1, 4, 1], capsys)
+    code, out, err = run(
+        [
+            lab_mat,
+            '--rows',
+            '2',
+            '5',
+            '--ts',
+            '2e-4',
+            '--detrend',
+            '--arx',
+            4,
+            2,
+            1,
+            '--iv',
+            4,
+            2,
+            1,
+            '--armax',
+            4,
+            2,
+            1,
+            1,
+            '--oe',
+            2,
+            4,
+            1,
+            '--bj',
+            2,
+            1,
+            1,
+            4,
+            1,
+        ],
+        capsys,
+    )
     assert code == 0, err
     assert out.count('Discrete-time') == 5
     assert 'estimation 3000, validation 3000' in out
@@ -38,14 +70,33 @@ def test_siso_models_text(lab_mat, capsys):
 
 def test_mimo_spec_json_plot_save(lab_mat, tmp_path, capsys):
     spec = tmp_path / 'spec.yaml'
-    spec.write_text('models:\n'
-                    '  - {structure: arx, na: [[4, 4], [0, 4]], nb: [[2, 2], [0, 2]],'
-                    ' nk: [[1, 1], [1, 1]]}\n'
-                    '  - {structure: armax, na: [[2, 2], [0, 2]], nb: [[1, 1], [0, 1]],'
-                    ' nc: [1, 1]}\n')
-    code, out, err = run([lab_mat, '--rows', '1,2', '4,5', '--ts', '2e-4', '--spec', spec,
-                          '--json', '--plot', tmp_path / 'png', '--save', tmp_path / 'models',
-                          '--split', '4000'], capsys)
+    spec.write_text(
+        'models:\n'
+        '  - {structure: arx, na: [[4, 4], [0, 4]], nb: [[2, 2], [0, 2]],'
+        ' nk: [[1, 1], [1, 1]]}\n'
+        '  - {structure: armax, na: [[2, 2], [0, 2]], nb: [[1, 1], [0, 1]],'
+        ' nc: [1, 1]}\n'
+    )
+    code, out, err = run(
+        [
+            lab_mat,
+            '--rows',
+            '1,2',
+            '4,5',
+            '--ts',
+            '2e-4',
+            '--spec',
+            spec,
+            '--json',
+            '--plot',
+            tmp_path / 'png',
+            '--save',
+            tmp_path / 'models',
+            '--split',
+            '4000',
+        ],
+        capsys,
+    )
     assert code == 0, err
     result = json.loads(out)
     assert result['data']['n_estimation'] == 4000
@@ -63,33 +114,46 @@ def test_mimo_spec_json_plot_save(lab_mat, tmp_path, capsys):
 def test_select_and_csv(tmp_path, capsys):
     d = simulate_siso(3000, 2)
     path = tmp_path / 'd.csv'
-    np.savetxt(path, np.column_stack([d.time, d.y, d.u]), delimiter=',', header='t,y,u',
-               comments='')
-    code, out, err = run([path, '--select', 'mdl', '--select-max', 4, 4, 1, '--horizon', 5],
-                         capsys)
+    np.savetxt(
+        path, np.column_stack([d.time, d.y, d.u]), delimiter=',', header='t,y,u', comments=''
+    )
+    code, out, err = run(
+        [path, '--select', 'mdl', '--select-max', 4, 4, 1, '--horizon', 5], capsys
+    )
     assert code == 0, err
     assert 'Order search (mdl, 16 candidates): na=2 nb=2 nk=1' in out
     assert '5-step prediction' in out
 
 
-@pytest.mark.parametrize(('args', 'match'), [
-    (['missing.mat', '--arx', 1, 1, 1, '--ts', 1], 'does not exist'),
-    (['{mat}', '--rows', '1', '4', '--arx', 1, 1, 1], 'stores no sample time'),
-    (['{mat}', '--rows', '1', '4', '--ts', '0', '--arx', 1, 1, 1], '--ts must be a positive'),
-    (['{mat}', '--rows', '1', '4', '--ts', '-2', '--arx', 1, 1, 1], '--ts must be a positive'),
-    (['{mat}', '--matrix', 'X', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1],
-     "no variable 'X'"),
-    (['{nan}', '--rows', '1', '2', '--ts', '1', '--arx', 1, 1, 1], 'NaN or infinite'),
-    (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 40, 40, 1, '--split', '50'],
-     'fewer samples than parameters'),
-    (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--spec', '{badspec}'],
-     'na must be a scalar or have shape'),
-    (['{mat}', '--rows', '1', '4', '--ts', '1'], 'no model requested'),
-    (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1, '--split', 'half'],
-     '--split must be a fraction'),
-    (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--oe', 2, 2, 1], 'single-input'),
-    (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
-])
+@pytest.mark.parametrize(
+    ('args', 'match'),
+    [
+        (['missing.mat', '--arx', 1, 1, 1, '--ts', 1], 'does not exist'),
+        (['{mat}', '--rows', '1', '4', '--arx', 1, 1, 1], 'stores no sample time'),
+        (['{mat}', '--rows', '1', '4', '--ts', '0', '--arx', 1, 1, 1], '--ts must be a positive'),
+        (['{mat}', '--rows', '1', '4', '--ts', '-2', '--arx', 1, 1, 1], '--ts must be a positive'),
+        (
+            ['{mat}', '--matrix', 'X', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1],
+            "no variable 'X'",
+        ),
+        (['{nan}', '--rows', '1', '2', '--ts', '1', '--arx', 1, 1, 1], 'NaN or infinite'),
+        (
+            ['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 40, 40, 1, '--split', '50'],
+            'fewer samples than parameters',
+        ),
+        (
+            ['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--spec', '{badspec}'],
+            'na must be a scalar or have shape',
+        ),
+        (['{mat}', '--rows', '1', '4', '--ts', '1'], 'no model requested'),
+        (
+            ['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1, '--split', 'half'],
+            '--split must be a fraction',
+        ),
+        (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--oe', 2, 2, 1], 'single-input'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
+    ],
+)
 def test_bad_input_exits_2_with_one_line(lab_mat, tmp_path, capsys, args, match):
     nan = tmp_path / 'nan.mat'
     savemat(nan, {'DATA': np.array([[1.0, np.nan, 2.0], [0.0, 1.0, 2.0]])})

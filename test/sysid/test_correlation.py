@@ -6,8 +6,11 @@ from maglev_ros.sysid.correlation import lag_gram
 
 def lagged_matrix(S, blocks, start):
     N = S.shape[1]
-    cols = [sign * S[sig, start - lag:N - lag] for sig, first, count, sign in blocks
-            for lag in range(first, first + count)]
+    cols = [
+        sign * S[sig, start - lag : N - lag]
+        for sig, first, count, sign in blocks
+        for lag in range(first, first + count)
+    ]
     return np.column_stack(cols)
 
 

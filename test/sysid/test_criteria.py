@@ -12,8 +12,9 @@ def test_fit_is_the_toolbox_formula():
     Y = rng.standard_normal((200, 2))
     Yh = Y + 0.3 * rng.standard_normal((200, 2))
     for i in range(2):
-        expected = 100 * (1 - np.linalg.norm(Y[:, i] - Yh[:, i])
-                          / np.linalg.norm(Y[:, i] - Y[:, i].mean()))
+        expected = 100 * (
+            1 - np.linalg.norm(Y[:, i] - Yh[:, i]) / np.linalg.norm(Y[:, i] - Y[:, i].mean())
+        )
         assert fit_percent(Y, Yh)[i] == pytest.approx(expected, rel=1e-14)
     assert fit_percent(Y, Y)[0] == 100.0
     assert fit_percent(Y[:, 0], np.full(200, Y[:, 0].mean()))[0] == pytest.approx(0.0, abs=1e-12)

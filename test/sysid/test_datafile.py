@@ -40,14 +40,17 @@ def test_csv_with_time_column(tmp_path):
     assert np.allclose(d2.y[:, 0], np.cos(t))
 
 
-@pytest.mark.parametrize(('content', 'kwargs', 'match'), [
-    ({'DATA': np.zeros((3, 10))}, {'Ts': 1.0, 'rows': ([1], [9])}, 'row 9 out of range'),
-    ({'DATA': np.zeros((3, 10))}, {'Ts': 1.0}, 'choose output and input rows'),
-    ({'X': np.zeros((3, 10))}, {'Ts': 1.0, 'rows': ([1], [2])}, "no variable 'DATA'"),
-    ({'y': np.zeros(10)}, {'Ts': 1.0}, "no variable 'u'"),
-    ({'y': np.zeros(10), 'u': np.zeros(10)}, {}, 'stores no sample time'),
-    ({'y': np.full(10, np.nan), 'u': np.zeros(10)}, {'Ts': 1.0}, 'y contains 10 NaN'),
-])
+@pytest.mark.parametrize(
+    ('content', 'kwargs', 'match'),
+    [
+        ({'DATA': np.zeros((3, 10))}, {'Ts': 1.0, 'rows': ([1], [9])}, 'row 9 out of range'),
+        ({'DATA': np.zeros((3, 10))}, {'Ts': 1.0}, 'choose output and input rows'),
+        ({'X': np.zeros((3, 10))}, {'Ts': 1.0, 'rows': ([1], [2])}, "no variable 'DATA'"),
+        ({'y': np.zeros(10)}, {'Ts': 1.0}, "no variable 'u'"),
+        ({'y': np.zeros(10), 'u': np.zeros(10)}, {}, 'stores no sample time'),
+        ({'y': np.full(10, np.nan), 'u': np.zeros(10)}, {'Ts': 1.0}, 'y contains 10 NaN'),
+    ],
+)
 def test_mat_errors(tmp_path, content, kwargs, match):
     path = tmp_path / 'bad.mat'
     savemat(path, content)

@@ -19,14 +19,17 @@ def test_constructor_shapes_names_units():
     assert IdData(np.zeros(5), np.zeros((5, 0)), 1.0).nu == 0
 
 
-@pytest.mark.parametrize(('kwargs', 'match'), [
-    ({'y': [1.0, np.nan], 'u': [0.0, 0.0], 'Ts': 1.0}, 'y contains 1 NaN'),
-    ({'y': [1.0, 2.0], 'u': [0.0, np.inf], 'Ts': 1.0}, 'u contains 1 NaN or infinite'),
-    ({'y': [1.0, 2.0], 'u': [0.0], 'Ts': 1.0}, 'u has 1 samples but y has 2'),
-    ({'y': [1.0, 2.0], 'u': [0.0, 1.0], 'Ts': 0.0}, 'Ts must be a positive'),
-    ({'y': [1.0, 2.0], 'u': [0.0, 1.0], 'Ts': -1e-3}, 'Ts must be a positive'),
-    ({'y': np.zeros((2, 2, 2)), 'u': [0.0, 1.0], 'Ts': 1.0}, 'y must be 1-D or 2-D'),
-])
+@pytest.mark.parametrize(
+    ('kwargs', 'match'),
+    [
+        ({'y': [1.0, np.nan], 'u': [0.0, 0.0], 'Ts': 1.0}, 'y contains 1 NaN'),
+        ({'y': [1.0, 2.0], 'u': [0.0, np.inf], 'Ts': 1.0}, 'u contains 1 NaN or infinite'),
+        ({'y': [1.0, 2.0], 'u': [0.0], 'Ts': 1.0}, 'u has 1 samples but y has 2'),
+        ({'y': [1.0, 2.0], 'u': [0.0, 1.0], 'Ts': 0.0}, 'Ts must be a positive'),
+        ({'y': [1.0, 2.0], 'u': [0.0, 1.0], 'Ts': -1e-3}, 'Ts must be a positive'),
+        ({'y': np.zeros((2, 2, 2)), 'u': [0.0, 1.0], 'Ts': 1.0}, 'y must be 1-D or 2-D'),
+    ],
+)
 def test_constructor_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         IdData(**kwargs)
@@ -58,7 +61,7 @@ def test_detrend_constant_and_linear():
     d = IdData(3 + 0.5 * t, 2 - t, 1.0)
     assert np.allclose(d.detrend().y.mean(), 0) and np.allclose(d.detrend().u.mean(), 0)
     assert np.allclose(d.detrend('linear').y, 0, atol=1e-10)
-    with pytest.raises(ValueError, match="detrend kind must be"):
+    with pytest.raises(ValueError, match='detrend kind must be'):
         d.detrend('quadratic')
 
 

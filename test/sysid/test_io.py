@@ -22,8 +22,9 @@ def test_round_trip(tmp_path, suffix):
 
 
 def test_mat_export_has_polynomials(tmp_path):
-    model = bj(simulate_siso(3000, 2, A=np.ones(1), C=C_ARMAX, F=np.array([1, -0.5])),
-               2, 1, 0, 1, 1)
+    model = bj(
+        simulate_siso(3000, 2, A=np.ones(1), C=C_ARMAX, F=np.array([1, -0.5])), 2, 1, 0, 1, 1
+    )
     path = export_mat(model, tmp_path / 'm.mat')
     content = loadmat(path)
     assert content['Ts'][0, 0] == model.Ts

@@ -30,8 +30,9 @@ def test_iv4_removes_colored_noise_bias_of_arx():
 
 
 def test_iv4_converges_like_one_over_sqrt_n():
-    errors = mean_error(lambda N, s: iv4(colored(N, s), 2, 2, 1).theta, [1000, 16000],
-                        [0, 1, 2], TRUTH)
+    errors = mean_error(
+        lambda N, s: iv4(colored(N, s), 2, 2, 1).theta, [1000, 16000], [0, 1, 2], TRUTH
+    )
     assert 0.1 < errors[1] / errors[0] < 0.5
 
 
@@ -69,8 +70,12 @@ def test_extended_iv_removes_colored_noise_bias_and_converges():
     assert np.linalg.norm(model.theta - TRUTH) < 0.1 * err_arx
     assert np.all(np.abs(model.theta - TRUTH) < 5 * model.std)
     assert model.structure == 'iv4' and 'extended' in model.report.method
-    errors = mean_error(lambda N, s: iv4(colored(N, s), 2, 2, 1, method='extended').theta,
-                        [1000, 16000], [0, 1, 2], TRUTH)
+    errors = mean_error(
+        lambda N, s: iv4(colored(N, s), 2, 2, 1, method='extended').theta,
+        [1000, 16000],
+        [0, 1, 2],
+        TRUTH,
+    )
     assert 0.1 < errors[1] / errors[0] < 0.5
 
 

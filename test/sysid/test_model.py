@@ -51,8 +51,9 @@ def test_mimo_coupled_transfer_function_and_poles():
         assert np.allclose(tf_vals[:, :, k], H[k], rtol=1e-6, atol=1e-9)
         assert np.allclose(ss_vals[:, :, k], H[k], rtol=1e-6, atol=1e-9)
     assert model.is_stable
-    roots = np.concatenate([np.roots(model.polynomial('A', 0, 0)),
-                            np.roots(model.polynomial('A', 1, 1))])
+    roots = np.concatenate(
+        [np.roots(model.polynomial('A', 0, 0)), np.roots(model.polynomial('A', 1, 1))]
+    )
     assert np.allclose(np.sort_complex(model.poles()), np.sort_complex(roots), atol=1e-6)
 
 
@@ -79,7 +80,7 @@ def test_text_form():
 
 def test_model_argument_errors():
     orders = make_orders(1, 1, na=1, nb=1)
-    with pytest.raises(ValueError, match="structure must be one of"):
+    with pytest.raises(ValueError, match='structure must be one of'):
         PolyModel('nlarx', orders, [0.1, 1.0], 0.1, np.eye(1))
     with pytest.raises(ValueError, match='Ts must be > 0'):
         PolyModel('arx', orders, [0.1, 1.0], 0.0, np.eye(1))

@@ -37,7 +37,7 @@ def test_k_step_prediction_matches_explicit_recursion():
     k = 3
     yhat = model.predict(data, k=k)[:, 0]
     for t in range(10, 300):
-        known = list(y[:t - k + 1])  # y up to t-k
+        known = list(y[: t - k + 1])  # y up to t-k
         for s in range(t - k + 1, t + 1):
             known.append(-a1 * known[s - 1] - a2 * known[s - 2] + b1 * u[s - 1] + b2 * u[s - 2])
         assert yhat[t] == pytest.approx(known[t], abs=1e-10)
@@ -69,8 +69,11 @@ def test_residual_test_passes_true_structure_and_fails_too_low_order():
 def test_residual_independence_detects_missing_input():
     rng = np.random.default_rng(3)
     u = rng.standard_normal((6000, 2))
-    y = (np.convolve(u[:, 0], [0, 1.0])[:6000] + np.convolve(u[:, 1], [0, 0, 0.5])[:6000]
-         + 0.1 * rng.standard_normal(6000))
+    y = (
+        np.convolve(u[:, 0], [0, 1.0])[:6000]
+        + np.convolve(u[:, 1], [0, 0, 0.5])[:6000]
+        + 0.1 * rng.standard_normal(6000)
+    )
     data = IdData(y, u, 1e-3)
     model = arx(data.select(inputs=[0]), 0, 1, 1)
     analysis = resid(model, data.select(inputs=[0]))
