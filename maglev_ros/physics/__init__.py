@@ -5,7 +5,7 @@ the levitating magnet; the 12-state dynamics f(x, u) and sensor model h(x, u);
 equilibria, linearisation and simulation. Specified in ``maggy-model.md``.
 """
 
-from .equilibria import Equilibrium, find_equilibria, solenoid_radius_correction, vertical_force
+from .equilibria import Equilibrium, find_equilibria, rest_state, vertical_force
 from .linearization import (
     LinearModel,
     controllability_rank,
@@ -21,6 +21,7 @@ from .model import (
     MaggyModel,
     ModelOptions,
     make_model,
+    solenoid_radius_correction,
 )
 from .parameters import PRESETS, MaggyParameters, ParameterError, load_parameters
 from .sheet import sheet_field
@@ -53,6 +54,7 @@ __all__ = [
     'vertical_force',
     'find_equilibria',
     'solenoid_radius_correction',
+    'rest_state',
     'LinearModel',
     'linearize',
     'controllability_rank',
