@@ -432,7 +432,6 @@ class SimulatorNode(Node):
         self._wait_since = 0.0  # lockstep: monotonic time the last sample was published
         self._offset_ns = 0  # simulated time of the current run's sample 0
         self.last_stamp_ns = -1
-        self._crash_reported = False
         self._rate_mark = (time.monotonic(), 0)
         self.real_time_factor = float('nan')
 

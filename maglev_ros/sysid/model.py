@@ -596,8 +596,3 @@ def _cofactor(M: list[list[np.ndarray]], row: int, col: int) -> np.ndarray:
         return np.ones(1)
     c = _poly_det(_minor(M, row, col))
     return c if (row + col) % 2 == 0 else -c
-
-
-def equivalent_polynomials(model: PolyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the matrix-ARMAX form ``(Ae, Be, Ce)`` of a model (see ``equivalent_armax``)."""
-    return equivalent_armax(model._polys)
