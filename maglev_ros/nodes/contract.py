@@ -219,7 +219,15 @@ class RawTemplate:
         self.size = len(layout.template)
 
     def serialise(self, t_ns: int, values: Sequence[float] = ()) -> bytes:
-        """CDR bytes of one message stamped ``t_ns`` (ns) with ``values`` (n_values,)."""
+        """CDR bytes of one message stamped ``t_ns`` (ns) with ``values`` (n_values,).
+
+        Parameters
+        ----------
+        t_ns : int
+            Stamp, ns.
+        values : sequence of float, shape (n_values,)
+            The varying float64 fields, in the layout order.
+        """
         buf = bytearray(self._template)
         self._stamp_packer.pack_into(
             buf, self._stamp_at, t_ns // 1_000_000_000, t_ns % 1_000_000_000
@@ -230,7 +238,13 @@ class RawTemplate:
 
 
 def field_layout(frame: str) -> RawLayout:
-    """Raw layout of a MagneticField in ``frame`` (3 values, T)."""
+    """Raw layout of a MagneticField in ``frame`` (3 values, T).
+
+    Parameters
+    ----------
+    frame : str
+        Frame id of the messages.
+    """
     msg = MagneticField()
     msg.header.frame_id = frame
     return raw_layout(msg, FIELD_VALUES)
@@ -250,7 +264,13 @@ def odometry_layout() -> RawLayout:
 
 
 def field_template(k: int) -> RawTemplate:
-    """Raw template of sensor ``k``'s MagneticField (3 values, T)."""
+    """Raw template of sensor ``k``'s MagneticField (3 values, T).
+
+    Parameters
+    ----------
+    k : int
+        Sensor index.
+    """
     return RawTemplate(field_layout(sensor_frame(k)))
 
 

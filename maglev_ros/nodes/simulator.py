@@ -323,6 +323,11 @@ def build_config(values: dict) -> SimulatorConfig:
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
     """Build the physics simulator of a configuration.
 
+    Parameters
+    ----------
+    cfg : SimulatorConfig
+        The validated parameters.
+
     Raises
     ------
     SimulatorParameterError
@@ -367,7 +372,13 @@ def _color(r: float, g: float, b: float, a: float = 1.0) -> ColorRGBA:
 
 
 def base_markers(params) -> list[Marker]:
-    """Cylinder markers of the solenoids (copper) and permanent magnets (grey)."""
+    """Cylinder markers of the solenoids (copper) and permanent magnets (grey).
+
+    Parameters
+    ----------
+    params : MaggyParameters
+        The parameter set.
+    """
     markers = []
     groups = (
         (params.solenoids, 'solenoids', _color(0.8, 0.45, 0.2)),
@@ -833,7 +844,13 @@ class SimulatorNode(Node):
         return message
 
     def set_paused(self, paused: bool) -> None:
-        """Pause (True) or resume (False) the integration."""
+        """Pause (True) or resume (False) the integration.
+
+        Parameters
+        ----------
+        paused : bool
+            True pauses, False resumes.
+        """
         with self._lock:
             self.paused = bool(paused)
             if not self.paused and self.started and self.config.mode == 'lockstep':
