@@ -71,7 +71,7 @@ def record(ctx, board, bag, read_interval=0.0):
                 n_sensors=1,
                 counts_per_ampere=COUNTS_PER_AMPERE,
                 start_enabled=True,
-                command_timeout=5.0,
+                command_timeout=1.0,
                 read_interval=read_interval,
             ),
         )
