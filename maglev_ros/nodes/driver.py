@@ -69,6 +69,8 @@ from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
+from maglev_ros.cdr import currents_layout, field_layout
+from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.hardware.board_clock import BoardClock
 from maglev_ros.hardware.packet import encode_command
 from maglev_ros.hardware.scaling import CurrentScaling
@@ -81,12 +83,10 @@ from maglev_ros.hardware.v2x_stream import (
     pack_records,
 )
 from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
-from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes.contract import (  # shared with the simulator
+    COIL_NAMES,
     COMMAND_QOS,
     SENSOR_QOS,
-    currents_layout,
-    field_layout,
     run_nodes,
 )
 
@@ -349,7 +349,7 @@ class DriverNode(Node):
         self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
         self._serialiser = SampleSerialiser(
             [RawMessageBatch(field_layout(frame)) for frame in cfg.sensor_frames]
-            + [RawMessageBatch(currents_layout())]
+            + [RawMessageBatch(currents_layout(COIL_NAMES))]
         )
         # per sample: the field of each sensor, then the currents (SampleSerialiser order)
         self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]

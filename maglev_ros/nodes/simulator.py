@@ -77,8 +77,9 @@ from std_msgs.msg import ColorRGBA, Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import Marker, MarkerArray
 
+from maglev_ros.cdr import clock_layout, currents_layout, field_layout, odometry_layout
+from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes import contract
-from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.physics import (
     FIELD_MODELS,
     KINEMATICS,
@@ -107,6 +108,7 @@ MODES = ('realtime', 'lockstep')
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 MAX_BACKLOG_S = 0.1  # s of wall time the real-time loop may catch up at most
 _ZERO = np.zeros(4)
+_NO_VALUES = np.zeros((1, 0))  # a /clock message has no float64 fields
 
 
 class SimulatorParameterError(ValueError):
@@ -421,24 +423,21 @@ class SimulatorNode(Node):
         self._rate_mark = (time.monotonic(), 0)
         self.real_time_factor = float('nan')
 
-        # publishers: raw CDR templates, published as bytes
+        # publishers: raw CDR bytes, a burst of samples at once (lockstep: a burst of one)
         qos = contract.SENSOR_QOS
         self._field_pubs = [
             self.create_publisher(MagneticField, contract.field_topic(k), qos)
             for k in self.sensors
         ]
-        self._field_raw = [contract.field_template(k) for k in self.sensors]
         self._current_pub = self.create_publisher(JointState, contract.CURRENTS_TOPIC, qos)
-        self._current_raw = contract.currents_template()
         self._state_pub = self._clock_pub = None
         if cfg.publish_state:
             from nav_msgs.msg import Odometry
 
             self._state_pub = self.create_publisher(Odometry, contract.TRUE_STATE_TOPIC, qos)
-            self._state_raw = contract.odometry_template()
         if cfg.publish_clock:
             self._clock_pub = self.create_publisher(Clock, contract.CLOCK_TOPIC, qos)
-            self._clock_raw = contract.clock_template()
+            self._clock_batch = RawMessageBatch(clock_layout())
         # samples per /clock message: each one in lockstep, one per burst in real time
         self._clock_stride = (
             1 if cfg.mode == 'lockstep' else max(1, int(round(cfg.pace_period * cfg.sample_rate)))
@@ -468,13 +467,13 @@ class SimulatorNode(Node):
         self._current_handle = self._current_pub.handle
         self._state_handle = None if self._state_pub is None else self._state_pub.handle
         self._clock_handle = None if self._clock_pub is None else self._clock_pub.handle
-        # real time: a burst of samples serialised at once, published sample by sample
-        layouts = [contract.field_layout(contract.sensor_frame(k)) for k in self.sensors]
+        # a burst of samples serialised at once, published sample by sample
+        layouts = [field_layout(contract.sensor_frame(k)) for k in self.sensors]
         publishers = list(self._field_handles)
         if self._state_handle is not None:
-            layouts.append(contract.odometry_layout())
+            layouts.append(odometry_layout(contract.BASE_FRAME, contract.MAGNET_FRAME))
             publishers.append(self._state_handle)
-        layouts.append(contract.currents_layout())
+        layouts.append(currents_layout(contract.COIL_NAMES))
         publishers.append(self._current_handle)
         self._burst_serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
         # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
@@ -506,32 +505,9 @@ class SimulatorNode(Node):
     # -- publishing -------------------------------------------------------------
 
     def _publish_sample(self, reading: np.ndarray) -> None:
-        """Publish the current sample: clock, fields, true state, then currents.
-
-        Pre-serialised bytes go straight to the publishers' handles (as the
-        driver does): the handles are safe to use here because the node
-        destroys its publishers only after :meth:`close` joined the stepping
-        thread. The true state's 13 values are recomputed only when the state
-        changed (never with the magnet fixed or absent).
-        """
+        """Publish the current sample (a burst of one): clock, fields, true state, currents."""
         sim = self.sim
-        t_ns = self._offset_ns + int(round(sim.samples * self._dt_ns))
-        if self._clock_pub is not None and sim.samples % self._clock_stride == 0:
-            self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
-        values = reading[self._columns].tolist()
-        for k, (handle, raw) in enumerate(zip(self._field_handles, self._field_raw, strict=True)):
-            handle.publish_raw(raw.serialise(t_ns, values[3 * k : 3 * k + 3]))
-        state = sim.state
-        if self._state_pub is not None:
-            key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
-            if key != self._odom_state:
-                self._odom_cache = contract.odometry_values(state).tolist()
-                self._odom_state = key
-            self._state_handle.publish_raw(self._state_raw.serialise(t_ns, self._odom_cache))
-        self._last_state = state
-        self._current_handle.publish_raw(self._current_raw.serialise(t_ns, sim.currents.tolist()))
-        self.last_stamp_ns = t_ns
-        self.counters['samples'] += 1
+        self._publish_burst([sim.samples], reading[None, :], [sim.state], sim.currents[None, :])
 
     def publish_markers(self) -> None:
         """Publish the base and the magnet (at its latest state) as RViz markers."""
@@ -679,7 +655,8 @@ class SimulatorNode(Node):
         if self._clock_pub is not None:
             for index, t_ns in zip(indices, stamps.tolist(), strict=True):
                 if index % self._clock_stride == 0:
-                    self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
+                    (clock,) = self._clock_batch.serialise(np.array([t_ns]), _NO_VALUES)
+                    self._clock_handle.publish_raw(clock)
         values = [readings[:, self._columns]]  # each published sensor's x y z, in order
         if self._state_pub is not None:
             odometry = np.empty((n, 13))
