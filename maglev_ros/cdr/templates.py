@@ -9,7 +9,8 @@ one piece of code knows where fields sit in CDR, for reading bags and for
 publishing bytes. :mod:`maglev_ros.cdr.batch` then writes a burst of messages
 by patching copies of the template.
 
-The layouts of the Maggy graph's sample messages (``docs/topics.md``):
+The layouts of the Maggy graph's sample messages (``docs/topics.md``; names
+and frames from :mod:`maglev_ros.topics`):
 :func:`field_layout` (sensor_msgs/MagneticField), :func:`currents_layout`
 (sensor_msgs/JointState), :func:`odometry_layout` (nav_msgs/Odometry) and
 :func:`clock_layout` (rosgraph_msgs/Clock).
@@ -26,6 +27,7 @@ from rosbags.typesys.store import Typestore
 
 from maglev_ros.cdr.layout import Path, cdr_layout
 from maglev_ros.cdr.typestore import jazzy_typestore
+from maglev_ros.topics import BASE_FRAME, COIL_NAMES, MAGNET_FRAME
 
 __all__ = [
     'CURRENT_VALUES',
@@ -172,7 +174,7 @@ def field_layout(frame: str) -> RawLayout:
     return raw_layout(msg, msgtype, FIELD_VALUES)
 
 
-def currents_layout(names: Sequence[str]) -> RawLayout:
+def currents_layout(names: Sequence[str] = COIL_NAMES) -> RawLayout:
     """Raw layout of a sensor_msgs/JointState of 4 coils named ``names`` (4 efforts, A)."""
     msgtype = 'sensor_msgs/msg/JointState'
     msg = default_message(msgtype)
@@ -181,7 +183,7 @@ def currents_layout(names: Sequence[str]) -> RawLayout:
     return raw_layout(msg, msgtype, CURRENT_VALUES)
 
 
-def odometry_layout(frame: str, child_frame: str) -> RawLayout:
+def odometry_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) -> RawLayout:
     """Raw layout of a nav_msgs/Odometry of ``child_frame`` in ``frame``.
 
     13 values, in the order of :data:`ODOMETRY_VALUES`: position (m),

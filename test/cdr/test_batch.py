@@ -142,7 +142,7 @@ def test_layout_offsets_match_the_walked_bytes():
     msg = deserialize_message(bytes(raw), JointState)
     assert list(msg.effort) == [0.5, 1.5, 2.5, 3.5]
     assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (7, 9)
-    assert list(msg.name) == contract.COIL_NAMES
+    assert list(msg.name) == list(contract.COIL_NAMES)
 
 
 def test_values_as_one_matrix_and_wrong_shapes(stamps):
