@@ -67,17 +67,17 @@ from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import Pose
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import ColorRGBA, Float64MultiArray
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
 from maglev_ros.cdr import clock_layout, currents_layout, field_layout, odometry_layout
 from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -106,7 +106,6 @@ __all__ = [
     'SimulatorNode',
     'PARAMETERS',
     'SimulatorParameterError',
-    'base_markers',
     'build_config',
     'make_simulator',
     'main',
@@ -359,30 +358,6 @@ def make_simulator(cfg: SimulatorConfig) -> Simulator:
         raise SimulatorParameterError(f'initial_state / model: {err}') from err
 
 
-def _color(r: float, g: float, b: float, a: float = 1.0) -> ColorRGBA:
-    return ColorRGBA(r=r, g=g, b=b, a=a)
-
-
-def base_markers(params) -> list[Marker]:
-    """Cylinder markers of the solenoids (copper) and permanent magnets (grey)."""
-    markers = []
-    groups = (
-        (params.solenoids, 'solenoids', _color(0.8, 0.45, 0.2)),
-        (params.permanent_magnets, 'permanent_magnets', _color(0.5, 0.5, 0.55)),
-    )
-    for cyl, ns, color in groups:
-        for i in range(cyl.count):
-            m = Marker(ns=ns, id=i, type=Marker.CYLINDER, action=Marker.ADD, color=color)
-            m.header.frame_id = contract.BASE_FRAME
-            c = cyl.centers[i]
-            m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in c)
-            m.pose.orientation.w = 1.0
-            m.scale.x = m.scale.y = 2.0 * float(cyl.radius[i])
-            m.scale.z = float(cyl.length[i])
-            markers.append(m)
-    return markers
-
-
 class SimulatorNode(Node):
     """The simulator (see the module docstring): ROS wiring around a simulation session.
 
@@ -567,29 +542,10 @@ class SimulatorNode(Node):
     def publish_markers(self) -> None:
         """Publish the base and the magnet (at its latest state) as RViz markers."""
         markers = list(self._base_markers)
-        stamp_ns = max(self.last_stamp_ns, 0)
         if self.config.magnet != 'absent':
-            m = self.sim.model.params.magnet
-            magnet = Marker(
-                ns='magnet',
-                id=0,
-                type=Marker.CYLINDER,
-                action=Marker.ADD,
-                color=_color(0.85, 0.1, 0.1) if not self.sim.crashed else _color(0.3, 0.3, 0.3),
-            )
-            magnet.header.frame_id = contract.BASE_FRAME
-            v = contract.odometry_values(self.session.last_state)
-            magnet.pose = Pose()
-            magnet.pose.position.x, magnet.pose.position.y, magnet.pose.position.z = v[0:3]
-            o = magnet.pose.orientation
-            o.x, o.y, o.z, o.w = v[3:7]
-            magnet.scale.x = magnet.scale.y = 2.0 * m.radius
-            magnet.scale.z = m.thickness
-            markers.append(magnet)
-        sec, nanosec = contract.split_stamp(stamp_ns)
-        for marker in markers:
-            marker.header.stamp.sec, marker.header.stamp.nanosec = sec, nanosec
-        self._marker_pub.publish(MarkerArray(markers=markers))
+            params, state = self.sim.model.params, self.session.last_state
+            markers.append(magnet_marker(params, state, self.sim.crashed))
+        self._marker_pub.publish(marker_array(markers, max(self.last_stamp_ns, 0)))
 
     def publish_diagnostics(self) -> None:
         """Publish the run state and counters on ``/diagnostics``."""
