@@ -477,11 +477,13 @@ class SimulatorNode(Node):
     def _burst_publisher(self, cfg: SimulatorConfig) -> SampleSerialiser:
         """Build the serialiser of one sample's messages and their publish calls.
 
-        Per sample: the field of each published sensor, the true state, the
-        currents (last: it marks a complete sample); ``/clock`` separately.
-        Pre-serialised bytes go straight to the publishers' handles: they are
-        safe to use from the stepping thread because the node destroys its
-        publishers only after :meth:`close` joined it.
+        Per sample: ``/clock`` in lockstep (every sample: one compiled call
+        serialises the whole sample), the field of each published sensor, the
+        true state, the currents (last: it marks a complete sample). In real
+        time ``/clock`` goes separately, once per burst. Pre-serialised bytes
+        go straight to the publishers' handles: they are safe to use from the
+        stepping thread because the node destroys its publishers only after
+        :meth:`close` joined it.
         """
         layouts = [field_layout(contract.sensor_frame(k)) for k in self.sensors]
         handles = [pub.handle for pub in self._field_pubs]
@@ -490,12 +492,15 @@ class SimulatorNode(Node):
             handles.append(self._state_pub.handle)
         layouts.append(currents_layout())
         handles.append(self._current_pub.handle)
-        self._publish_calls = [handle.publish_raw for handle in handles]
+        self._clock_batch = None  # real time: /clock once per burst
         if self._clock_pub is not None:
-            self._clock_batch = RawMessageBatch(clock_layout())
-            self._publish_clock = self._clock_pub.handle.publish_raw
-        # samples per /clock message: each one in lockstep, one per burst in real time
-        self._clock_stride = 1 if cfg.mode == 'lockstep' else self.session.burst
+            if cfg.mode == 'lockstep':
+                layouts.insert(0, clock_layout())
+                handles.insert(0, self._clock_pub.handle)
+            else:
+                self._clock_batch = RawMessageBatch(clock_layout())
+                self._publish_clock = self._clock_pub.handle.publish_raw
+        self._publish_calls = [handle.publish_raw for handle in handles]
         self._odom_cache = np.zeros(13)
         self._odom_state = b''  # bytes of the state _odom_cache was computed for
         serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
@@ -506,8 +511,9 @@ class SimulatorNode(Node):
     def _publish(self, batch: SampleBatch | None) -> None:
         """Publish a batch of samples (lockstep: usually one); report a crash.
 
-        The ``/clock`` messages of the batch go first; the rest is serialised
-        in one go and published sample by sample. The true state's 13 values
+        Real time: the ``/clock`` messages of the batch (one per burst) go
+        first. The samples' messages are serialised in one go and published
+        sample by sample. The true state's 13 values
         are recomputed only when the state changed (never with the magnet
         fixed or absent).
         """
@@ -516,8 +522,8 @@ class SimulatorNode(Node):
         n = len(batch)
         if n:
             stamps = batch.stamps_ns
-            if self._clock_pub is not None:
-                ticks = stamps[batch.indices % self._clock_stride == 0]
+            if self._clock_batch is not None:
+                ticks = stamps[batch.indices % self.session.burst == 0]
                 if ticks.size:
                     no_values = np.empty((ticks.size, 0))
                     for message in self._clock_batch.serialise(ticks, no_values):
