@@ -548,6 +548,8 @@ class DriverNode(Node):
             except LinkError as err:
                 self._on_disconnected(f'link lost: {err}')
             except Exception as err:  # noqa: BLE001 - zero the coils, then reconnect
+                if not self.context.ok():  # a signal shut the context down mid-publish:
+                    break  # close() zeroes the coils
                 self._counts['io_errors'] += 1
                 log.error(f'unexpected error on the board link: {err!r}; zeroing and reconnecting')
                 self._send_zero()
