@@ -28,7 +28,9 @@ supply, then the coils' L/R dynamics. Services: ``maglev/simulator/reset``
 (std_srvs/Trigger) restarts from the initial state (and recovers a crash);
 ``maglev/simulator/pause`` (std_srvs/SetBool) pauses (true) or resumes.
 
-Timing modes (``mode``):
+Timing modes (``mode``; the pacing is a ROS-free
+:class:`~maglev_ros.physics.session.SimulationSession`, which also states the
+lockstep contract):
 
 ``realtime``
     A thread paced to the wall clock steps the model at ``sample_rate`` with
