@@ -57,6 +57,7 @@ DEFAULT_TOPICS = [
     contract.TRUE_STATE_TOPIC,
     contract.CLOCK_TOPIC,
 ]
+_PARAMETER_ANSWER_S = 0.3  # s to wait for one parameter of the metadata node
 _CLOCK = struct.Struct('<iI')  # rosgraph_msgs/Clock after the 4-byte CDR header
 
 
@@ -222,6 +223,9 @@ class RecorderNode(Node):
         self._clock_ns = 0
         self._metadata_done = not cfg.metadata_node
         self._metadata_pending = False
+        # set while one parameter's request waits for its answer (not while the
+        # list of names is still on its way: that answer may come late at start-up)
+        self._metadata_skip = None
         self._closed = False
         self.create_timer(0.1, self._discover)
         self._discover()
@@ -274,7 +278,10 @@ class RecorderNode(Node):
             )
         if not self._metadata_done and not self._metadata_pending:
             self._request_metadata()
-        elif self._metadata_pending and time.monotonic() - self._metadata_since > 0.3:
+        elif (
+            self._metadata_skip is not None
+            and time.monotonic() - self._metadata_since > _PARAMETER_ANSWER_S
+        ):
             self._metadata_skip()  # no answer (an unset parameter): skip it
 
     def _writer_for(self, handle, topic: str, is_clock: bool):
@@ -327,6 +334,7 @@ class RecorderNode(Node):
                     self.writer.set_metadata(items)
                 self._metadata_done = True
                 self._metadata_pending = False
+                self._metadata_skip = None
                 return
             parameter = names[0]
             self._metadata_since = time.monotonic()

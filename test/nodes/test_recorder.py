@@ -207,3 +207,48 @@ def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
     with BagReader(bag) as reader:
         assert reader.metadata['maglev_ros.version'] == '0.1.0'
         assert sum(1 for _ in reader.messages(['/maglev/currents/command'])) == 50
+
+
+def test_metadata_node_answering_late_does_not_kill_the_recorder(ctx, tmp_path):
+    """Issue 11 item 1: the metadata node's parameter list arrives after the timeout.
+
+    At start-up under ``ros2 launch`` the simulator answers ``list_parameters``
+    late; the recorder's timeout check then ran before any per-parameter request
+    existed and died (AttributeError). Here the list answer takes 1 s.
+    """
+    from rcl_interfaces.msg import ParameterValue
+    from rcl_interfaces.srv import GetParameters, ListParameters
+
+    slow = rclpy.create_node('slow_metadata', context=ctx, start_parameter_services=False)
+
+    def list_late(request, response):
+        time.sleep(1.0)
+        response.result.names = ['answer']
+        return response
+
+    def get(request, response):
+        response.values = [ParameterValue(type=2, integer_value=42) for _ in request.names]
+        return response
+
+    slow.create_service(ListParameters, '/slow_metadata/list_parameters', list_late)
+    slow.create_service(GetParameters, '/slow_metadata/get_parameters', get)
+    peer = contract.Spinner(ctx, [slow])  # its own thread: the slow answer blocks only it
+    recorder = RecorderNode(
+        context=ctx,
+        parameter_overrides=params(
+            path=str(tmp_path / 'late'), topics=['/maglev/currents'], metadata_node='slow_metadata'
+        ),
+    )
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(recorder)
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while not recorder.metadata_complete:
+            assert time.monotonic() < deadline, 'metadata never fetched'
+            executor.spin_once(timeout_sec=0.05)  # raises if a callback dies
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        peer.close()
+        slow.destroy_node()
+    assert recorder.writer.metadata['slow_metadata.answer'] == 42
