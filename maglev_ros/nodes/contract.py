@@ -30,6 +30,7 @@ import math
 import os
 import struct
 import sys
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -40,6 +41,7 @@ from nav_msgs.msg import Odometry
 from rclpy.executors import ExternalShutdownException
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import serialize_message
+from rclpy.signals import SignalHandlerOptions
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
 
@@ -47,6 +49,7 @@ from maglev_ros.bags.cdr_layout import cdr_layout
 from maglev_ros.bags.typestore import jazzy_typestore
 from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
+from maglev_ros.stop_signals import StopSignals
 from maglev_ros.topics import (  # re-exported: the nodes' one import of the contract
     BASE_FRAME,
     CLOCK_TOPIC,
@@ -299,6 +302,27 @@ def spin(executor, context=None, stop=None) -> None:
             break  # a callback raced the shutdown (SIGINT/SIGTERM): nothing left to do
 
 
+def drain(executor, context=None, seconds: float = 0.1) -> None:
+    """Run the callbacks already due (messages received before a stop), for ``seconds``.
+
+    Parameters
+    ----------
+    executor : rclpy executor
+        The executor (nodes added).
+    context : rclpy.context.Context, optional
+        Its context (default: the default context).
+    seconds : float
+        How long to keep spinning, s.
+    """
+    context = context or rclpy.get_default_context()
+    deadline = time.monotonic() + seconds
+    while context.ok() and time.monotonic() < deadline:
+        try:
+            executor.spin_once(timeout_sec=0.01)
+        except ExternalShutdownException:
+            break
+
+
 class Spinner:
     """Spin nodes on one executor in a background thread (tests, ``maglev-lab``).
 
@@ -367,7 +391,11 @@ def declare_parameters(node, table: Mapping[str, tuple[object, str]]) -> dict[st
 
 
 def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, parameters=None) -> int:
-    """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM.
+    """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM/SIGHUP.
+
+    A second signal during the clean-up is ignored: the nodes are destroyed
+    (bags finalised, coils zeroed) before the context shuts down, and the
+    exit status stays 0.
 
     Parameters
     ----------
@@ -397,28 +425,34 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         )
         print(parameters.help_text(prog), end='')
         return 0
-    rclpy.init(args=args)
+    # SIGINT, SIGTERM and SIGHUP end the spin; one arriving during the clean-up
+    # (launch's own SIGINT after a terminal's Ctrl-C) no longer interrupts it:
+    # rclpy's handlers are off, so the context stays valid until the nodes are
+    # destroyed (bags finalised, coils zeroed) and is shut down last
+    rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     nodes = []
     executor = None
-    try:
-        for factory in factories:
-            nodes.append(factory())
-        relax_event_threads()  # DDS timer wake-ups must not preempt the publishers
-        executor = make_executor()
-        for node in nodes:
-            executor.add_node(node)
-        spin(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except errors as err:
-        rclpy.logging.get_logger(name).error(str(err))
-        return 2
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        for node in reversed(nodes):
-            node.destroy_node()
-        rclpy.try_shutdown()
+    with StopSignals() as stop:
+        try:
+            for factory in factories:
+                nodes.append(factory())
+            relax_event_threads()  # DDS timer wake-ups must not preempt the publishers
+            executor = make_executor()
+            for node in nodes:
+                executor.add_node(node)
+            spin(executor, stop=stop.event)
+            drain(executor)  # what arrived before the signal goes into the bag
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except errors as err:
+            rclpy.logging.get_logger(name).error(str(err))
+            return 2
+        finally:
+            if executor is not None:
+                executor.shutdown()
+            for node in reversed(nodes):
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0
 
 

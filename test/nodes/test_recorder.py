@@ -157,8 +157,21 @@ def test_config_errors(tmp_path):
         build_config(base | {'path': str(tmp_path)})
 
 
-@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
+def signal_until_exit(proc, signum, interval=0.003, timeout=30.0):
+    """Send ``signum`` every ``interval`` s until ``proc`` exits: some land in its clean-up."""
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            proc.send_signal(signum)
+        except ProcessLookupError:
+            break
+        time.sleep(interval)
+
+
+@pytest.mark.parametrize('repeat', [False, True], ids=['once', 'repeated'])
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum, repeat):
+    """The bag is finalised on SIGINT, SIGTERM and SIGHUP, and on more of them in clean-up."""
     bag = tmp_path / f'sig{int(signum)}'
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     proc = subprocess.Popen(
@@ -194,7 +207,10 @@ def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
         for k in range(50):
             pub.publish(Float64MultiArray(data=[float(k), 0.0, 0.0, 0.0]))
         assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=10))
-        proc.send_signal(signum)
+        if repeat:
+            signal_until_exit(proc, signum)
+        else:
+            proc.send_signal(signum)
         out, _ = proc.communicate(timeout=30.0)
         assert proc.returncode == 0, out
         assert 'Traceback' not in out
