@@ -27,31 +27,28 @@ finalised).
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')  # small solves; see cli/sysid.py
-os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # keep the lab local
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import shutil  # noqa: E402
-import signal  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from maglev_ros.cli.usage import (  # noqa: E402
+from maglev_ros.cli.usage import (
     Parser,
     UsageError,
+    limit_blas_threads,
     non_negative_float,
     positive_float,
     run_command,
 )
-from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix  # noqa: E402
-from maglev_ros.topics import (  # noqa: E402
+from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix
+from maglev_ros.topics import (
     AXES,
     CLOCK_TOPIC,
     COMMAND_TOPIC,
@@ -397,7 +394,6 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
         On SIGINT/SIGTERM (the bag is finalised first).
     """
     import rclpy
-    from rclpy.context import Context
 
     from maglev_ros.nodes import contract
     from maglev_ros.nodes.excitation import ExcitationNode
@@ -410,8 +406,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
         TRUE_STATE_TOPIC,
         CLOCK_TOPIC,
     ]
-    ctx = Context()
-    rclpy.init(context=ctx, args=[])
+    ctx = _lab_context()
     nodes, spinner = [], None
     try:
         sim = SimulatorNode(
@@ -597,7 +592,6 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
         On SIGINT/SIGTERM (the bag is finalised first).
     """
     import rclpy
-    from rclpy.context import Context
 
     from maglev_ros.nodes import contract
     from maglev_ros.nodes.driver import DriverNode
@@ -609,8 +603,7 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
         COMMAND_TOPIC,
     ]
     currents_topic = '/' + CURRENTS_TOPIC
-    ctx = Context()
-    rclpy.init(context=ctx, args=[])
+    ctx = _lab_context()
     nodes, spinner = [], None
     try:
         recorder = RecorderNode(
@@ -707,7 +700,23 @@ def _run_board(args: argparse.Namespace, bag: Path) -> dict:
         stop_child(child)
 
 
+def _lab_context():
+    """Return an initialised rclpy Context for the lab's nodes, discovery kept local.
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is set to LOCALHOST unless the
+    environment sets it: the lab's graph stays on this machine.
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    return ctx
+
+
 def _run(args: argparse.Namespace) -> int:
+    limit_blas_threads(1)  # small solves: see limit_blas_threads
     _check(args)
     out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
     bag = out / 'bag'

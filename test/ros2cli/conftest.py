@@ -8,13 +8,17 @@ The package is built once per session with colcon (``colcon_build`` of
 - ``ros2_cli`` (session): where ``ros2`` is and what it runs on; skips the test,
   with the reason, where ``ros2`` is not installed (``bash
   ../shared/ros2-cli/install.sh .venv`` installs it on top of the PyPI wheels).
-- ``ros2_env``: the environment: ``AMENT_PREFIX_PATH=<install>:<venv>``, the
-  install tree's site-packages on ``PYTHONPATH``, a ``ROS_DOMAIN_ID`` no other
-  test of the session uses, ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``, logs in
-  the test's temporary directory, unbuffered and uncoloured output.
-- ``ros2``: a :class:`Ros2` runner in that environment. ``ros2.run(*args)``
-  runs ``ros2 <args>`` to the end; ``ros2.start(*args)`` starts it in its own
-  session (process group) as a terminal's foreground job, and the returned
+- ``domain``: a ``ROS_DOMAIN_ID`` no other test of the session uses.
+- ``ros2_env`` (session): a :class:`Ros2Env`: the environment as ``source
+  install/setup.bash`` leaves it (``AMENT_PREFIX_PATH=<install>:<venv>``, the
+  install tree's site-packages on ``PYTHONPATH``, unbuffered and uncoloured
+  output); ``ros2_env.run(args, domain)`` and ``ros2_env.start(args, domain)``
+  add the domain id and ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST``; with
+  :func:`interrupt` (Ctrl-C to the group) and :func:`wait_until`.
+- ``ros2``: a :class:`Ros2` runner for one test, in its own domain, logs in the
+  test's temporary directory. ``ros2.run(*args)`` runs ``ros2 <args>`` to the
+  end; ``ros2.start(*args)`` starts it in its own session (process group) as a
+  terminal's foreground job, output to a file, and the returned
   :class:`Ros2Process` sends signals to the whole group
   (:meth:`Ros2Process.interrupt_like_terminal`). Every process a test started
   is killed (group-wide) at the end of the test if it is still running.
@@ -34,6 +38,7 @@ import signal
 import subprocess
 import sys
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -102,24 +107,103 @@ def ros2_cli(colcon_build) -> Ros2Cli:
     )
 
 
-@pytest.fixture
-def ros2_env(ros2_cli: Ros2Cli, tmp_path: Path) -> dict[str, str]:
-    """Environment of one test's ``ros2`` commands (a domain of its own)."""
+def _environment(cli: Ros2Cli) -> dict[str, str]:
     env = os.environ.copy()
     join = os.pathsep.join
     env['AMENT_PREFIX_PATH'] = join(
-        filter(None, [str(ros2_cli.prefix), str(ros2_cli.venv), env.get('AMENT_PREFIX_PATH')])
+        filter(None, [str(cli.prefix), str(cli.venv), env.get('AMENT_PREFIX_PATH')])
     )
-    env['PYTHONPATH'] = join(filter(None, [str(ros2_cli.site_packages), env.get('PYTHONPATH')]))
-    env['PATH'] = join([str(ros2_cli.executable.parent), env.get('PATH', '')])
+    env['PYTHONPATH'] = join(filter(None, [str(cli.site_packages), env.get('PYTHONPATH')]))
+    env['PATH'] = join([str(cli.executable.parent), env.get('PATH', '')])
     env['PYTHONNOUSERSITE'] = '1'
     env['PYTHONUNBUFFERED'] = '1'
     env['RCUTILS_COLORIZED_OUTPUT'] = '0'
-    env['ROS_DOMAIN_ID'] = str(_next_domain_id())
-    env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    env['ROS_LOG_DIR'] = str(tmp_path / 'ros_log')
     env.pop('ROS_LOCALHOST_ONLY', None)
     return env
+
+
+def _in_domain(env: dict[str, str], domain: int) -> dict[str, str]:
+    return env | {'ROS_DOMAIN_ID': str(domain), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+
+
+@dataclass(frozen=True)
+class Ros2Env:
+    """A colcon install of the package and the environment to run ``ros2`` in it.
+
+    Attributes
+    ----------
+    cli : Ros2Cli
+        The command line and the install.
+    env : dict
+        Environment as ``source install/setup.bash`` would leave it (domain
+        id and discovery range set per call by :meth:`run`/:meth:`start`).
+    """
+
+    cli: Ros2Cli
+    env: dict
+
+    @property
+    def prefix(self) -> Path:
+        return self.cli.prefix
+
+    def run(
+        self, args: Sequence[str], domain: int, timeout: float = 60.0
+    ) -> subprocess.CompletedProcess:
+        """Run ``ros2 args...`` to completion (stdout and stderr captured as text)."""
+        return subprocess.run(
+            [str(self.cli.executable), *args],
+            env=_in_domain(self.env, domain),
+            capture_output=True,
+            text=True,
+            timeout=timeout,
+            stdin=subprocess.DEVNULL,
+        )
+
+    def start(self, args: Sequence[str], domain: int) -> subprocess.Popen:
+        """Start ``ros2 args...`` in its own session (output merged into stdout)."""
+        return subprocess.Popen(
+            [str(self.cli.executable), *args],
+            env=_in_domain(self.env, domain),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            stdin=subprocess.DEVNULL,
+            text=True,
+            start_new_session=True,
+        )
+
+
+def interrupt(proc: subprocess.Popen, timeout: float = STOP_TIMEOUT) -> tuple[int, str]:
+    """Send SIGINT to the process group, as a terminal's Ctrl-C; return (status, output)."""
+    if proc.poll() is None:
+        os.killpg(proc.pid, signal.SIGINT)
+    try:
+        out, _ = proc.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        out, _ = proc.communicate()
+        return -9, out
+    return proc.returncode, out
+
+
+def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None:
+    """Poll ``predicate`` every 0.5 s until true; fail naming ``what`` after ``timeout`` s."""
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            pytest.fail(f'timed out after {timeout} s waiting for {what}')
+        time.sleep(0.5)
+
+
+@pytest.fixture(scope='session')
+def ros2_env(ros2_cli: Ros2Cli) -> Ros2Env:
+    """The install's ``ros2`` environment (skips where ``ros2`` or colcon is missing)."""
+    return Ros2Env(ros2_cli, _environment(ros2_cli))
+
+
+@pytest.fixture
+def domain() -> int:
+    """A ROS domain id of its own for one test."""
+    return _next_domain_id()
 
 
 @dataclass
@@ -239,7 +323,7 @@ class Ros2:
     cli : Ros2Cli
         The command line.
     env : dict
-        The environment (``ros2_env``).
+        The environment (with the test's domain).
     workdir : Path
         Working directory and place of the output logs.
     """
@@ -300,8 +384,9 @@ class Ros2:
 
 
 @pytest.fixture
-def ros2(ros2_cli: Ros2Cli, ros2_env: dict[str, str], tmp_path: Path):
+def ros2(ros2_env: Ros2Env, domain: int, tmp_path: Path):
     """A :class:`Ros2` runner for one test (its leftovers are killed at the end)."""
-    runner = Ros2(ros2_cli, ros2_env, tmp_path)
+    env = _in_domain(ros2_env.env, domain) | {'ROS_LOG_DIR': str(tmp_path / 'ros_log')}
+    runner = Ros2(ros2_env.cli, env, tmp_path)
     yield runner
     runner.close()
