@@ -3,7 +3,7 @@
 One pass over the bag collects the raw messages of the requested topics (and
 only those).  Then, per topic: if all messages share one byte layout (the
 usual case: same frame id, names and array lengths), every field is one
-strided numpy read over all messages (:mod:`~maglev_ros.bags.cdr_layout`);
+strided numpy read over all messages (:mod:`~maglev_ros.cdr.layout`);
 otherwise each message is deserialised with the type store's generated CDR
 reader and the needed attributes are fetched with one
 :func:`operator.attrgetter` call, array indices being applied afterwards on
@@ -19,7 +19,8 @@ from operator import attrgetter
 
 import numpy as np
 
-from .cdr_layout import cdr_layout, decode_columns
+from maglev_ros.cdr.layout import cdr_layout, decode_columns
+
 from .channels import FieldRef, check_field, format_field_path
 from .errors import BagError
 from .reader import BagReader
@@ -190,7 +191,7 @@ def read_topics(
         definition before anything is read).
     fast : bool
         Decode topics whose messages share one byte layout by strided numpy
-        reads (:mod:`~maglev_ros.bags.cdr_layout`); False always deserialises
+        reads (:mod:`~maglev_ros.cdr.layout`); False always deserialises
         message by message (same result, for tests and comparison).
 
     Returns

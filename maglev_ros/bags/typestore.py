@@ -15,24 +15,11 @@ from rosbags.interfaces import Connection, MessageDefinitionFormat
 from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
+from maglev_ros.cdr.typestore import jazzy_typestore
+
 from .errors import BagError
 
 __all__ = ['bag_typestore', 'cdr_deserializer', 'jazzy_typestore']
-
-_JAZZY: list[Typestore] = []
-
-
-def jazzy_typestore() -> Typestore:
-    """Return the shared rosbags type store of ROS 2 Jazzy's standard messages.
-
-    Returns
-    -------
-    rosbags Typestore
-        Built once per process.
-    """
-    if not _JAZZY:
-        _JAZZY.append(get_typestore(Stores.ROS2_JAZZY))
-    return _JAZZY[0]
 
 
 def bag_typestore(connections: Iterable[Connection]) -> Typestore:

@@ -3,12 +3,16 @@
 Re-exports only; see the modules: ``packet`` (V2x command packets),
 ``v2x_stream`` (V2x record decoder), ``v4x_telemetry`` (V4x text telemetry),
 ``scaling`` (current <-> PWM), ``board_clock`` (board time to host time),
+``command_guard`` (which commands reach the coils, as PWM counts),
+``board_stream`` (the board's bytes to stamped samples in SI units),
 ``serial_link`` (the port handle), ``firmware`` (board emulators),
 ``physics_plant`` (the physics simulator as an emulator plant) and
 ``virtual_board`` (an emulator on a pty).
 """
 
 from .board_clock import BoardClock
+from .board_stream import BoardStream, StreamOutput
+from .command_guard import CommandGuard, GuardDecision
 from .firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from .packet import (
     CommandParser,
@@ -47,6 +51,9 @@ __all__ = [
     'Backoff',
     'BoardClock',
     'BoardStatus',
+    'BoardStream',
+    'CommandGuard',
+    'GuardDecision',
     'CommandParser',
     'CurrentScaling',
     'DecoderStats',
@@ -62,6 +69,7 @@ __all__ = [
     'SerialLink',
     'Severity',
     'SimulatorPlant',
+    'StreamOutput',
     'TelemetryError',
     'TelemetrySample',
     'TelemetryStats',

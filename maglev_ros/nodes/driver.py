@@ -67,25 +67,19 @@ from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
-from maglev_ros.hardware.board_clock import BoardClock
+from maglev_ros.cdr import currents_layout, field_layout
+from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
+from maglev_ros.hardware.board_stream import BoardStream, StreamOutput
+from maglev_ros.hardware.command_guard import CommandGuard
 from maglev_ros.hardware.packet import WATCHDOG_S, encode_command
 from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE, CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
-from maglev_ros.hardware.v2x_stream import (
-    BURST_RECORDS,
-    SAMPLE_PERIOD_US,
-    DecoderStats,
-    RecordDecoder,
-    pack_records,
-)
-from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetryStream
-from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
+from maglev_ros.hardware.v2x_stream import DecoderStats
+from maglev_ros.hardware.v4x_telemetry import Severity
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
     DIAGNOSTICS_QOS,
     SENSOR_QOS,
-    currents_layout,
-    field_layout,
     run_nodes,
 )
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer
@@ -111,9 +105,28 @@ NODE_NAME = 'maglev_driver'
 DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
-BURST_PERIOD_S = 0.001  # s between the board's bursts (V2x; V4x lines come at most as often)
-MAX_HELD_RECORDS = 25_000  # 5 s at 5 kHz: a link that never looks caught up publishes anyway
-_ZERO = np.zeros(4)
+COUNTERS = (  # as /diagnostics lists them
+    'records',
+    'commands_sent',
+    'commands_rejected',
+    'commands_clamped',
+    'commands_unsent',
+    'commands_ignored',
+    'timeouts',
+    'reconnects',
+    'io_errors',
+    'info_messages',
+    'resyncs',
+    'dropped_bytes',
+)
+_NODE_COUNTERS = (
+    'records',
+    'commands_sent',
+    'commands_unsent',
+    'reconnects',
+    'io_errors',
+    'info_messages',
+)
 
 
 class DriverParameterError(NodeParameterError):
@@ -348,7 +361,13 @@ def build_config(values: dict) -> DriverConfig:
 
 
 class DriverNode(Node):
-    """The board driver (see the module docstring).
+    """The board driver (see the module docstring): ROS wiring around the hardware cores.
+
+    The :class:`~maglev_ros.hardware.command_guard.CommandGuard` decides what
+    reaches the coils; the :class:`~maglev_ros.hardware.board_stream.BoardStream`
+    turns the board's bytes into stamped samples. This node wires them to the
+    serial link (an I/O thread), the topics, the enable service and
+    ``/diagnostics``.
 
     Parameters
     ----------
@@ -364,47 +383,31 @@ class DriverNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.config = build_config(PARAMETERS.declare(self))
+        self._lock = threading.Lock()  # the command guard and the link's writes
+        self.guard: CommandGuard | None = None
+        self.config = cfg = build_config(PARAMETERS.declare(self))
         self.add_on_set_parameters_callback(PARAMETERS.on_set(self, build_config))
-        cfg = self.config
         self._v2x = cfg.firmware == 'v2x'
+        self.guard = CommandGuard(
+            cfg.scaling,
+            cfg.current_limit,
+            cfg.command_timeout,
+            enabled=cfg.start_enabled,
+            read_only=not self._v2x,
+        )
+        self.stream = BoardStream(
+            cfg.firmware,
+            cfg.n_sensors,
+            cfg.scaling,
+            confirm_records=cfg.confirm_records,
+            read_interval=cfg.read_interval,
+        )
         self._link = SerialLink(cfg.port, cfg.baudrate)
         self._backoff = Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay)
-        self._decoder = RecordDecoder(cfg.n_sensors, confirm=cfg.confirm_records)
-        self._telemetry = TelemetryStream(cfg.n_sensors)
-        self._board_clock = BoardClock()
-        self._catching_up = True  # after (re)connecting, until a read brings no backlog
-        self._held: list[tuple[np.ndarray, np.ndarray]] = []  # samples kept meanwhile
-        # records a read brings when the link keeps up: the bursts of one read interval
-        # (at least one 1 ms burst) and one more for timing jitter, and the held-back record
-        self._caught_up_records = (
-            BURST_RECORDS * (max(1, math.ceil(cfg.read_interval / BURST_PERIOD_S - 1e-9)) + 1) + 1
-        )
-        self._lock = threading.Lock()  # command state
-        self._enabled = cfg.start_enabled
-        self._last_command_ns: int | None = None
-        self._timed_out = False
         self._applied = np.zeros(4, dtype=np.int64)  # PWM counts last sent
         self.link_state = 'connecting'
         self._connections = 0
-        self.counters = dict.fromkeys(
-            (
-                'records',
-                'commands_sent',
-                'commands_rejected',
-                'commands_clamped',
-                'commands_unsent',
-                'commands_ignored',
-                'timeouts',
-                'reconnects',
-                'io_errors',
-                'info_messages',
-                'resyncs',
-                'dropped_bytes',
-            ),
-            0,
-        )
-        self._base = {'resyncs': 0, 'dropped_bytes': 0}  # of earlier connections
+        self._counts = dict.fromkeys(_NODE_COUNTERS, 0)
         self._rate_mark = (time.monotonic(), 0, 0)
         self.last_info = ''
         self._field_pubs = [
@@ -428,115 +431,95 @@ class DriverNode(Node):
         self.get_logger().info(
             f'{cfg.firmware} board on {cfg.port}, {cfg.n_sensors} sensor(s), publishing {kind}; '
             f'{cfg.scaling.counts_per_ampere:.1f} counts/A, limit {cfg.current_limit:.3f} A, '
-            f'{"enabled" if self._enabled else "disabled"}'
+            f'{"enabled" if self.enabled else "disabled"}'
         )
-        self._load_compiled_paths()
+        # compiled kernels load (0.5 to 1.5 s holding the GIL) now, not in the I/O thread
+        self.stream.warm_up()
+        self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, self.stream.n_values)))
         self._stop = threading.Event()
         self._closed = False
         self._io = threading.Thread(target=self._io_loop, name='maglev-driver-io', daemon=True)
         self._io.start()
 
-    def _load_compiled_paths(self) -> None:
-        """Run the decoder and the serialiser once on made-up records, before any I/O.
+    # -- state ------------------------------------------------------------------
 
-        Their numba kernels load (or compile) on first use, 0.5 to 1.5 s
-        holding the GIL; in the I/O thread that stall would overflow the
-        publishers' history with the backlog of the board's records.
-        """
-        n = self.config.n_sensors
-        decoder = RecordDecoder(n, confirm=self.config.confirm_records)
-        stamps = SAMPLE_PERIOD_US * np.arange(2 * BURST_RECORDS)
-        decoder.feed(
-            pack_records(stamps, np.zeros((stamps.size, n, 3)), np.zeros((stamps.size, 4)))
-        )
-        self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, 3 * n + 4)))
+    @property
+    def config(self) -> DriverConfig:
+        """The validated parameters (run-time changes reach the command guard)."""
+        return self._config
 
-    # -- commands ---------------------------------------------------------------
+    @config.setter
+    def config(self, config: DriverConfig) -> None:
+        self._config = config
+        if self.guard is not None:
+            with self._lock:
+                self.guard.configure(config.current_limit, config.command_timeout)
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """Records, commands sent/rejected/clamped/unsent/ignored, timeouts, link events."""
+        guard, stream = self.guard.counters, self.stream
+        merged = self._counts | guard
+        merged['resyncs'], merged['dropped_bytes'] = stream.resyncs, stream.dropped_bytes
+        return {name: merged[name] for name in COUNTERS}
 
     @property
     def decoder_stats(self) -> DecoderStats:
         """Counters of the record decoder of the current connection (V2x)."""
-        return self._decoder.stats
+        return self.stream.decoder_stats
 
     @property
     def enabled(self) -> bool:
         """Whether commands are applied (else zero currents are sent)."""
-        return self._enabled
+        return self.guard.enabled
 
-    def _send(self, currents: np.ndarray) -> None:
-        """Send currents (A, shape (4,)) as one packet (V2x); count failures."""
+    # -- commands ---------------------------------------------------------------
+
+    def _send(self, counts: np.ndarray) -> None:
+        """Send PWM counts (shape (4,)) as one packet (V2x); count failures."""
         if not self._v2x:
             return
-        counts = self.config.scaling.to_counts(currents)
         try:
             self._link.write(encode_command(counts))
         except LinkError:
-            self.counters['commands_unsent'] += 1
+            self._counts['commands_unsent'] += 1
             return
         self._applied = counts
-        self.counters['commands_sent'] += 1
+        self._counts['commands_sent'] += 1
 
     def _on_command(self, msg: Float64MultiArray) -> None:
-        log = self.get_logger()
-        if not self._v2x:
-            self.counters['commands_ignored'] += 1
-            log.warning(
-                'command ignored: the V4x firmware is read-only (its own controller runs)',
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            return
-        values = np.asarray(msg.data, dtype=float)
-        if values.shape != (4,):
-            self.counters['commands_rejected'] += 1
-            log.warning(
-                f'rejected command: need 4 currents (x+, x-, y+, y-), got {values.size}',
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            return
-        if not np.all(np.isfinite(values)):
-            self.counters['commands_rejected'] += 1
-            log.warning(
-                f'rejected command: currents must be finite, got {values.tolist()}',
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            return
-        limit = self.config.current_limit
-        if np.any(np.abs(values) > limit):
-            self.counters['commands_clamped'] += 1
-            log.warning(
-                f'clamped command {values.tolist()} A to +-{limit:.3f} A',
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            values = np.clip(values, -limit, limit)
         with self._lock:
-            self._last_command_ns = time.monotonic_ns()
-            self._timed_out = False
-            self._send(values if self._enabled else _ZERO)
+            decision = self.guard.command(msg.data, time.monotonic_ns())
+            if decision.counts is not None:
+                self._send(decision.counts)
+        if decision.warning:
+            self.get_logger().warning(decision.warning, throttle_duration_sec=WARN_THROTTLE_S)
 
     def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         with self._lock:
-            self._enabled = bool(request.data)
-            if not self._enabled:
-                self._send(_ZERO)
+            zero = self.guard.set_enabled(request.data)
+            if zero is not None:
+                self._send(zero)
         response.success = True
-        response.message = 'enabled' if self._enabled else 'disabled: zero currents sent'
+        response.message = 'enabled' if self.enabled else 'disabled: zero currents sent'
         self.get_logger().info(f'driver {response.message}')
         return response
 
     def _check_timeout(self) -> None:
         with self._lock:
-            if self._last_command_ns is None or self._timed_out:
+            age = self.guard.check_timeout(time.monotonic_ns())
+            if age is None:
                 return
-            age = (time.monotonic_ns() - self._last_command_ns) * 1e-9
-            if age > self.config.command_timeout:
-                self._timed_out = True
-                self.counters['timeouts'] += 1
-                self._send(_ZERO)
-                self.get_logger().warning(
-                    f'no valid command for {age:.3f} s > {self.config.command_timeout} s: '
-                    'zero currents sent',
-                    throttle_duration_sec=WARN_THROTTLE_S,
-                )
+            self._send(self.guard.zero)
+        self.get_logger().warning(
+            f'no valid command for {age:.3f} s > {self.config.command_timeout} s: '
+            'zero currents sent',
+            throttle_duration_sec=WARN_THROTTLE_S,
+        )
+
+    def _send_zero(self) -> None:
+        with self._lock:
+            self._send(self.guard.zero)
 
     # -- board I/O --------------------------------------------------------------
 
@@ -558,106 +541,47 @@ class DriverNode(Node):
                 data = self._link.read()
                 if data:
                     read_at = time.monotonic()
-                    self._handle(data)
+                    # system time: the ROS time of a node without sim time
+                    self._handle(self.stream.feed(data, time.time_ns()))
                     if interval:  # let bursts collect: one read, decode, publish for several
                         self._stop.wait(interval - (time.monotonic() - read_at))
             except LinkError as err:
                 self._on_disconnected(f'link lost: {err}')
             except Exception as err:  # noqa: BLE001 - zero the coils, then reconnect
-                self.counters['io_errors'] += 1
+                if not self.context.ok():  # a signal shut the context down mid-publish:
+                    break  # close() zeroes the coils
+                self._counts['io_errors'] += 1
                 log.error(f'unexpected error on the board link: {err!r}; zeroing and reconnecting')
-                with self._lock:
-                    self._send(_ZERO)
+                self._send_zero()
                 self._on_disconnected('error')
                 self._stop.wait(self._backoff.next_delay())
 
     def _on_connected(self) -> None:
         self._connections += 1
-        self.counters['reconnects'] = self._connections - 1
+        self._counts['reconnects'] = self._connections - 1
         self._backoff.reset()
-        self._decoder = RecordDecoder(self.config.n_sensors, confirm=self.config.confirm_records)
-        self._telemetry = TelemetryStream(self.config.n_sensors)
-        self._board_clock = BoardClock()  # the board may have been power-cycled
-        self._catching_up = True  # see _deliver
-        self._held.clear()
+        self.stream.connect()
         self.link_state = 'connected'
         self.get_logger().info(f'connected to {self.config.port}')
-        with self._lock:
-            self._send(_ZERO)  # a known state; applied once the board's loop runs
+        self._send_zero()  # a known state; applied once the board's loop runs
 
     def _on_disconnected(self, reason: str) -> None:
         self._link.close()
-        self._base['resyncs'] += self._decoder.stats.resyncs
-        self._base['dropped_bytes'] += self._decoder.stats.dropped_bytes
-        self._decoder = RecordDecoder(self.config.n_sensors, confirm=self.config.confirm_records)
+        self.stream.disconnect()
         self.link_state = 'disconnected'
         self.get_logger().warning(f'{self.config.port}: {reason}')
 
-    def _handle(self, data: bytes) -> None:
-        host_ns = time.time_ns()  # system time: the ROS time of a node without sim time
-        if self._v2x:
-            batch = self._decoder.feed(data)
-            if len(batch):
-                n = len(batch)
-                values = np.empty((n, self._serialiser.n_values))  # each field (T), currents (A)
-                np.multiply(
-                    batch.field_mT.reshape(n, -1), 1e-3, out=values[:, :-4], dtype=np.float64
-                )  # mT -> T
-                self.config.scaling.to_current(batch.pwm, out=values[:, -4:])
-                self._deliver(batch.time_us, values, host_ns)
-            return
-        samples = []
-        for item in self._telemetry.feed(data):
-            if isinstance(item, InfoMessage):
-                self.counters['info_messages'] += 1
-                self.last_info = item.text
-                if item.severity >= Severity.WARN:
-                    self.get_logger().warning(f'board: {item.text}')
-                else:
-                    self.get_logger().info(f'board: {item.text}')
+    def _handle(self, output: StreamOutput) -> None:
+        """Log the board's info lines, publish the samples of one read."""
+        for info in output.infos:
+            self._counts['info_messages'] += 1
+            self.last_info = info.text
+            if info.severity >= Severity.WARN:
+                self.get_logger().warning(f'board: {info.text}')
             else:
-                samples.append(item)
-        if samples:
-            board_us = np.array([round(s.time * 1e6) for s in samples], dtype=np.int64)
-            field_t = np.stack([s.field_mT for s in samples]) * 1e-3
-            currents = np.stack([s.current for s in samples])
-            self._deliver(
-                board_us, np.hstack([field_t.reshape(len(samples), -1), currents]), host_ns
-            )
-
-    def _deliver(self, board_us: np.ndarray, values: np.ndarray, host_ns: int) -> None:
-        """Observe the board clock, stamp the samples and publish them.
-
-        After a (re)connection the first reads may bring a backlog (the board
-        streamed while this thread was not reading yet: a busy start-up, a
-        stale OS buffer). The newest record of such a read is old, so its
-        observation would put the clock's first offset late by the backlog's
-        age, and correcting that later would hold stamps back. Until a read
-        brings no more than the records a read normally brings (the link has
-        caught up), samples are therefore kept, not stamped; then all of them
-        are stamped with the caught-up clock and published. Nothing is lost,
-        the first stamps are right, the catch-up costs latency only once.
-
-        Parameters
-        ----------
-        board_us : ndarray of int64, shape (n,)
-            Board time of each sample, us (unwrapped).
-        values : ndarray of float64, shape (n, 3 N + 4)
-            Each sensor's field (T), then the currents (A).
-        host_ns : int
-            Host time of the read, ns.
-        """
-        self._board_clock.observe(int(board_us[-1]), host_ns)
-        if self._catching_up:
-            self._held.append((board_us, values))
-            held = sum(len(b) for b, _ in self._held)
-            if len(board_us) > self._caught_up_records and held < MAX_HELD_RECORDS:
-                return
-            self._catching_up = False
-            board_us = np.concatenate([b for b, _ in self._held])
-            values = np.concatenate([v for _, v in self._held])
-            self._held.clear()
-        self._publish(self._board_clock.to_host(board_us), values)
+                self.get_logger().info(f'board: {info.text}')
+        if len(output):
+            self._publish(output.stamps_ns, output.values)
 
     def _publish(self, stamps: np.ndarray, values: np.ndarray) -> None:
         """Publish n samples: stamps (n,) ns; values (n, 3 N + 4): each field (T), currents (A).
@@ -677,21 +601,19 @@ class DriverNode(Node):
                 self._publish_calls[n] = publishers
         for publish, message in zip(publishers, messages, strict=True):
             publish(message)
-        self.counters['records'] += n
+        self._counts['records'] += n
 
     # -- diagnostics ------------------------------------------------------------
 
     def _publish_diagnostics(self) -> None:
         now = time.monotonic()
+        counters = self.counters
         then, records, sent = self._rate_mark
         span = max(now - then, 1e-9)
-        self._rate_mark = (now, self.counters['records'], self.counters['commands_sent'])
-        stats = self._decoder.stats
-        self.counters['resyncs'] = self._base['resyncs'] + stats.resyncs
-        self.counters['dropped_bytes'] = self._base['dropped_bytes'] + stats.dropped_bytes
+        self._rate_mark = (now, counters['records'], counters['commands_sent'])
         if self.link_state != 'connected':
             level, message = DiagnosticStatus.ERROR, f'board link {self.link_state}'
-        elif self._timed_out:
+        elif self.guard.timed_out:
             level, message = DiagnosticStatus.WARN, 'command timeout: zero currents'
         else:
             level, message = DiagnosticStatus.OK, 'connected'
@@ -699,13 +621,13 @@ class DriverNode(Node):
             'link state': self.link_state,
             'firmware': self.config.firmware,
             'field kind': 'raw' if self._v2x else 'baseline and feedthrough removed (V4x)',
-            'enabled': str(self._enabled),
-            'records/s': f'{(self.counters["records"] - records) / span:.1f}',
-            'command rate (1/s)': f'{(self.counters["commands_sent"] - sent) / span:.1f}',
+            'enabled': str(self.enabled),
+            'records/s': f'{(counters["records"] - records) / span:.1f}',
+            'command rate (1/s)': f'{(counters["commands_sent"] - sent) / span:.1f}',
             'applied PWM (counts)': ' '.join(str(int(c)) for c in self._applied),
             'last board message': self.last_info,
         }
-        values.update({name.replace('_', ' '): str(v) for name, v in self.counters.items()})
+        values.update({name.replace('_', ' '): str(v) for name, v in counters.items()})
         status = DiagnosticStatus(
             level=level,
             name=f'{NODE_NAME}: board link',
@@ -727,8 +649,7 @@ class DriverNode(Node):
         self._stop.set()
         self._io.join(timeout=2.0)
         if self._v2x and self._link.is_open:
-            with self._lock:
-                self._send(_ZERO)
+            self._send_zero()
         self._link.close()
 
     def destroy_node(self) -> None:

@@ -107,7 +107,6 @@ class PlayerNode(Node):
             if self._own_clock
             else None
         )
-        self._clock_raw = contract.clock_template()
         self.published = 0
         self.done = threading.Event()
         self._stop = threading.Event()
@@ -143,7 +142,9 @@ class PlayerNode(Node):
                 if delay > 0 and self._stop.wait(delay):
                     return
             if self._own_clock and (next_clock is None or t_ns >= next_clock):
-                self._clock_pub.publish(self._clock_raw.serialise(t_ns))
+                clock = Clock()  # every clock_period (10 ms): a message object is cheap enough
+                clock.clock.sec, clock.clock.nanosec = contract.split_stamp(t_ns)
+                self._clock_pub.publish(clock)
                 next_clock = t_ns + self.clock_period_ns
             self._topic_pubs[conn.topic].publish(bytes(data))
             self.published += 1

@@ -63,21 +63,21 @@ import math
 import os
 import threading
 import time
-from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import Pose
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import ColorRGBA, Float64MultiArray
+from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
-from visualization_msgs.msg import Marker, MarkerArray
+from visualization_msgs.msg import MarkerArray
 
+from maglev_ros.cdr import clock_layout, currents_layout, field_layout, odometry_layout
+from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes import contract
-from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
+from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -96,6 +96,7 @@ from maglev_ros.physics import (
     Simulator,
     make_model,
 )
+from maglev_ros.physics.session import MODES, CommandError, SampleBatch, SimulationSession
 from maglev_ros.physics.simulation import MAGNET_MODES
 from maglev_ros.topics import SIMULATOR_PAUSE_SERVICE, SIMULATOR_RESET_SERVICE
 
@@ -105,17 +106,13 @@ __all__ = [
     'SimulatorNode',
     'PARAMETERS',
     'SimulatorParameterError',
-    'base_markers',
     'build_config',
     'make_simulator',
     'main',
 ]
 
 NODE_NAME = 'maglev_simulator'
-MODES = ('realtime', 'lockstep')
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
-MAX_BACKLOG_S = 0.1  # s of wall time the real-time loop may catch up at most
-_ZERO = np.zeros(4)
 
 
 class SimulatorParameterError(NodeParameterError):
@@ -361,32 +358,13 @@ def make_simulator(cfg: SimulatorConfig) -> Simulator:
         raise SimulatorParameterError(f'initial_state / model: {err}') from err
 
 
-def _color(r: float, g: float, b: float, a: float = 1.0) -> ColorRGBA:
-    return ColorRGBA(r=r, g=g, b=b, a=a)
-
-
-def base_markers(params) -> list[Marker]:
-    """Cylinder markers of the solenoids (copper) and permanent magnets (grey)."""
-    markers = []
-    groups = (
-        (params.solenoids, 'solenoids', _color(0.8, 0.45, 0.2)),
-        (params.permanent_magnets, 'permanent_magnets', _color(0.5, 0.5, 0.55)),
-    )
-    for cyl, ns, color in groups:
-        for i in range(cyl.count):
-            m = Marker(ns=ns, id=i, type=Marker.CYLINDER, action=Marker.ADD, color=color)
-            m.header.frame_id = contract.BASE_FRAME
-            c = cyl.centers[i]
-            m.pose.position.x, m.pose.position.y, m.pose.position.z = (float(v) for v in c)
-            m.pose.orientation.w = 1.0
-            m.scale.x = m.scale.y = 2.0 * float(cyl.radius[i])
-            m.scale.z = float(cyl.length[i])
-            markers.append(m)
-    return markers
-
-
 class SimulatorNode(Node):
-    """The simulator (see the module docstring).
+    """The simulator (see the module docstring): ROS wiring around a simulation session.
+
+    The :class:`~maglev_ros.physics.session.SimulationSession` decides when
+    samples are stepped and with which command; this node feeds it commands,
+    service calls and time, and publishes the batches it returns. One lock
+    serialises the session's calls and the publishing of their batches.
 
     Parameters
     ----------
@@ -403,63 +381,35 @@ class SimulatorNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.config = cfg = build_config(PARAMETERS.declare(self))
         self.sim = make_simulator(cfg)
+        self.session = SimulationSession(
+            self.sim,
+            cfg.mode,
+            pace_period=cfg.pace_period,
+            command_timeout=cfg.command_timeout,
+            paused=cfg.start_paused,
+        )
         n_all = len(self.sim.model.params.sensors)
         self.sensors = cfg.sensors or tuple(range(n_all))
         self._columns = np.array([3 * k + j for k in self.sensors for j in range(3)])
-        self._dt_ns = 1e9 / cfg.sample_rate
-        self._lock = threading.RLock()  # simulator, command and run state
-        self.counters = dict.fromkeys(
-            (
-                'samples',
-                'commands',
-                'commands_rejected',
-                'late_commands',
-                'held_samples',
-                'timeouts',
-                'overruns',
-                'crashes',
-                'resets',
-            ),
-            0,
-        )
-        self._command = _ZERO.copy()  # the command held for the next step
-        self._queue: deque[np.ndarray] = deque()  # lockstep: commands not yet used
-        self._steps_since_command = 0
-        self._got_command = False
-        self.paused = cfg.start_paused
-        self.started = cfg.mode == 'realtime'
-        self._wait_since = 0.0  # lockstep: monotonic time the last sample was published
-        self._offset_ns = 0  # simulated time of the current run's sample 0
-        self.last_stamp_ns = -1
-        self._crash_reported = False
-        self._rate_mark = (time.monotonic(), 0)
-        self.real_time_factor = float('nan')
+        self._lock = threading.RLock()  # the session and the publishing of its batches
 
-        # publishers: raw CDR templates, published as bytes
         qos = contract.SENSOR_QOS
         self._field_pubs = [
             self.create_publisher(MagneticField, contract.field_topic(k), qos)
             for k in self.sensors
         ]
-        self._field_raw = [contract.field_template(k) for k in self.sensors]
         self._current_pub = self.create_publisher(JointState, contract.CURRENTS_TOPIC, qos)
-        self._current_raw = contract.currents_template()
         self._state_pub = self._clock_pub = None
         if cfg.publish_state:
             from nav_msgs.msg import Odometry
 
             self._state_pub = self.create_publisher(Odometry, contract.TRUE_STATE_TOPIC, qos)
-            self._state_raw = contract.odometry_template()
         if cfg.publish_clock:
             self._clock_pub = self.create_publisher(Clock, contract.CLOCK_TOPIC, qos)
-            self._clock_raw = contract.clock_template()
-        # samples per /clock message: each one in lockstep, one per burst in real time
-        self._clock_stride = (
-            1 if cfg.mode == 'lockstep' else max(1, int(round(cfg.pace_period * cfg.sample_rate)))
-        )
         self._diag_pub = self.create_publisher(
             contract.DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
         )
+        self._publisher = self._burst_publisher(cfg)
         command_qos = (
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
         )
@@ -475,35 +425,13 @@ class SimulatorNode(Node):
             )
             self._base_markers = base_markers(self.sim.model.params)
             self.create_timer(1.0 / cfg.marker_rate, self.publish_markers)
-        self._last_state = self.sim.state
-        self._odom_cache: list[float] = []
-        self._odom_state = b''  # bytes of the state _odom_cache was computed for
-        self._field_handles = [pub.handle for pub in self._field_pubs]
-        self._current_handle = self._current_pub.handle
-        self._state_handle = None if self._state_pub is None else self._state_pub.handle
-        self._clock_handle = None if self._clock_pub is None else self._clock_pub.handle
-        # real time: a burst of samples serialised at once, published sample by sample
-        layouts = [contract.field_layout(contract.sensor_frame(k)) for k in self.sensors]
-        publishers = list(self._field_handles)
-        if self._state_handle is not None:
-            layouts.append(contract.odometry_layout())
-            publishers.append(self._state_handle)
-        layouts.append(contract.currents_layout())
-        publishers.append(self._current_handle)
-        self._burst_serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
-        # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
-        self._burst_serialiser.serialise(
-            np.zeros(1, np.int64), np.zeros((1, self._burst_serialiser.n_values))
-        )
-        self._burst_publishers = [handle.publish_raw for handle in publishers]
-        self._first_reading = self.sim.reset()
         self._stop = threading.Event()
         self._closed = False
         self._thread = None
         if cfg.mode == 'lockstep':
             self.create_timer(min(0.05, cfg.command_timeout / 4), self._lockstep_watch)
         else:
-            self._publish_sample(self._first_reading)
+            self._publish(self.session.start(time.monotonic()))
             self._thread = threading.Thread(
                 target=self._realtime_loop, name='maglev-simulator', daemon=True
             )
@@ -517,74 +445,119 @@ class SimulatorNode(Node):
             f'{", paused" if self.paused else ""}'
         )
 
+    # -- run state (the session's) ----------------------------------------------
+
+    @property
+    def counters(self) -> dict[str, int]:
+        """The session's counters (samples, commands, late commands, timeouts, ...)."""
+        return self.session.counters
+
+    @property
+    def paused(self) -> bool:
+        """Whether stepping is paused."""
+        return self.session.paused
+
+    @property
+    def started(self) -> bool:
+        """Whether the first sample was published (lockstep waits for the graph)."""
+        return self.session.started
+
+    @property
+    def last_stamp_ns(self) -> int:
+        """Simulated time of the last published sample, ns (-1 before any)."""
+        return self.session.last_stamp_ns
+
+    @property
+    def real_time_factor(self) -> float:
+        """Simulated over wall time between the last two diagnostics (NaN at first)."""
+        return self.session.real_time_factor
+
     # -- publishing -------------------------------------------------------------
 
-    def _publish_sample(self, reading: np.ndarray) -> None:
-        """Publish the current sample: clock, fields, true state, then currents.
+    def _burst_publisher(self, cfg: SimulatorConfig) -> SampleSerialiser:
+        """Build the serialiser of one sample's messages and their publish calls.
 
-        Pre-serialised bytes go straight to the publishers' handles (as the
-        driver does): the handles are safe to use here because the node
-        destroys its publishers only after :meth:`close` joined the stepping
-        thread. The true state's 13 values are recomputed only when the state
-        changed (never with the magnet fixed or absent).
+        Per sample: ``/clock`` in lockstep (every sample: one compiled call
+        serialises the whole sample), the field of each published sensor, the
+        true state, the currents (last: it marks a complete sample). In real
+        time ``/clock`` goes separately, once per burst. Pre-serialised bytes
+        go straight to the publishers' handles: they are safe to use from the
+        stepping thread because the node destroys its publishers only after
+        :meth:`close` joined it.
         """
-        sim = self.sim
-        t_ns = self._offset_ns + int(round(sim.samples * self._dt_ns))
-        if self._clock_pub is not None and sim.samples % self._clock_stride == 0:
-            self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
-        values = reading[self._columns].tolist()
-        for k, (handle, raw) in enumerate(zip(self._field_handles, self._field_raw, strict=True)):
-            handle.publish_raw(raw.serialise(t_ns, values[3 * k : 3 * k + 3]))
-        state = sim.state
+        layouts = [field_layout(contract.sensor_frame(k)) for k in self.sensors]
+        handles = [pub.handle for pub in self._field_pubs]
         if self._state_pub is not None:
-            key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
-            if key != self._odom_state:
-                self._odom_cache = contract.odometry_values(state).tolist()
-                self._odom_state = key
-            self._state_handle.publish_raw(self._state_raw.serialise(t_ns, self._odom_cache))
-        self._last_state = state
-        self._current_handle.publish_raw(self._current_raw.serialise(t_ns, sim.currents.tolist()))
-        self.last_stamp_ns = t_ns
-        self.counters['samples'] += 1
+            layouts.append(odometry_layout())
+            handles.append(self._state_pub.handle)
+        layouts.append(currents_layout())
+        handles.append(self._current_pub.handle)
+        self._clock_batch = None  # real time: /clock once per burst
+        if self._clock_pub is not None:
+            if cfg.mode == 'lockstep':
+                layouts.insert(0, clock_layout())
+                handles.insert(0, self._clock_pub.handle)
+            else:
+                self._clock_batch = RawMessageBatch(clock_layout())
+                self._publish_clock = self._clock_pub.handle.publish_raw
+        self._publish_calls = [handle.publish_raw for handle in handles]
+        self._odom_cache = np.zeros(13)
+        self._odom_state = b''  # bytes of the state _odom_cache was computed for
+        serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
+        # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
+        serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, serialiser.n_values)))
+        return serialiser
+
+    def _publish(self, batch: SampleBatch | None) -> None:
+        """Publish a batch of samples (lockstep: usually one); report a crash.
+
+        Real time: the ``/clock`` messages of the batch (one per burst) go
+        first. The samples' messages are serialised in one go and published
+        sample by sample. The true state's 13 values
+        are recomputed only when the state changed (never with the magnet
+        fixed or absent).
+        """
+        if batch is None:
+            return
+        n = len(batch)
+        if n:
+            stamps = batch.stamps_ns
+            if self._clock_batch is not None:
+                ticks = stamps[batch.indices % self.session.burst == 0]
+                if ticks.size:
+                    no_values = np.empty((ticks.size, 0))
+                    for message in self._clock_batch.serialise(ticks, no_values):
+                        self._publish_clock(message)
+            values = [batch.readings[:, self._columns]]  # each published sensor's x y z
+            if self._state_pub is not None:
+                odometry = np.empty((n, 13))
+                for i, state in enumerate(batch.states):
+                    key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
+                    if key != self._odom_state:
+                        self._odom_cache = contract.odometry_values(state)
+                        self._odom_state = key
+                    odometry[i] = self._odom_cache
+                values.append(odometry)
+            values.append(batch.currents)
+            messages = self._publisher.serialise(stamps, values)
+            for publish, message in zip(self._publish_calls * n, messages, strict=True):
+                publish(message)
+        if batch.crashed:
+            self._on_crash()
 
     def publish_markers(self) -> None:
         """Publish the base and the magnet (at its latest state) as RViz markers."""
         markers = list(self._base_markers)
-        stamp_ns = max(self.last_stamp_ns, 0)
         if self.config.magnet != 'absent':
-            m = self.sim.model.params.magnet
-            magnet = Marker(
-                ns='magnet',
-                id=0,
-                type=Marker.CYLINDER,
-                action=Marker.ADD,
-                color=_color(0.85, 0.1, 0.1) if not self.sim.crashed else _color(0.3, 0.3, 0.3),
-            )
-            magnet.header.frame_id = contract.BASE_FRAME
-            v = contract.odometry_values(self._last_state)
-            magnet.pose = Pose()
-            magnet.pose.position.x, magnet.pose.position.y, magnet.pose.position.z = v[0:3]
-            o = magnet.pose.orientation
-            o.x, o.y, o.z, o.w = v[3:7]
-            magnet.scale.x = magnet.scale.y = 2.0 * m.radius
-            magnet.scale.z = m.thickness
-            markers.append(magnet)
-        sec, nanosec = contract.split_stamp(stamp_ns)
-        for marker in markers:
-            marker.header.stamp.sec, marker.header.stamp.nanosec = sec, nanosec
-        self._marker_pub.publish(MarkerArray(markers=markers))
+            params, state = self.sim.model.params, self.session.last_state
+            markers.append(magnet_marker(params, state, self.sim.crashed))
+        self._marker_pub.publish(marker_array(markers, max(self.last_stamp_ns, 0)))
 
     def publish_diagnostics(self) -> None:
         """Publish the run state and counters on ``/diagnostics``."""
         if not self.context.ok():  # a signal is shutting the node down
             return
-        now = time.monotonic()
-        then, samples = self._rate_mark
-        self._rate_mark = (now, self.counters['samples'])
-        if self.started and not self.paused and not self.sim.crashed:
-            self.real_time_factor = (
-                (self.counters['samples'] - samples) * self._dt_ns * 1e-9 / max(now - then, 1e-9)
-            )
+        self.session.measure_real_time_factor(time.monotonic())
         sim = self.sim
         if sim.crashed:
             level = DiagnosticStatus.ERROR
@@ -619,103 +592,8 @@ class SimulatorNode(Node):
             )
         )
 
-    # -- stepping ---------------------------------------------------------------
-
-    def _step(self, command: np.ndarray) -> bool:
-        """Step one sample with ``command`` and publish it; False after a crash."""
-        reading = self.sim.step(command)
-        if self.sim.crashed:
-            self._on_crash()
-            return False
-        self._publish_sample(reading)
-        return True
-
-    def _step_burst(self, count: int) -> int:
-        """Real time: step up to ``count`` samples with the held command, publish them.
-
-        The caller holds the lock, so a command or a reset arriving meanwhile
-        takes effect from the next burst on; the samples are published
-        together (one serialisation, then the messages sample by sample).
-
-        Returns
-        -------
-        int
-            The number of samples stepped (``count`` unless paused or crashed).
-        """
-        sim = self.sim
-        indices, readings, states, currents = [], [], [], []
-        crashed = False
-        for _ in range(count):
-            if self.paused or sim.crashed:
-                break
-            if self._got_command and self._steps_since_command >= 1:
-                self.counters['held_samples'] += 1
-            self._steps_since_command += 1
-            reading = sim.step(self._command)
-            if sim.crashed:
-                crashed = True
-                break
-            indices.append(sim.samples)
-            readings.append(reading)
-            states.append(sim.state)
-            currents.append(sim.currents)
-        if indices:
-            self._publish_burst(indices, np.array(readings), states, np.array(currents))
-        if crashed:
-            self._on_crash()
-        return len(indices) + crashed
-
-    def _publish_burst(
-        self,
-        indices: list[int],
-        readings: np.ndarray,
-        states: list[np.ndarray],
-        currents: np.ndarray,
-    ) -> None:
-        """Publish n samples at once, the messages :meth:`_publish_sample` would publish.
-
-        Parameters
-        ----------
-        indices : list of int, length n
-            Sample numbers (``Simulator.samples`` after each step).
-        readings : ndarray, shape (n, 3 k_all)
-            Sensor readings, T.
-        states : list of ndarray, shape (12,) each
-            States after each step.
-        currents : ndarray, shape (n, 4)
-            Coil currents, A.
-
-        The ``/clock`` messages of the burst go first; the rest is serialised
-        in one go and published sample by sample.
-        """
-        n = len(indices)
-        stamps = self._offset_ns + np.rint(np.array(indices) * self._dt_ns).astype(np.int64)
-        if self._clock_pub is not None:
-            for index, t_ns in zip(indices, stamps.tolist(), strict=True):
-                if index % self._clock_stride == 0:
-                    self._clock_handle.publish_raw(self._clock_raw.serialise(t_ns))
-        values = [readings[:, self._columns]]  # each published sensor's x y z, in order
-        if self._state_pub is not None:
-            odometry = np.empty((n, 13))
-            for i, state in enumerate(states):
-                key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
-                if key != self._odom_state:
-                    self._odom_cache = contract.odometry_values(state).tolist()
-                    self._odom_state = key
-                odometry[i] = self._odom_cache
-            values.append(odometry)
-        values.append(currents)
-        messages = self._burst_serialiser.serialise(stamps, values)
-        for publish, message in zip(self._burst_publishers * n, messages, strict=True):
-            publish(message)
-        self._last_state = states[-1]
-        self.last_stamp_ns = int(stamps[-1])
-        self.counters['samples'] += n
-
     def _on_crash(self) -> None:
         sim = self.sim
-        self.counters['crashes'] += 1
-        self._last_state = sim.crash_state
         state = ' '.join(f'{v:.4g}' for v in sim.crash_state[:6])
         self.get_logger().error(
             f'magnet crashed at t = {sim.crash_time:.4f} s ({sim.reason}); pose {state}; '
@@ -723,121 +601,72 @@ class SimulatorNode(Node):
         )
         self.publish_diagnostics()
 
-    def _on_command(self, msg: Float64MultiArray) -> None:
-        values = np.asarray(msg.data, dtype=float)
-        if values.shape != (4,) or not np.all(np.isfinite(values)):
-            self.counters['commands_rejected'] += 1
-            self.get_logger().warning(
-                f'rejected command: need 4 finite currents (x+, x-, y+, y-), got '
-                f'{values.tolist()}',
-                throttle_duration_sec=WARN_THROTTLE_S,
-            )
-            return
-        with self._lock:
-            self.counters['commands'] += 1
-            if self.config.mode == 'realtime':
-                if self._steps_since_command > 1:
-                    self.counters['late_commands'] += 1
-                self._steps_since_command = 0
-                self._got_command = True
-                self._command = values
-                return
-            if not self.started:
-                return  # before the first sample: not a command for any sample
-            self._queue.append(values)
-            self._advance()
+    # -- stepping ---------------------------------------------------------------
 
-    def _advance(self) -> None:
-        """Lockstep: step once per queued command while running."""
-        while self._queue and not self.paused and not self.sim.crashed:
-            self._command = self._queue.popleft()
-            self._step(self._command)
-        self._wait_since = time.monotonic()
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        with self._lock:
+            try:
+                batch = self.session.command(msg.data, time.monotonic())
+            except CommandError as err:
+                self.get_logger().warning(
+                    f'rejected command: {err}', throttle_duration_sec=WARN_THROTTLE_S
+                )
+                return
+            self._publish(batch)
 
     def _lockstep_watch(self) -> None:
         """Lockstep: start when the graph is ready; hold the command on a timeout."""
         with self._lock:
-            if self.paused or self.sim.crashed:
+            session = self.session
+            if session.paused or session.crashed:
                 return
-            if not self.started:
+            now = time.monotonic()
+            if not session.started:
                 if (
                     self.count_publishers(contract.COMMAND_TOPIC) >= 1
                     and self._current_pub.get_subscription_count() >= self.config.start_subscribers
                 ):
-                    self._start_run()
+                    self._publish(session.start(now))
                 return
-            age = time.monotonic() - self._wait_since
-            if age > self.config.command_timeout:
-                self.counters['timeouts'] += 1
+            age = now - session.waiting_since
+            batch = session.check_timeout(now)
+            if batch is not None:
                 self.get_logger().warning(
                     f'no command for {age:.3f} s > {self.config.command_timeout} s at '
                     f't = {self.sim.time:.6f} s: holding the last command',
                     throttle_duration_sec=WARN_THROTTLE_S,
                 )
-                self._step(self._command)
-                self._wait_since = time.monotonic()
-
-    def _start_run(self) -> None:
-        self.started = True
-        self._publish_sample(self._first_reading)
-        self._wait_since = time.monotonic()
+                self._publish(batch)
 
     def _realtime_loop(self) -> None:
-        dt = 1.0 / self.config.sample_rate
-        # samples stepped per wake-up: waking 5000 times a second costs more
-        # than the step itself; the board's driver also publishes in bursts
-        burst = max(1, int(round(self.config.pace_period / dt)))
-        base, done = time.monotonic(), 0  # pacing origin and samples since it
         while not self._stop.is_set():
-            with self._lock:
-                running = not self.paused and not self.sim.crashed
-            if not running:
-                self._stop.wait(0.01)
-                base, done = time.monotonic(), 0
-                continue
             now = time.monotonic()
-            due = int((now - base) / dt) - done
-            if due < burst:
-                time.sleep(max(base + (done + burst) * dt - now, 0.0))
-                continue
-            if due * dt > MAX_BACKLOG_S:
-                self.counters['overruns'] += 1
-                base, done = now - dt, 0
-                due = 1
             try:
                 with self._lock:
-                    done += self._step_burst(due)
+                    batch, wait = self.session.pace(now)
+                    self._publish(batch)
             except Exception:  # publishing fails once the context shuts down (signal)
                 if self.context.ok() and not self._stop.is_set():
                     raise
                 return
+            if wait > 0:
+                time.sleep(wait)
 
     # -- services ---------------------------------------------------------------
 
     def reset(self) -> str:
         """Restart from the initial state (recovers a crash); return a description."""
         with self._lock:
-            self._offset_ns = self.last_stamp_ns + int(round(self._dt_ns))
-            self._first_reading = self.sim.reset()
-            self._queue.clear()
-            self._command = _ZERO.copy()
-            self._steps_since_command = 0
-            self._got_command = False
-            self.counters['resets'] += 1
-            self._last_state = self.sim.state
-            if self.started:
-                self._publish_sample(self._first_reading)
-                self._wait_since = time.monotonic()
-        message = f'reset: new run starts at {self._offset_ns * 1e-9:.6f} s'
+            self._publish(self.session.reset(time.monotonic()))
+            start_ns = self.session.run_start_ns
+        message = f'reset: new run starts at {start_ns * 1e-9:.6f} s'
         self.get_logger().info(message)
         return message
 
     def set_paused(self, paused: bool) -> None:
         """Pause (True) or resume (False) the integration."""
         with self._lock:
-            self.paused = bool(paused)
-            if not self.paused and self.started and self.config.mode == 'lockstep':
-                self._advance()
+            self._publish(self.session.set_paused(paused, time.monotonic()))
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
         response.message = self.reset()

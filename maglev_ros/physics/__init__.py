@@ -2,7 +2,8 @@
 
 Fields of loops, current sheets and filament solenoids; force and torque on
 the levitating magnet; the 12-state dynamics f(x, u) and sensor model h(x, u);
-equilibria, linearisation and simulation. Specified in ``maggy-model.md``.
+equilibria, linearisation and simulation; a simulation session paces the
+simulator in real time or lockstep (``session``). Specified in ``maggy-model.md``.
 """
 
 from .equilibria import Equilibrium, find_equilibria, solenoid_radius_correction, vertical_force
@@ -23,6 +24,7 @@ from .model import (
     make_model,
 )
 from .parameters import PRESETS, MaggyParameters, ParameterError, load_parameters
+from .session import CommandError, SampleBatch, SimulationSession
 from .sheet import sheet_field
 from .simulation import (
     CoilDynamics,
@@ -63,4 +65,7 @@ __all__ = [
     'SimulationCrashedError',
     'Simulator',
     'simulate_reference',
+    'CommandError',
+    'SampleBatch',
+    'SimulationSession',
 ]

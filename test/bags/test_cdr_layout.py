@@ -5,9 +5,9 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 
 from maglev_ros.bags import BagReader, parse_channel
-from maglev_ros.bags.cdr_layout import cdr_layout, decode_columns
 from maglev_ros.bags.extraction import read_topics
 from maglev_ros.bags.typestore import cdr_deserializer, jazzy_typestore
+from maglev_ros.cdr.layout import cdr_layout, decode_columns
 
 from .recordings import (
     COMMAND,

@@ -19,6 +19,8 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
+from maglev_ros.cdr import odometry_layout
+from maglev_ros.cdr.batch import RawMessageBatch
 from maglev_ros.nodes import contract
 from maglev_ros.nodes.simulator import (
     SimulatorNode,
@@ -196,7 +198,8 @@ def test_true_state_as_odometry():
         [twist.linear.x, twist.linear.y, twist.linear.z], R.T @ x[6:9], atol=1e-14
     )
     assert [twist.angular.x, twist.angular.y, twist.angular.z] == [1.0, 2.0, 3.0]
-    raw = contract.odometry_template().serialise(123, contract.odometry_values(x).tolist())
+    layout = odometry_layout(contract.BASE_FRAME, contract.MAGNET_FRAME)
+    (raw,) = RawMessageBatch(layout).serialise(np.array([123]), contract.odometry_values(x)[None])
     assert raw == serialize_message(msg)
     assert deserialize_message(raw, Odometry) == msg
 

@@ -3,12 +3,12 @@
 The messages on the Maggy graph that go out at 5 kHz differ from sample to
 sample only in their stamp and a few float64 fields. A template is
 serialised once and its varying fields located
-(:func:`maglev_ros.nodes.contract.raw_layout`); a burst's messages are then
+(:mod:`maglev_ros.cdr.templates`); a burst's messages are then
 made by patching copies of those bytes in one compiled call
 (:func:`fill_messages`): :class:`RawMessageBatch` for one message type,
 :class:`SampleSerialiser` for several per sample (e.g. the field of each
 sensor and the currents), what the driver and the real-time simulator
-publish every millisecond.
+publish every millisecond (a lockstep sample is a burst of one).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 
 if TYPE_CHECKING:
-    from maglev_ros.nodes.contract import RawLayout
+    from maglev_ros.cdr.templates import RawLayout
 
 __all__ = ['RawMessageBatch', 'SampleSerialiser', 'fill_messages']
 
@@ -73,9 +73,9 @@ class RawMessageBatch:
 
     Parameters
     ----------
-    layout : maglev_ros.nodes.contract.RawLayout
+    layout : maglev_ros.cdr.templates.RawLayout
         The serialised template and the offsets of its stamp and k values
-        (e.g. ``contract.field_layout(frame)``).
+        (e.g. ``field_layout(frame)``).
     """
 
     def __init__(self, layout: RawLayout) -> None:

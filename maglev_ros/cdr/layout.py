@@ -21,9 +21,9 @@ import numpy as np
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
-__all__ = ['CdrLayout', 'cdr_layout', 'decode_columns']
+__all__ = ['CdrLayout', 'Path', 'cdr_layout', 'decode_columns']
 
-Path = tuple[str | int, ...]
+Path = tuple[str | int, ...]  # a field path: names and sequence indices
 # ROS 2 primitive -> little-endian numpy dtype (char and byte are uint8 in ROS 2)
 _DTYPES = {
     'bool': '|u1',
