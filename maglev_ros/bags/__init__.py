@@ -11,7 +11,7 @@ from .channels import Channel, FieldRef, parse_channel, parse_field_path
 from .datasets import BagDataset, load_bag_dataset, read_bag
 from .errors import BagError
 from .export import format_summary, write_dataset
-from .reader import METADATA_TOPIC, BagReader, TopicInfo, is_bag_path
+from .reader import METADATA_TOPIC, BagReader, TopicInfo, is_bag_directory, is_bag_path
 from .writer import BagWriter, TopicHandle
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     'align',
     'estimate_period',
     'format_summary',
+    'is_bag_directory',
     'is_bag_path',
     'load_bag_dataset',
     'parse_channel',
