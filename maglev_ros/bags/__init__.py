@@ -12,6 +12,7 @@ from .datasets import BagDataset, load_bag_dataset, read_bag
 from .errors import BagError
 from .export import format_summary, write_dataset
 from .reader import METADATA_TOPIC, BagReader, TopicInfo, is_bag_directory, is_bag_path
+from .reindex import ReindexReport, reindex
 from .writer import BagWriter, TopicHandle
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     'Channel',
     'FieldRef',
     'Gap',
+    'ReindexReport',
     'Source',
     'SourceReport',
     'TopicHandle',
@@ -37,5 +39,6 @@ __all__ = [
     'parse_channel',
     'parse_field_path',
     'read_bag',
+    'reindex',
     'write_dataset',
 ]

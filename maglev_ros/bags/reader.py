@@ -89,7 +89,7 @@ def is_bag_path(path: str | Path) -> bool:
 
 
 # what a rosbag2 directory holds, finished or not (sqlite3 keeps its journal beside)
-_BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-wal', '.db3-shm', '.db3-journal')
+_BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-wal', '.db3-shm', '.db3-journal', '.damaged')
 
 
 def is_bag_directory(path: str | Path) -> bool:
@@ -104,7 +104,8 @@ def is_bag_directory(path: str | Path) -> bool:
     -------
     bool
         True if every entry is ``metadata.yaml`` or a storage file (``.mcap``,
-        ``.db3`` and sqlite3's journal files): safe to replace as a bag.
+        ``.db3``, sqlite3's journal files, a ``.damaged`` original kept by
+        :func:`maglev_ros.bags.reindex`): safe to replace as a bag.
     """
     path = Path(path)
     return path.is_dir() and all(
@@ -183,8 +184,8 @@ class BagReader:
                 names = sorted(p.name for p in files)
                 raise BagError(
                     f'bag directory {str(path)!r} has no metadata.yaml (files: '
-                    f'{names}); an unfinished recording can be rebuilt with '
-                    f'"ros2 bag reindex"'
+                    f'{names}); an unfinished recording (a killed recorder) is rebuilt '
+                    f'with: maglev-bag2data --reindex {path}'
                 )
             storage = next(
                 (s for p in files for suf, s in _STORAGE_SUFFIXES.items() if p.name.endswith(suf)),
