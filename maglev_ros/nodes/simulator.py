@@ -583,7 +583,7 @@ class SimulatorNode(Node):
         values.update({name.replace('_', ' '): v for name, v in self.counters.items()})
         self._diag_pub.publish(
             contract.diagnostic_array(
-                time.time_ns(),
+                self.get_clock().now().nanoseconds,  # the node's clock: sim time under it
                 f'{NODE_NAME}: simulation',
                 level,
                 message,
