@@ -80,8 +80,8 @@ def test_lab_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path, storage)
         ['/maglev/sensor_0/field', '/maglev/currents', '/maglev/currents/command', '/clock'],
         'maglev_simulator',
     )
-    # lockstep: one field and one clock message per sample (the stop may fall between them)
-    assert abs(counts['/maglev/sensor_0/field'] - counts['/clock']) <= 1, counts
+    # lockstep: one field and one applied current per sample (the stop may fall between)
+    assert abs(counts['/maglev/sensor_0/field'] - counts['/maglev/currents']) <= 1, counts
 
 
 def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
@@ -96,6 +96,9 @@ def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
     )
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
+    # the driver publishes once its link has caught up: wait for the first sample
+    echo = ros2.run('topic', 'echo', '--once', '/maglev/currents', timeout=START_TIMEOUT)
+    assert echo.returncode == 0 and 'effort' in echo.stdout, echo.stdout + echo.stderr
     time.sleep(RUN_S)
     stop_like_terminal(launch)
     board.interrupt_like_terminal()
