@@ -399,9 +399,9 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
     """
     import rclpy
 
-    from maglev_ros.nodes import contract
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.runtime import Spinner
     from maglev_ros.nodes.simulator import SimulatorNode
 
     topics = [field_topic(k) for k in args.sensors] + [
@@ -451,7 +451,7 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
             ),
         )
         nodes.insert(0, recorder)  # destroyed last: finalises the bag
-        spinner = contract.Spinner(ctx, nodes)
+        spinner = Spinner(ctx, nodes)
         _wait(
             lambda: (
                 len(recorder.subscribed) == len(topics)
@@ -604,10 +604,10 @@ def run_board_experiment(
     """
     import rclpy
 
-    from maglev_ros.nodes import contract
     from maglev_ros.nodes.driver import DriverNode
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.runtime import Spinner
 
     topics = [field_topic(k) for k in args.sensors] + [
         CURRENTS_TOPIC,
@@ -637,7 +637,7 @@ def run_board_experiment(
             ),
         )
         nodes.append(driver)
-        spinner = contract.Spinner(ctx, nodes)
+        spinner = Spinner(ctx, nodes)
         _wait(
             lambda: (
                 len(recorder.subscribed) == len(topics) - 1

@@ -252,7 +252,7 @@ def _linearize(args) -> int:
 
 
 def _simulate(args) -> int:
-    from ..physics.equilibria import find_equilibria
+    from ..physics.equilibria import rest_state
     from ..physics.model import STATE_NAMES
     from ..physics.simulation import CoilDynamics, SensorEffects, Simulator
 
@@ -263,10 +263,7 @@ def _simulate(args) -> int:
         raise UsageError(
             f'--currents: expected {n_s} values (x+ x- y+ y-), got {len(args.currents)}'
         )
-    found = find_equilibria(model)
-    if not found:
-        raise UsageError(f'{model.params.name}: no equilibrium to start from')
-    x0 = model.hover_state(found[0].z)
+    x0 = rest_state(model)
     for name, value in args.perturb.items():
         x0[STATE_NAMES.index(name)] += value
     coil = CoilDynamics.from_parameters(model.params) if args.coil else None

@@ -25,13 +25,16 @@ simulator node:
 * ``/diagnostics``: link state, records/s, resyncs, dropped bytes, command
   rate, rejected and clamped commands, timeouts, reconnects.
 
-Commands: a command of the wrong length or with a NaN or infinite value is
-rejected (nothing is sent, the command timeout keeps running); values
-beyond +-``current_limit`` are clamped to it. Both cases log a throttled
-warning and are counted. Zero currents are sent when no valid command came
-for ``command_timeout`` s, when disabled, on shutdown (SIGINT, SIGTERM,
-``destroy_node``) and after an error the I/O loop cannot handle. The link
-survives unplugging: the port is reopened with exponential back-off.
+Commands pass the ROS-free :class:`~maglev_ros.hardware.command_guard.CommandGuard`
+and the board's bytes the ROS-free :class:`~maglev_ros.hardware.board_stream.BoardStream`
+(decode, units, board clock, catch-up); the node wires them. A command of the
+wrong length or with a NaN or infinite value is rejected (nothing is sent, the
+command timeout keeps running); values beyond +-``current_limit`` are clamped to
+it. Both cases log a throttled warning and are counted. Zero currents are sent
+when no valid command came for ``command_timeout`` s, when disabled, on shutdown
+(SIGINT, SIGTERM, ``destroy_node``) and after an error the I/O loop cannot
+handle. The link survives unplugging: the port is reopened with exponential
+back-off.
 
 Scaling (V2x): ``counts = round(counts_per_ampere * I)``, clamped to +-4096,
 with ``counts_per_ampere = 4096 * coil_resistance / supply_voltage`` unless

@@ -12,6 +12,7 @@ from std_msgs.msg import ColorRGBA
 from visualization_msgs.msg import Marker, MarkerArray
 
 from maglev_ros.nodes import contract
+from maglev_ros.physics.kernels import odometry_values
 
 __all__ = ['base_markers', 'magnet_marker', 'marker_array']
 
@@ -74,7 +75,7 @@ def magnet_marker(params, state: np.ndarray, crashed: bool = False) -> Marker:
         color=_color(0.3, 0.3, 0.3) if crashed else _color(0.85, 0.1, 0.1),
     )
     magnet.header.frame_id = contract.BASE_FRAME
-    v = contract.odometry_values(state)
+    v = odometry_values(state)
     magnet.pose.position.x, magnet.pose.position.y, magnet.pose.position.z = v[0:3]
     o = magnet.pose.orientation
     o.x, o.y, o.z, o.w = v[3:7]

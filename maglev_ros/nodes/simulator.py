@@ -28,7 +28,9 @@ supply, then the coils' L/R dynamics. Services: ``maglev/simulator/reset``
 (std_srvs/Trigger) restarts from the initial state (and recovers a crash);
 ``maglev/simulator/pause`` (std_srvs/SetBool) pauses (true) or resumes.
 
-Timing modes (``mode``):
+Timing modes (``mode``; the pacing is a ROS-free
+:class:`~maglev_ros.physics.session.SimulationSession`, which also states the
+lockstep contract):
 
 ``realtime``
     A thread paced to the wall clock steps the model at ``sample_rate`` with
@@ -66,7 +68,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
@@ -96,6 +98,7 @@ from maglev_ros.physics import (
     Simulator,
     make_model,
 )
+from maglev_ros.physics.kernels import odometry_values
 from maglev_ros.physics.session import MODES, CommandError, SampleBatch, SimulationSession
 from maglev_ros.physics.simulation import MAGNET_MODES
 from maglev_ros.topics import SIMULATOR_PAUSE_SERVICE, SIMULATOR_RESET_SERVICE
@@ -407,7 +410,7 @@ class SimulatorNode(Node):
         if cfg.publish_clock:
             self._clock_pub = self.create_publisher(Clock, contract.CLOCK_TOPIC, qos)
         self._diag_pub = self.create_publisher(
-            contract.DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
+            DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
         )
         self._publisher = self._burst_publisher(cfg)
         command_qos = (
@@ -534,7 +537,7 @@ class SimulatorNode(Node):
                 for i, state in enumerate(batch.states):
                     key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
                     if key != self._odom_state:
-                        self._odom_cache = contract.odometry_values(state)
+                        self._odom_cache = odometry_values(state)
                         self._odom_state = key
                     odometry[i] = self._odom_cache
                 values.append(odometry)

@@ -145,12 +145,9 @@ def linearize(model, x_eq=None, u_eq=None, step: float = FD_STEP) -> LinearModel
         A (12, 12), B (12, n_s), C (3k, 12), D (3k, n_s).
     """
     if x_eq is None:
-        from .equilibria import find_equilibria
+        from .equilibria import rest_state
 
-        found = find_equilibria(model)
-        if not found:
-            raise ValueError(f'{model!r} has no equilibrium to linearise about')
-        x_eq = model.hover_state(found[0].z)
+        x_eq = rest_state(model)
     x0 = np.asarray(x_eq, dtype=float).copy()
     u0 = np.zeros(model.n_inputs) if u_eq is None else np.asarray(u_eq, dtype=float).copy()
     if not step > 0:

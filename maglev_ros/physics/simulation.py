@@ -507,12 +507,9 @@ class Simulator:
         return state.copy()
 
     def _equilibrium_state(self) -> np.ndarray:
-        from .equilibria import find_equilibria
+        from .equilibria import rest_state
 
-        found = find_equilibria(self.model)
-        if not found:
-            raise ValueError(f'{self.model!r} has no equilibrium; give x0')
-        return self.model.hover_state(found[0].z)
+        return rest_state(self.model)
 
 
 def _compiled(dispatcher, *example):
