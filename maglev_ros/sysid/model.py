@@ -17,7 +17,6 @@ from .dataset import IdData
 from .orders import Orders
 from .polynomial import (
     Polynomials,
-    equivalent_armax,
     free_response,
     innovations_form,
     predictor_errors,
@@ -596,8 +595,3 @@ def _cofactor(M: list[list[np.ndarray]], row: int, col: int) -> np.ndarray:
         return np.ones(1)
     c = _poly_det(_minor(M, row, col))
     return c if (row + col) % 2 == 0 else -c
-
-
-def equivalent_polynomials(model: PolyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the matrix-ARMAX form ``(Ae, Be, Ce)`` of a model (see ``equivalent_armax``)."""
-    return equivalent_armax(model._polys)
