@@ -14,7 +14,7 @@ from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
 from maglev_ros.stop_signals import StopSignals
 
-__all__ = ['Spinner', 'drain', 'make_executor', 'run_nodes', 'spin']
+__all__ = ['Spinner', 'make_executor', 'run_nodes', 'spin']
 
 
 def make_executor(context=None):
@@ -28,8 +28,8 @@ def make_executor(context=None):
     return EventsExecutor(context=context)
 
 
-def spin(executor, context=None, stop=None) -> None:
-    """Spin ``executor`` until its context shuts down or ``stop`` is set.
+def spin(executor, context=None, stop=None, seconds=None, wait: float = 0.1) -> None:
+    """Spin ``executor`` until its context shuts down, ``stop`` is set or ``seconds`` pass.
 
     Runs ``spin_once`` in a loop: the Jazzy EventsExecutor's own ``spin()``
     does not fire timers in the PyPI build, ``spin_once`` does.
@@ -42,38 +42,25 @@ def spin(executor, context=None, stop=None) -> None:
         Its context (default: the default context).
     stop : threading.Event, optional
         Set it to end the loop from another thread.
+    seconds : float, optional
+        Spin for at most this long, s (e.g. to run the callbacks already due
+        after a stop: messages received before it).
+    wait : float
+        ``spin_once`` timeout, s.
     """
     context = context or rclpy.get_default_context()
+    deadline = None if seconds is None else time.monotonic() + seconds
     while context.ok() and not (stop is not None and stop.is_set()):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
         try:
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=wait)
         except ExternalShutdownException:
             break
         except Exception:  # noqa: BLE001 - re-raised unless the context is gone
             if context.ok():
                 raise
             break  # a callback raced the shutdown (SIGINT/SIGTERM): nothing left to do
-
-
-def drain(executor, context=None, seconds: float = 0.1) -> None:
-    """Run the callbacks already due (messages received before a stop), for ``seconds``.
-
-    Parameters
-    ----------
-    executor : rclpy executor
-        The executor (nodes added).
-    context : rclpy.context.Context, optional
-        Its context (default: the default context).
-    seconds : float
-        How long to keep spinning, s.
-    """
-    context = context or rclpy.get_default_context()
-    deadline = time.monotonic() + seconds
-    while context.ok() and time.monotonic() < deadline:
-        try:
-            executor.spin_once(timeout_sec=0.01)
-        except ExternalShutdownException:
-            break
 
 
 class Spinner:
@@ -173,7 +160,7 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
             for node in nodes:
                 executor.add_node(node)
             spin(executor, stop=stop.event)
-            drain(executor)  # what arrived before the signal goes into the bag
+            spin(executor, seconds=0.1, wait=0.01)  # what arrived before the signal
         except (KeyboardInterrupt, ExternalShutdownException):
             pass
         except errors as err:
