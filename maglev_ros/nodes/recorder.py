@@ -17,8 +17,10 @@ Metadata (the bag's ``custom_data``): package version, storage, topics,
 recording start, and every parameter of ``metadata_node`` (default the
 simulator: parameter set, model options, seed, ...) as ``<node>.<name>``,
 fetched through its parameter services when it appears. The bag is finalised
-(index and ``metadata.yaml``) when the node is destroyed, also after SIGINT
-or SIGTERM.
+(index and ``metadata.yaml``) when the node is destroyed, also after SIGINT,
+SIGTERM or SIGHUP and when another signal arrives during that clean-up; the
+writer puts the messages into the file every second, so a recorder killed with
+SIGKILL leaves a bag that ``maglev-bag2data BAG --reindex`` rebuilds.
 """
 
 from __future__ import annotations
@@ -385,7 +387,7 @@ class RecorderNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Record until SIGINT or SIGTERM; the bag is finalised either way.
+    """Record until SIGINT, SIGTERM or SIGHUP; the bag is finalised either way.
 
     Parameters
     ----------

@@ -701,7 +701,7 @@ class SimulatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the simulator until SIGINT or SIGTERM.
+    """Run the simulator until SIGINT, SIGTERM or SIGHUP.
 
     Parameters
     ----------
