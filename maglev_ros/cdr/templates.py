@@ -167,7 +167,13 @@ def raw_layout(
 
 
 def field_layout(frame: str) -> RawLayout:
-    """Raw layout of a sensor_msgs/MagneticField in ``frame`` (3 values: x y z, T)."""
+    """Raw layout of a sensor_msgs/MagneticField in ``frame`` (3 values: x y z, T).
+
+    Parameters
+    ----------
+    frame : str
+        Frame id of the messages (e.g. ``maglev_sensor_0``).
+    """
     msgtype = 'sensor_msgs/msg/MagneticField'
     msg = default_message(msgtype)
     msg.header.frame_id = frame
@@ -175,7 +181,13 @@ def field_layout(frame: str) -> RawLayout:
 
 
 def currents_layout(names: Sequence[str] = COIL_NAMES) -> RawLayout:
-    """Raw layout of a sensor_msgs/JointState of 4 coils named ``names`` (4 efforts, A)."""
+    """Raw layout of a sensor_msgs/JointState of 4 coils named ``names`` (4 efforts, A).
+
+    Parameters
+    ----------
+    names : sequence of str, optional
+        The joint names (default the coil order x+ x- y+ y-).
+    """
     msgtype = 'sensor_msgs/msg/JointState'
     msg = default_message(msgtype)
     msg.name = list(names)
@@ -189,6 +201,13 @@ def odometry_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) ->
     13 values, in the order of :data:`ODOMETRY_VALUES`: position (m),
     orientation quaternion x y z w, linear velocity in the child frame (m/s),
     angular velocity (rad/s).
+
+    Parameters
+    ----------
+    frame : str, optional
+        ``header.frame_id`` (default ``maglev_base``).
+    child_frame : str, optional
+        ``child_frame_id`` (default ``maglev_magnet``).
     """
     msgtype = 'nav_msgs/msg/Odometry'
     msg = default_message(msgtype)

@@ -180,7 +180,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def on_board(args: argparse.Namespace) -> bool:
-    """Whether the session runs against a board (driver) rather than the simulator."""
+    """Whether the session runs against a board (driver) rather than the simulator.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments.
+    """
     return bool(getattr(args, 'board', None) or getattr(args, 'virtual_board', False))
 
 
@@ -369,7 +375,13 @@ def _wait(predicate, ctx, what: str, timeout: float = WAIT_S, stop=None) -> None
 
 
 def overrides(**values) -> list:
-    """Return ROS parameter overrides ``name=value`` for a node built in this process."""
+    """Return ROS parameter overrides ``name=value`` for a node built in this process.
+
+    Parameters
+    ----------
+    **values : object
+        Parameter values by name.
+    """
     from rclpy.parameter import Parameter
 
     return [Parameter(k, value=v) for k, v in values.items()]
@@ -542,7 +554,13 @@ def start_virtual_board(params: str, magnet: str) -> tuple[subprocess.Popen, str
 
 
 def stop_child(child: subprocess.Popen) -> None:
-    """Stop a child process with SIGINT (SIGKILL after 10 s) and reap it."""
+    """Stop a child process with SIGINT (SIGKILL after 10 s) and reap it.
+
+    Parameters
+    ----------
+    child : subprocess.Popen
+        The child process.
+    """
     if child.poll() is None:
         child.send_signal(signal.SIGINT)
         try:
@@ -556,7 +574,13 @@ def stop_child(child: subprocess.Popen) -> None:
 
 
 def board_sensors(args: argparse.Namespace) -> int:
-    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1."""
+    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments.
+    """
     if args.board_sensors is not None:
         return args.board_sensors
     if args.virtual_board:

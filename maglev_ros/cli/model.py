@@ -17,7 +17,7 @@ import numpy as np
 from .usage import Parser, UsageError, non_negative_float, positive_float, run_command
 
 PROG = 'maglev-model'
-__all__ = ['build_parser', 'main']
+__all__ = ['build_parser', 'main', 'simulation_figure']
 
 
 def _state_assignments(text: str) -> dict[str, float]:
@@ -337,7 +337,21 @@ def _state_text(x: np.ndarray) -> str:
     )
 
 
-def _plot(result, path: str, title: str) -> None:
+def simulation_figure(result, title: str):
+    """Figure of a simulation: position (mm), angles (rad) and the sensors' Bz (mT) over time.
+
+    Parameters
+    ----------
+    result : maglev_ros.physics.SimulationResult
+        The simulation.
+    title : str
+        The parameter set's name, for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Three axes sharing the time axis (s); close it when done.
+    """
     import matplotlib
 
     matplotlib.use('Agg')
@@ -361,6 +375,13 @@ def _plot(result, path: str, title: str) -> None:
     status = 'ok' if not result.crashed else f'crashed at {result.crash_time:.4f} s'
     fig.suptitle(f'{title}: simulation ({status})')
     fig.tight_layout()
+    return fig
+
+
+def _plot(result, path: str, title: str) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = simulation_figure(result, title)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -205,7 +205,13 @@ def _label(model: Any) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Execute a parsed command line; raise ``ValueError`` on bad input."""
+    """Execute a parsed command line; raise ``ValueError`` on bad input.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-sysid's parsed arguments.
+    """
     from maglev_ros import sysid
 
     if args.ts is not None and not args.ts > 0:

@@ -31,7 +31,14 @@ class UsageError(ValueError):
 class Parser(argparse.ArgumentParser):
     """An ArgumentParser that raises :class:`UsageError` instead of printing usage."""
 
-    def error(self, message: str) -> None:  # noqa: D102 - one-line usage errors
+    def error(self, message: str) -> None:
+        """Raise :class:`UsageError` with argparse's message (no usage text, no exit).
+
+        Parameters
+        ----------
+        message : str
+            argparse's message.
+        """
         raise UsageError(message)
 
 
@@ -46,7 +53,13 @@ def _finite_number(text: str) -> float:
 
 
 def positive_float(text: str) -> float:
-    """Argparse type: a finite number > 0."""
+    """Argparse type: a finite number > 0.
+
+    Parameters
+    ----------
+    text : str
+        The command-line text.
+    """
     value = _finite_number(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f'must be positive, got {text!r}')
@@ -54,7 +67,13 @@ def positive_float(text: str) -> float:
 
 
 def non_negative_float(text: str) -> float:
-    """Argparse type: a finite number >= 0."""
+    """Argparse type: a finite number >= 0.
+
+    Parameters
+    ----------
+    text : str
+        The command-line text.
+    """
     value = _finite_number(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f'must be >= 0, got {text!r}')

@@ -95,7 +95,14 @@ class CommandGuard:
         self.configure(current_limit, command_timeout)
 
     def configure(self, current_limit: float, command_timeout: float) -> None:
-        """Set the current limit (A) and the command timeout (s), both > 0.
+        """Set the current limit and the command timeout.
+
+        Parameters
+        ----------
+        current_limit : float
+            Largest commanded |current|, A (> 0).
+        command_timeout : float
+            s without a valid command before zero currents are sent (> 0).
 
         Raises
         ------
@@ -169,7 +176,18 @@ class CommandGuard:
         return GuardDecision(self.scaling.to_counts(values if self._enabled else _ZERO), warning)
 
     def set_enabled(self, enabled: bool) -> np.ndarray | None:
-        """Enable or disable; return the zero counts to send when disabling, else None."""
+        """Enable or disable the coils.
+
+        Parameters
+        ----------
+        enabled : bool
+            The new state.
+
+        Returns
+        -------
+        ndarray of int64, shape (4,), or None
+            The zero counts to send when disabling, else None.
+        """
         self._enabled = bool(enabled)
         return None if self._enabled else self.zero
 

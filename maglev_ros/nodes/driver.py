@@ -453,6 +453,13 @@ class DriverNode(Node):
 
     @config.setter
     def config(self, config: DriverConfig) -> None:
+        """Store a new configuration and pass its limit and timeout to the guard.
+
+        Parameters
+        ----------
+        config : DriverConfig
+            The validated parameters.
+        """
         self._config = config
         if self.guard is not None:
             with self._lock:

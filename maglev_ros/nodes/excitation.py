@@ -179,6 +179,11 @@ def build_config(values: dict) -> ExcitationConfig:
 def commands_of(cfg: ExcitationConfig) -> np.ndarray:
     """One period of coil commands of a configuration, shape (length, 4), A.
 
+    Parameters
+    ----------
+    cfg : ExcitationConfig
+        The validated parameters.
+
     Raises
     ------
     ExcitationParameterError

@@ -85,7 +85,19 @@ def magnet_marker(params, state: np.ndarray, crashed: bool = False) -> Marker:
 
 
 def marker_array(markers: list[Marker], stamp_ns: int) -> MarkerArray:
-    """Stamp ``markers`` with ``stamp_ns`` (ns) and wrap them in a MarkerArray."""
+    """Stamp markers and wrap them in a MarkerArray.
+
+    Parameters
+    ----------
+    markers : list of Marker
+        The markers (stamped in place).
+    stamp_ns : int
+        Stamp, ns.
+
+    Returns
+    -------
+    MarkerArray
+    """
     sec, nanosec = contract.split_stamp(stamp_ns)
     for marker in markers:
         marker.header.stamp.sec, marker.header.stamp.nanosec = sec, nanosec

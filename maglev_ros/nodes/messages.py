@@ -27,7 +27,13 @@ __all__ = [
 
 
 def split_stamp(t_ns: int) -> tuple[int, int]:
-    """Split a time in ns into (sec, nanosec)."""
+    """Split a time in ns into (sec, nanosec).
+
+    Parameters
+    ----------
+    t_ns : int
+        Time, ns.
+    """
     return t_ns // 1_000_000_000, t_ns % 1_000_000_000
 
 
@@ -55,7 +61,17 @@ def _stamp(msg, t_ns: int):
 
 
 def field_message(k: int, t_ns: int, field_t: Sequence[float]) -> MagneticField:
-    """MagneticField of sensor ``k`` at time ``t_ns`` (ns) with ``field_t`` (3,) in T."""
+    """MagneticField of sensor ``k`` at time ``t_ns`` (ns) with ``field_t`` (3,) in T.
+
+    Parameters
+    ----------
+    k : int
+        Sensor index.
+    t_ns : int
+        Stamp, ns.
+    field_t : sequence of float, shape (3,)
+        Field, T.
+    """
     msg = MagneticField()
     msg.header.frame_id = sensor_frame(k)
     _set_field(msg, field_t)
@@ -63,14 +79,30 @@ def field_message(k: int, t_ns: int, field_t: Sequence[float]) -> MagneticField:
 
 
 def currents_message(t_ns: int, currents: Sequence[float]) -> JointState:
-    """JointState of the coil currents (4,) in A (effort), names x+ x- y+ y-."""
+    """JointState of the coil currents (4,) in A (effort), names x+ x- y+ y-.
+
+    Parameters
+    ----------
+    t_ns : int
+        Stamp, ns.
+    currents : sequence of float, shape (4,)
+        Coil currents x+ x- y+ y-, A.
+    """
     msg = JointState(name=list(COIL_NAMES))
     _set_effort(msg, currents)
     return _stamp(msg, t_ns)
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:
-    """True-state Odometry of state ``x`` (12,): frame maglev_base, child maglev_magnet."""
+    """True-state Odometry of state ``x`` (12,): frame maglev_base, child maglev_magnet.
+
+    Parameters
+    ----------
+    t_ns : int
+        Stamp, ns.
+    x : ndarray, shape (12,)
+        State: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    """
     msg = Odometry()
     msg.header.frame_id = BASE_FRAME
     msg.child_frame_id = MAGNET_FRAME

@@ -163,7 +163,13 @@ def build_config(values: dict) -> RecorderConfig:
 
 
 def message_class(msgtype: str):
-    """Return the rclpy message class of ``pkg/msg/Type``."""
+    """Return the rclpy message class of ``pkg/msg/Type``.
+
+    Parameters
+    ----------
+    msgtype : str
+        Message type, ``pkg/msg/Type``.
+    """
     import importlib
 
     package, kind, name = msgtype.split('/')

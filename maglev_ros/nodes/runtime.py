@@ -18,7 +18,13 @@ __all__ = ['Spinner', 'make_executor', 'run_nodes', 'spin']
 
 
 def make_executor(context=None):
-    """Return the fastest executor available: EventsExecutor, else SingleThreadedExecutor."""
+    """Return the fastest executor available: EventsExecutor, else SingleThreadedExecutor.
+
+    Parameters
+    ----------
+    context : rclpy.context.Context, optional
+        Its context (default: the default context).
+    """
     try:
         from rclpy.experimental import EventsExecutor
     except ImportError:  # older rclpy
@@ -92,7 +98,13 @@ class Spinner:
         self._thread.start()
 
     def add_node(self, node) -> None:
-        """Add a node to the executor."""
+        """Add a node to the executor.
+
+        Parameters
+        ----------
+        node : rclpy.node.Node
+            The node.
+        """
         self.executor.add_node(node)
 
     def close(self) -> None:

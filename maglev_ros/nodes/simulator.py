@@ -322,6 +322,11 @@ def build_config(values: dict) -> SimulatorConfig:
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
     """Build the physics simulator of a configuration.
 
+    Parameters
+    ----------
+    cfg : SimulatorConfig
+        The validated parameters.
+
     Raises
     ------
     SimulatorParameterError
@@ -667,7 +672,13 @@ class SimulatorNode(Node):
         return message
 
     def set_paused(self, paused: bool) -> None:
-        """Pause (True) or resume (False) the integration."""
+        """Pause (True) or resume (False) the integration.
+
+        Parameters
+        ----------
+        paused : bool
+            True pauses, False resumes.
+        """
         with self._lock:
             self._publish(self.session.set_paused(paused, time.monotonic()))
 

@@ -31,12 +31,24 @@ REDUCED_STATES = tuple(i for i, name in enumerate(STATE_NAMES) if name not in ('
 
 
 def input_names(n_inputs: int) -> tuple[str, ...]:
-    """Solenoid names in the package's order (x+, x-, y+, y-, then s4, s5, ...)."""
+    """Solenoid names in the package's order (x+, x-, y+, y-, then s4, s5, ...).
+
+    Parameters
+    ----------
+    n_inputs : int
+        Number of solenoids.
+    """
     return tuple(COIL_NAMES[j] if j < 4 else f's{j}' for j in range(n_inputs))
 
 
 def output_names(n_sensors: int) -> tuple[str, ...]:
-    """Measurement names: Bx_0, By_0, Bz_0, Bx_1, ... (tesla)."""
+    """Measurement names: Bx_0, By_0, Bz_0, Bx_1, ... (tesla).
+
+    Parameters
+    ----------
+    n_sensors : int
+        Number of sensors.
+    """
     return tuple(f'B{axis}_{k}' for k in range(n_sensors) for axis in 'xyz')
 
 

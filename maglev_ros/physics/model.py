@@ -150,6 +150,11 @@ def rim_angles(n: int) -> tuple[np.ndarray, np.ndarray]:
     sin(-t) = -sin t, exact zeros on the axes) and a centred magnet in a
     symmetric base feels exactly zero horizontal force.
 
+    Parameters
+    ----------
+    n : int
+        Number of rim points.
+
     Returns
     -------
     cos, sin : ndarray, shape (n,)
@@ -323,6 +328,13 @@ class MaggyModel:
         Fast model: a loop of radius R with current ``-J l / (2 mu0)``, half the
         magnet's equivalent current, as published. Accurate/filament: the exact
         current sheet (``-J l / mu0``).
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            World points, m.
+        x : array_like, shape (12,)
+            State of the magnet.
         """
         pts = as_points(points)
         state = self._state(x)
@@ -359,7 +371,15 @@ class MaggyModel:
         return wrench[:3], wrench[3:]
 
     def wrench(self, x, u=None) -> np.ndarray:
-        """Force and torque stacked, shape (6,): (F (N), tau (N m)), world frame."""
+        """Force and torque stacked, shape (6,): (F (N), tau (N m)), world frame.
+
+        Parameters
+        ----------
+        x : array_like, shape (12,)
+            State of the magnet.
+        u : array_like, shape (n_s,), optional
+            Solenoid currents, A (default zero).
+        """
         state = self._state(x)
         current = self._inputs(u)
         if self.options.field == 'fast':
@@ -524,7 +544,13 @@ class MaggyModel:
         return current
 
     def with_options(self, **changes) -> MaggyModel:
-        """Return a model of the same parameters with some options changed."""
+        """Return a model of the same parameters with some options changed.
+
+        Parameters
+        ----------
+        **changes : object
+            :class:`ModelOptions` fields to change.
+        """
         return MaggyModel(self.params, dataclasses.replace(self.options, **changes))
 
     def inverted(self) -> MaggyModel:
@@ -538,7 +564,13 @@ class MaggyModel:
         return model
 
     def hover_state(self, z: float) -> np.ndarray:
-        """Return the centred, level, resting state at height ``z`` (m), shape (12,)."""
+        """Return the centred, level, resting state at height ``z`` (m), shape (12,).
+
+        Parameters
+        ----------
+        z : float
+            Height of the magnet's centre, m.
+        """
         x = np.zeros(12)
         x[2] = z
         return x

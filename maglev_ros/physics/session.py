@@ -229,6 +229,13 @@ class SimulationSession:
     def set_paused(self, paused: bool, now: float) -> SampleBatch | None:
         """Pause (True) or resume (False); lockstep: resuming steps queued commands.
 
+        Parameters
+        ----------
+        paused : bool
+            The new state.
+        now : float
+            Monotonic time, s.
+
         Returns
         -------
         SampleBatch or None
@@ -244,6 +251,11 @@ class SimulationSession:
 
         The new run starts one sample period after the last returned sample;
         queued commands are dropped and the held command is zero.
+
+        Parameters
+        ----------
+        now : float
+            Monotonic time, s.
 
         Returns
         -------

@@ -84,7 +84,15 @@ class CoilDynamics:
 
     @classmethod
     def from_parameters(cls, params, drive: str = 'current') -> CoilDynamics:
-        """Coil electrics of a parameter set's ``coils`` section."""
+        """Coil electrics of a parameter set's ``coils`` section.
+
+        Parameters
+        ----------
+        params : MaggyParameters
+            The parameter set.
+        drive : str
+            What the commands are: 'current' (default), 'voltage' or 'duty'.
+        """
         c = params.coils
         return cls(drive, c.resistance, c.inductance, c.supply_voltage)
 
@@ -265,6 +273,11 @@ class Simulator:
     # ------------------------------------------------------------------ state
     def reset(self, x0=None) -> np.ndarray:
         """Restart at ``x0`` (default: the constructor's, else the equilibrium).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (12,), optional
+            Initial state.
 
         Returns
         -------

@@ -345,6 +345,11 @@ class PolyModel:
 
         Equal to :meth:`residuals` with ``ic='zero'``; kept as an independent
         cross-check of the polynomial filters.
+
+        Parameters
+        ----------
+        data : IdData
+            The data set.
         """
         A, B, C, D, K = self.innovations_form()
         return predictor_errors(
@@ -411,7 +416,15 @@ class PolyModel:
         return np.concatenate(out) if out else np.zeros(0, dtype=complex)
 
     def zeros(self, output: int = 0, input: int = 0) -> np.ndarray:  # noqa: A002
-        """Zeros (in z) of the numerator ``B_ij`` of one input-output channel."""
+        """Zeros (in z) of the numerator ``B_ij`` of one input-output channel.
+
+        Parameters
+        ----------
+        output : int
+            Output index.
+        input : int
+            Input index.
+        """
         b = np.trim_zeros(self.polynomial('B', output, input), 'f')
         return np.roots(b) if len(b) > 1 else np.zeros(0, dtype=complex)
 
