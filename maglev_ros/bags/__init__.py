@@ -11,7 +11,8 @@ from .channels import Channel, FieldRef, parse_channel, parse_field_path
 from .datasets import BagDataset, load_bag_dataset, read_bag
 from .errors import BagError
 from .export import format_summary, write_dataset
-from .reader import METADATA_TOPIC, BagReader, TopicInfo, is_bag_path
+from .reader import METADATA_TOPIC, BagReader, TopicInfo, is_bag_directory, is_bag_path
+from .reindex import ReindexReport, reindex
 from .writer import BagWriter, TopicHandle
 
 __all__ = [
@@ -24,6 +25,7 @@ __all__ = [
     'Channel',
     'FieldRef',
     'Gap',
+    'ReindexReport',
     'Source',
     'SourceReport',
     'TopicHandle',
@@ -31,10 +33,12 @@ __all__ = [
     'align',
     'estimate_period',
     'format_summary',
+    'is_bag_directory',
     'is_bag_path',
     'load_bag_dataset',
     'parse_channel',
     'parse_field_path',
     'read_bag',
+    'reindex',
     'write_dataset',
 ]

@@ -29,7 +29,14 @@ from .errors import BagError
 from .names import normalize_topic
 from .typestore import bag_typestore, cdr_deserializer
 
-__all__ = ['METADATA_TOPIC', 'BagReader', 'TopicInfo', 'decode_metadata', 'is_bag_path']
+__all__ = [
+    'METADATA_TOPIC',
+    'BagReader',
+    'TopicInfo',
+    'decode_metadata',
+    'is_bag_directory',
+    'is_bag_path',
+]
 
 _STORAGE_SUFFIXES = {'.mcap': 'mcap', '.db3': 'sqlite3'}
 # rosbags' messages about metadata.yaml (rosbag2/reader.py)
@@ -79,6 +86,32 @@ def is_bag_path(path: str | Path) -> bool:
     """
     path = Path(path)
     return path.is_dir() or path.suffix in _STORAGE_SUFFIXES
+
+
+# what a rosbag2 directory holds, finished or not (sqlite3 keeps its journal beside)
+_BAG_FILE_SUFFIXES = ('.mcap', '.db3', '.db3-wal', '.db3-shm', '.db3-journal', '.damaged')
+
+
+def is_bag_directory(path: str | Path) -> bool:
+    """Whether a directory holds a bag and nothing else (finished, unfinished or empty).
+
+    Parameters
+    ----------
+    path : str or Path
+        A directory.
+
+    Returns
+    -------
+    bool
+        True if every entry is ``metadata.yaml`` or a storage file (``.mcap``,
+        ``.db3``, sqlite3's journal files, a ``.damaged`` original kept by
+        :func:`maglev_ros.bags.reindex`): safe to replace as a bag.
+    """
+    path = Path(path)
+    return path.is_dir() and all(
+        p.is_file() and (p.name == 'metadata.yaml' or p.name.endswith(_BAG_FILE_SUFFIXES))
+        for p in path.iterdir()
+    )
 
 
 def decode_metadata(custom: dict[str, str] | None) -> dict[str, object]:
@@ -151,8 +184,8 @@ class BagReader:
                 names = sorted(p.name for p in files)
                 raise BagError(
                     f'bag directory {str(path)!r} has no metadata.yaml (files: '
-                    f'{names}); an unfinished recording can be rebuilt with '
-                    f'"ros2 bag reindex"'
+                    f'{names}); an unfinished recording (a killed recorder) is rebuilt '
+                    f'with: maglev-bag2data --reindex {path}'
                 )
             storage = next(
                 (s for p in files for suf, s in _STORAGE_SUFFIXES.items() if p.name.endswith(suf)),

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import sqlite3
 import threading
+import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,12 +33,13 @@ from .errors import BagError
 from .names import normalize_msgtype, normalize_topic
 from .typestore import jazzy_typestore
 
-__all__ = ['STORAGES', 'BagWriter', 'TopicHandle', 'encode_metadata']
+__all__ = ['FLUSH_PERIOD_S', 'STORAGES', 'BagWriter', 'TopicHandle', 'encode_metadata']
 
 #: Storage plugins by name (``ros2 bag record --storage``).
 STORAGES: dict[str, StoragePlugin] = {'mcap': StoragePlugin.MCAP, 'sqlite3': StoragePlugin.SQLITE3}
 #: rosbag2 metadata version written (ROS 2 Jazzy writes 8).
 BAG_VERSION = 8
+FLUSH_PERIOD_S = 1.0  # s between flushes of written messages into the file
 _SCALARS = (str, int, float, bool)
 
 
@@ -110,12 +112,14 @@ class BagWriter:
     lock, so subscription callbacks on several executor threads may write while
     another thread closes (also for sqlite3, whose connection is not tied to the
     opening thread).  :meth:`write` stores the bytes before it returns (MCAP:
-    into the current chunk, flushed to the file every chunk; sqlite3: into one
-    transaction committed at :meth:`close`).  :meth:`close` is idempotent; call it from the
-    ``finally`` of the recorder's ``main`` (or a shutdown callback).  Writing
-    after :meth:`close` raises :class:`BagError`.  Nothing is readable until
+    into the current chunk; sqlite3: into the open transaction); every
+    ``FLUSH_PERIOD_S`` (1 s) a write also puts them into the file
+    (:meth:`flush`).  :meth:`close` is idempotent; call it from the ``finally``
+    of the recorder's ``main`` (or a shutdown callback).  Writing after
+    :meth:`close` raises :class:`BagError`.  A bag is readable once
     :meth:`close` has written ``metadata.yaml``; a process killed with SIGKILL
-    leaves an unfinished bag.
+    leaves an unfinished bag, which :func:`maglev_ros.bags.reindex` rebuilds
+    with every message up to the last flush (at most about 1 s is lost).
     """
 
     def __init__(
@@ -139,6 +143,7 @@ class BagWriter:
         self._lock = threading.RLock()
         self._state = 'new'
         self.message_count = 0
+        self._flush_due = time.monotonic() + FLUSH_PERIOD_S
 
     # ------------------------------------------------------------ lifecycle
     @property
@@ -303,6 +308,28 @@ class BagWriter:
                 raise BagError(f'timestamp must be >= 0 ns, got {timestamp_ns!r}')
             self._writer.write(handle.connection, stamp, data)
             self.message_count += 1
+            if time.monotonic() >= self._flush_due:
+                self.flush()
+
+    def flush(self) -> None:
+        """Put every message written so far into the file (done every FLUSH_PERIOD_S).
+
+        MCAP: the open chunk is closed and the file buffer flushed; sqlite3: the
+        transaction is committed. A process killed after this (SIGKILL, power
+        loss) leaves these messages in the file: :func:`maglev_ros.bags.reindex`
+        rebuilds such a bag.
+        """
+        with self._lock:
+            self._flush_due = time.monotonic() + FLUSH_PERIOD_S
+            if self._state != 'open':
+                return
+            storage = self._writer.storage
+            if hasattr(storage, 'close_chunk'):  # rosbags' MCAP writer
+                if storage.chunk.bio.tell():
+                    storage.close_chunk()
+                storage.bio.flush()
+            elif isinstance(getattr(storage, 'conn', None), sqlite3.Connection):
+                storage.conn.commit()
 
     def _check_open(self) -> None:
         if self._state == 'new':

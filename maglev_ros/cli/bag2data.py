@@ -5,6 +5,7 @@ or ``ros2 bag record``), aligns them on one uniform time base, splits them and
 writes ``.npz``, ``.csv`` or ``.mat`` files (the lab's ``DATA`` layout)::
 
     maglev-bag2data run/ --topics
+    maglev-bag2data run/ --reindex      # rebuild a bag whose recorder was killed
     maglev-bag2data run/ --output 'maglev/sensor_0/field:magnetic_field.x' \
         --input 'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]' \
         --out data.mat
@@ -158,6 +159,13 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         '--topics', action='store_true', help="list the bag's topics and run metadata, then exit"
     )
+    p.add_argument(
+        '--reindex',
+        action='store_true',
+        help='rebuild an unfinished bag (no metadata.yaml: a recording killed with SIGKILL '
+        'or by a power loss) from its .mcap or .db3 file, keeping every complete message; '
+        'the original file stays beside it as .damaged; then exit',
+    )
     return p
 
 
@@ -194,6 +202,11 @@ def _run(args: argparse.Namespace) -> int:
     from maglev_ros.bags import format_summary, write_dataset
     from maglev_ros.bags.export import split_paths
 
+    if args.reindex:
+        from maglev_ros.bags import reindex
+
+        print(reindex(args.bag).describe())
+        return 0
     if args.topics:
         return _topics(args.bag, args.json)
     if args.out:

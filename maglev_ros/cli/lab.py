@@ -39,6 +39,7 @@ from pathlib import Path
 
 import numpy as np
 
+from maglev_ros.bags.reader import is_bag_directory
 from maglev_ros.cli.usage import (
     Parser,
     UsageError,
@@ -48,6 +49,7 @@ from maglev_ros.cli.usage import (
     run_command,
 )
 from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix
+from maglev_ros.stop_signals import StopSignals
 from maglev_ros.topics import (
     AXES,
     CLOCK_TOPIC,
@@ -362,10 +364,10 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError(f'--band must be LOW HIGH with 0 <= LOW < HIGH <= 1, got {args.band}')
 
 
-def _wait(predicate, ctx, what: str, timeout: float = WAIT_S) -> None:
+def _wait(predicate, ctx, what: str, timeout: float = WAIT_S, stop=None) -> None:
     deadline = time.monotonic() + timeout
     while not predicate():
-        if not ctx.ok():
+        if not ctx.ok() or (stop is not None and stop.requested):
             raise KeyboardInterrupt
         if time.monotonic() > deadline:
             raise RuntimeError(f'timed out after {timeout:g} s waiting for {what}')
@@ -385,7 +387,7 @@ def overrides(**values) -> list:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
+def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
     """Run simulator (lockstep), excitation and recorder on one executor.
 
     Parameters
@@ -394,6 +396,8 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
         Parsed ``maglev-lab`` arguments.
     bag : Path
         Bag directory to create.
+    stop : maglev_ros.stop_signals.StopSignals, optional
+        Ends the run when a stop signal arrives.
 
     Returns
     -------
@@ -403,7 +407,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
     Raises
     ------
     KeyboardInterrupt
-        On SIGINT/SIGTERM (the bag is finalised first).
+        On a stop signal (the bag is finalised first).
     """
     import rclpy
 
@@ -469,6 +473,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
             ),
             ctx,
             'the node graph',
+            stop=stop,
         )
         wall = time.monotonic()
         sim.set_paused(False)
@@ -477,6 +482,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
             ctx,
             'the simulation',
             timeout=1e9,
+            stop=stop,
         )
         sim.set_paused(True)
         wall = time.monotonic() - wall
@@ -488,6 +494,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
             ),
             ctx,
             'the recorder',
+            stop=stop,
         )
         return {
             'samples': published,
@@ -586,7 +593,9 @@ def board_sensors(args: argparse.Namespace) -> int:
     return max(args.sensors) + 1
 
 
-def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_sensors: int) -> dict:
+def run_board_experiment(
+    args: argparse.Namespace, bag: Path, port: str, n_sensors: int, stop=None
+) -> dict:
     """Run the driver (on ``port``), excitation (timer) and recorder on one executor.
 
     Real time: the board sets the pace; recording lasts ``args.duration``
@@ -602,6 +611,8 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
         Serial device of the board.
     n_sensors : int
         Sensors per board record.
+    stop : maglev_ros.stop_signals.StopSignals, optional
+        Ends the run when a stop signal arrives.
 
     Returns
     -------
@@ -613,7 +624,7 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
     Raises
     ------
     KeyboardInterrupt
-        On SIGINT/SIGTERM (the bag is finalised first).
+        On a stop signal (the bag is finalised first).
     """
     import rclpy
 
@@ -659,6 +670,7 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
             ),
             ctx,
             'the driver and the recorder',
+            stop=stop,
         )
         # the excitation starts once everything listens: its first command is recorded
         excite = ExcitationNode(
@@ -683,11 +695,18 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
             ),
             ctx,
             'the excitation',
+            stop=stop,
         )
         start = recorder.counts[currents_topic]
         wall = time.monotonic()
         end = wall + args.duration
-        _wait(lambda: time.monotonic() >= end, ctx, 'the recording', timeout=args.duration + 1)
+        _wait(
+            lambda: time.monotonic() >= end,
+            ctx,
+            'the recording',
+            timeout=args.duration + 1,
+            stop=stop,
+        )
         recorder.close()  # finalised; the driver zeroes the currents when destroyed
         wall = time.monotonic() - wall
         samples = recorder.counts[currents_topic] - start
@@ -708,7 +727,7 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
         rclpy.try_shutdown(context=ctx)
 
 
-def _run_board(args: argparse.Namespace, bag: Path) -> dict:
+def _run_board(args: argparse.Namespace, bag: Path, stop=None) -> dict:
     n_sensors = board_sensors(args)
     if max(args.sensors) >= n_sensors or min(args.sensors) < 0:
         raise UsageError(
@@ -716,10 +735,10 @@ def _run_board(args: argparse.Namespace, bag: Path) -> dict:
             f'{n_sensors}), got {args.sensors}'
         )
     if args.board:
-        return run_board_experiment(args, bag, args.board, n_sensors)
+        return run_board_experiment(args, bag, args.board, n_sensors, stop)
     child, port = start_virtual_board(args.params, args.magnet)
     try:
-        return run_board_experiment(args, bag, port, n_sensors)
+        return run_board_experiment(args, bag, port, n_sensors, stop)
     finally:
         stop_child(child)
 
@@ -732,10 +751,11 @@ def _lab_context():
     """
     import rclpy
     from rclpy.context import Context
+    from rclpy.signals import SignalHandlerOptions
 
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     ctx = Context()
-    rclpy.init(context=ctx, args=[])
+    rclpy.init(context=ctx, args=[], signal_handler_options=SignalHandlerOptions.NO)
     return ctx
 
 
@@ -744,11 +764,16 @@ def _run(args: argparse.Namespace) -> int:
     _check(args)
     out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
     bag = out / 'bag'
+    if args.board and not Path(args.board).exists():
+        raise UsageError(
+            f'--board {args.board}: no such device; is the board plugged in '
+            f'(ls /dev/ttyACM*), or leave --board out for a virtual board'
+        )
     if bag.exists():
         if not args.overwrite:
             raise UsageError(f'{bag} exists already; choose another --out or add --overwrite')
-        if not (bag / 'metadata.yaml').is_file() and any(bag.iterdir()):
-            raise UsageError(f'{bag} is not a finished bag; not removing it')
+        if not is_bag_directory(bag):
+            raise UsageError(f'{bag} is not a bag (it holds other files); not removing it')
         shutil.rmtree(bag)
     out.mkdir(parents=True, exist_ok=True)
     board = on_board(args)
@@ -770,11 +795,15 @@ def _run(args: argparse.Namespace) -> int:
             f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
             f'{args.noise:g} T, seed {args.seed}'
         )
-    try:
-        stats = _run_board(args, bag) if board else run_experiment(args, bag)
-    except KeyboardInterrupt:
-        print(f'{PROG}: interrupted; bag finalised in {bag}', file=sys.stderr)
-        return 130
+    # SIGINT, SIGTERM and SIGHUP end the recording; the bag is finalised, also when
+    # another signal arrives during the clean-up; exit status 128 + the signal
+    with StopSignals() as stop:
+        try:
+            stats = _run_board(args, bag, stop) if board else run_experiment(args, bag, stop)
+        except KeyboardInterrupt:
+            name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
+            print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
+            return stop.exit_status or 130
     if board:
         print(
             f'recorded {stats["samples"]} board samples ({stats["simulated_s"]:.3f} s of '

@@ -30,6 +30,13 @@ step bounds also exclude the step a stream shifted by whole timestamp
 bytes shows (about 0 or 51 200 us for a record period of 200 us), so a
 misaligned run cannot lock even when the fields are constant.
 
+The extension and the lock never take bytes of the record held back for
+confirmation (see below) to build a record: when the next record lost its
+first 1 or 2 bytes, the held record's last bytes and that record's rest form a
+plausible-looking splice. A run may start inside the held record only if its
+first record follows it by a sample period, as its second follows its first
+(the held record then lost its tail).
+
 Once locked, records are viewed with ``numpy.frombuffer`` over aligned
 chunks and checked, and their timestamps unwrapped, by compiled loops
 (:mod:`maglev_ros.hardware.v2x_kernels`: one call per burst instead of a
@@ -77,6 +84,9 @@ _CLOCK_MASK = _CLOCK_WRAP - 1
 # While searching, bytes up to this many lock runs before the newest possible
 # run start are kept, so that a later lock can still extend back over them.
 _BACKTRACK_RUNS = 4
+# Two consecutive steps of the board clock differ by less than this (it samples
+# every 200 us), us: tells a record that follows a truncated one from a splice.
+_SPLICE_TOLERANCE_US = 20
 # Views of aligned records: timestamps (n,), fields (n, N, 3), PWM (n, 4).
 _Run = tuple[np.ndarray, np.ndarray, np.ndarray]
 
@@ -406,6 +416,21 @@ class RecordDecoder:
         for r in range(1, k):
             run &= rec_ok[r * size : r * size + m]
             run &= step_ok[(r - 1) * size : (r - 1) * size + m]
+        if self._head:
+            # A run starting inside the held-back record means that record lost its
+            # tail; the run's first record then follows it by one sample period, as
+            # the second record follows the first. A run that does not is led by a
+            # record spliced from the held-back record's last bytes and the rest of a
+            # record that lost its first bytes (its timestamp off by up to 2**(8 L)
+            # us for L lost bytes): not a boundary.
+            inside = min(size, m)
+            into = (u32[first:inside] - np.uint32(self._prev_ts)).astype(np.int64)
+            onward = step[first:inside].astype(np.int64)
+            run[first:inside] &= (
+                (into >= self.bounds.min_step_us)
+                & (into <= self.bounds.max_step_us)
+                & (np.abs(onward - into) <= _SPLICE_TOLERANCE_US)
+            )
         hits = np.flatnonzero(run[first:])
         if not hits.size:
             # Offsets below m start no run; keep the last _BACKTRACK_RUNS *
@@ -415,14 +440,19 @@ class RecordDecoder:
         # Extend backwards: the latest plausible record that ends at or before
         # the run and steps correctly into it belongs to the stream too (it
         # sat just before a damaged record, or directly before the run).
+        # With a held-back record at buf[:size], the extension stays behind it: that
+        # record passed every check, and a candidate overlapping it would be made of
+        # its bytes (its timestamp, then the head of a record that lost its first
+        # bytes), stealing it and stamping the damaged record with its time.
         low, high = self.bounds.min_step_us, self.bounds.max_step_us
-        while offset - size >= first:
-            span = slice(first, offset - size + 1)
+        back_first = size if self._head else first
+        while offset - size >= back_first:
+            span = slice(back_first, offset - size + 1)
             steps = u32[offset] - u32[span]
             back = np.flatnonzero(rec_ok[span] & (steps >= low) & (steps <= high))
             if not back.size:
                 break
-            offset = first + int(back[-1])
+            offset = back_first + int(back[-1])
         return offset, m
 
     def _search(self, out: list[_Run]) -> bool:

@@ -32,7 +32,7 @@ wrong length or with a NaN or infinite value is rejected (nothing is sent, the
 command timeout keeps running); values beyond +-``current_limit`` are clamped to
 it. Both cases log a throttled warning and are counted. Zero currents are sent
 when no valid command came for ``command_timeout`` s, when disabled, on shutdown
-(SIGINT, SIGTERM, ``destroy_node``) and after an error the I/O loop cannot
+(SIGINT, SIGTERM, SIGHUP, ``destroy_node``) and after an error the I/O loop cannot
 handle. The link survives unplugging: the port is reopened with exponential
 back-off.
 
@@ -669,7 +669,7 @@ class DriverNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the driver until SIGINT or SIGTERM.
+    """Run the driver until SIGINT, SIGTERM or SIGHUP.
 
     Parameters
     ----------

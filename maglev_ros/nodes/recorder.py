@@ -17,8 +17,10 @@ Metadata (the bag's ``custom_data``): package version, storage, topics,
 recording start, and every parameter of ``metadata_node`` (default the
 simulator: parameter set, model options, seed, ...) as ``<node>.<name>``,
 fetched through its parameter services when it appears. The bag is finalised
-(index and ``metadata.yaml``) when the node is destroyed, also after SIGINT
-or SIGTERM.
+(index and ``metadata.yaml``) when the node is destroyed, also after SIGINT,
+SIGTERM or SIGHUP and when another signal arrives during that clean-up; the
+writer puts the messages into the file every second, so a recorder killed with
+SIGKILL leaves a bag that ``maglev-bag2data BAG --reindex`` rebuilds.
 """
 
 from __future__ import annotations
@@ -64,6 +66,7 @@ DEFAULT_TOPICS = [
     TRUE_STATE_TOPIC,
     CLOCK_TOPIC,
 ]
+_PARAMETER_ANSWER_S = 0.3  # s to wait for one parameter of the metadata node
 _CLOCK = struct.Struct('<iI')  # rosgraph_msgs/Clock after the 4-byte CDR header
 
 
@@ -235,6 +238,9 @@ class RecorderNode(Node):
         self._clock_ns = 0
         self._metadata_done = not cfg.metadata_node
         self._metadata_pending = False
+        # set while one parameter's request waits for its answer (not while the
+        # list of names is still on its way: that answer may come late at start-up)
+        self._metadata_skip = None
         self._closed = False
         self.create_timer(0.1, self._discover)
         self._discover()
@@ -287,7 +293,10 @@ class RecorderNode(Node):
             )
         if not self._metadata_done and not self._metadata_pending:
             self._request_metadata()
-        elif self._metadata_pending and time.monotonic() - self._metadata_since > 0.3:
+        elif (
+            self._metadata_skip is not None
+            and time.monotonic() - self._metadata_since > _PARAMETER_ANSWER_S
+        ):
             self._metadata_skip()  # no answer (an unset parameter): skip it
 
     def _writer_for(self, handle, topic: str, is_clock: bool):
@@ -340,6 +349,7 @@ class RecorderNode(Node):
                     self.writer.set_metadata(items)
                 self._metadata_done = True
                 self._metadata_pending = False
+                self._metadata_skip = None
                 return
             parameter = names[0]
             self._metadata_since = time.monotonic()
@@ -383,7 +393,7 @@ class RecorderNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Record until SIGINT or SIGTERM; the bag is finalised either way.
+    """Record until SIGINT, SIGTERM or SIGHUP; the bag is finalised either way.
 
     Parameters
     ----------

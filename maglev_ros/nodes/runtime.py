@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
+from rclpy.signals import SignalHandlerOptions
 
 from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
+from maglev_ros.stop_signals import StopSignals
 
 __all__ = ['Spinner', 'make_executor', 'run_nodes', 'spin']
 
@@ -31,8 +34,8 @@ def make_executor(context=None):
     return EventsExecutor(context=context)
 
 
-def spin(executor, context=None, stop=None) -> None:
-    """Spin ``executor`` until its context shuts down or ``stop`` is set.
+def spin(executor, context=None, stop=None, seconds=None, wait: float = 0.1) -> None:
+    """Spin ``executor`` until its context shuts down, ``stop`` is set or ``seconds`` pass.
 
     Runs ``spin_once`` in a loop: the Jazzy EventsExecutor's own ``spin()``
     does not fire timers in the PyPI build, ``spin_once`` does.
@@ -45,11 +48,19 @@ def spin(executor, context=None, stop=None) -> None:
         Its context (default: the default context).
     stop : threading.Event, optional
         Set it to end the loop from another thread.
+    seconds : float, optional
+        Spin for at most this long, s (e.g. to run the callbacks already due
+        after a stop: messages received before it).
+    wait : float
+        ``spin_once`` timeout, s.
     """
     context = context or rclpy.get_default_context()
+    deadline = None if seconds is None else time.monotonic() + seconds
     while context.ok() and not (stop is not None and stop.is_set()):
+        if deadline is not None and time.monotonic() >= deadline:
+            break
         try:
-            executor.spin_once(timeout_sec=0.1)
+            executor.spin_once(timeout_sec=wait)
         except ExternalShutdownException:
             break
         except Exception:  # noqa: BLE001 - re-raised unless the context is gone
@@ -106,7 +117,11 @@ class Spinner:
 
 
 def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, parameters=None) -> int:
-    """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM.
+    """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM/SIGHUP.
+
+    A second signal during the clean-up is ignored: the nodes are destroyed
+    (bags finalised, coils zeroed) before the context shuts down, and the
+    exit status stays 0.
 
     Parameters
     ----------
@@ -136,31 +151,37 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         )
         print(parameters.help_text(prog), end='')
         return 0
+    # SIGINT, SIGTERM and SIGHUP end the spin; one arriving during the clean-up
+    # (launch's own SIGINT after a terminal's Ctrl-C) no longer interrupts it:
+    # rclpy's handlers are off, so the context stays valid until the nodes are
+    # destroyed (bags finalised, coils zeroed) and is shut down last
     try:
-        rclpy.init(args=args)
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
     except Exception as err:  # noqa: BLE001 - rcl refuses the command line (RCLError)
         text = str(err).strip().splitlines()
         print(f'{name}: error: {text[0] if text else type(err).__name__}', file=sys.stderr)
         return 2
     nodes = []
     executor = None
-    try:
-        for factory in factories:
-            nodes.append(factory())
-        relax_event_threads()  # DDS timer wake-ups must not preempt the publishers
-        executor = make_executor()
-        for node in nodes:
-            executor.add_node(node)
-        spin(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except errors as err:
-        rclpy.logging.get_logger(name).error(str(err))
-        return 2
-    finally:
-        if executor is not None:
-            executor.shutdown()
-        for node in reversed(nodes):
-            node.destroy_node()
-        rclpy.try_shutdown()
+    with StopSignals() as stop:
+        try:
+            for factory in factories:
+                nodes.append(factory())
+            relax_event_threads()  # DDS timer wake-ups must not preempt the publishers
+            executor = make_executor()
+            for node in nodes:
+                executor.add_node(node)
+            spin(executor, stop=stop.event)
+            spin(executor, seconds=0.1, wait=0.01)  # what arrived before the signal
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+        except errors as err:
+            rclpy.logging.get_logger(name).error(str(err))
+            return 2
+        finally:
+            if executor is not None:
+                executor.shutdown()
+            for node in reversed(nodes):
+                node.destroy_node()
+            rclpy.try_shutdown()
     return 0

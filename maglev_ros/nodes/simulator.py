@@ -591,7 +591,7 @@ class SimulatorNode(Node):
         values.update({name.replace('_', ' '): v for name, v in self.counters.items()})
         self._diag_pub.publish(
             contract.diagnostic_array(
-                time.time_ns(),
+                self.get_clock().now().nanoseconds,  # the node's clock: sim time under it
                 f'{NODE_NAME}: simulation',
                 level,
                 message,
@@ -712,7 +712,7 @@ class SimulatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the simulator until SIGINT or SIGTERM.
+    """Run the simulator until SIGINT, SIGTERM or SIGHUP.
 
     Parameters
     ----------

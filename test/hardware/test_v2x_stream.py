@@ -284,3 +284,23 @@ def test_long_runs_spanning_more_than_2_31_us():
         batch = decode_all(decoder, pack_records(stamps, field, pwm), chunk_sizes=1 << 20)
         np.testing.assert_array_equal(batch.time_us, stamps)
         assert decoder.stats.wraps == 1
+
+
+@pytest.mark.parametrize('n_sensors', [1, 3])
+@pytest.mark.parametrize('lost', [1, 2])
+@pytest.mark.parametrize('chunk', [None, 1, 4096])
+def test_lost_head_bytes_cost_only_that_record(n_sensors, lost, chunk):
+    """Issue 11 item 11: 40 records 200 us apart, the first bytes of record 20 lost.
+
+    Before: record 19 (intact) was lost, record 20 stamped with 19's timestamp
+    bytes (200 us early), every later record shifted by +4800 us, one clock restart.
+    """
+    stamps, field, pwm = make_records(40, n_sensors, start_us=0)
+    parts = record_bytes(stamps, field, pwm)
+    parts[20] = parts[20][lost:]
+    decoder = RecordDecoder(n_sensors)
+    out = decode_all(decoder, b''.join(parts), chunk_sizes=chunk)
+    kept = [i for i in range(40) if i != 20]
+    assert_records(out, stamps, field, pwm, kept)
+    np.testing.assert_array_equal(out.time_us, stamps[kept])
+    assert decoder.stats.clock_restarts == 0

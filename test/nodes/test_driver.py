@@ -1,4 +1,5 @@
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -453,8 +454,14 @@ def _driver_process(port, domain, *extra):
     )
 
 
-@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT])
-def test_shutdown_by_signal_sends_zeros(ctx, domain, signum):
+@pytest.mark.parametrize('repeat', [False, True], ids=['once', 'repeated'])
+@pytest.mark.parametrize('signum', [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
+def test_shutdown_by_signal_sends_zeros(ctx, domain, signum, repeat):
+    """Zero currents on SIGTERM/SIGINT/SIGHUP, quietly, also with more signals (issue 11 item 5).
+
+    The I/O thread stops before the context shuts down: no ERROR or FATAL line
+    (its publish used to fail and the generic error path sent the zeros).
+    """
     board, _ = v2x_board()
     with board:
         proc = _driver_process(
@@ -473,8 +480,15 @@ def test_shutdown_by_signal_sends_zeros(ctx, domain, signum):
                 assert proc.poll() is None, proc.stdout.read()
                 pub.publish(Float64MultiArray(data=[0.6] * 4))
                 time.sleep(0.05)
+            time.sleep(0.5)  # records flow
             proc.send_signal(signum)
+            while repeat and proc.poll() is None:  # more signals during the clean-up
+                time.sleep(0.003)
+                proc.send_signal(signum)
             assert proc.wait(timeout=15.0) == 0, proc.stdout.read()
+            output = proc.stdout.read()
+            problems = re.findall(r'.*(?:\[ERROR\]|\[FATAL\]|Traceback).*', output)
+            assert not problems, output
             assert last_accepted(board) == (0, 0, 0, 0)
             with board.lock:
                 assert list(board.firmware.pwm) == [0, 0, 0, 0]

@@ -151,8 +151,21 @@ def test_config_errors(tmp_path):
         build_config(base | {'path': str(tmp_path)})
 
 
-@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM])
-def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
+def signal_until_exit(proc, signum, interval=0.003, timeout=30.0):
+    """Send ``signum`` every ``interval`` s until ``proc`` exits: some land in its clean-up."""
+    deadline = time.monotonic() + timeout
+    while proc.poll() is None and time.monotonic() < deadline:
+        try:
+            proc.send_signal(signum)
+        except ProcessLookupError:
+            break
+        time.sleep(interval)
+
+
+@pytest.mark.parametrize('repeat', [False, True], ids=['once', 'repeated'])
+@pytest.mark.parametrize('signum', [signal.SIGINT, signal.SIGTERM, signal.SIGHUP])
+def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum, repeat):
+    """The bag is finalised on SIGINT, SIGTERM and SIGHUP, and on more of them in clean-up."""
     bag = tmp_path / f'sig{int(signum)}'
     env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     proc = subprocess.Popen(
@@ -188,7 +201,10 @@ def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
         for k in range(50):
             pub.publish(Float64MultiArray(data=[float(k), 0.0, 0.0, 0.0]))
         assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=10))
-        proc.send_signal(signum)
+        if repeat:
+            signal_until_exit(proc, signum)
+        else:
+            proc.send_signal(signum)
         out, _ = proc.communicate(timeout=30.0)
         assert proc.returncode == 0, out
         assert 'Traceback' not in out
@@ -201,3 +217,48 @@ def test_bag_is_finalised_after_a_signal(ctx, domain, tmp_path, signum):
     with BagReader(bag) as reader:
         assert reader.metadata['maglev_ros.version'] == '0.1.0'
         assert sum(1 for _ in reader.messages(['/maglev/currents/command'])) == 50
+
+
+def test_metadata_node_answering_late_does_not_kill_the_recorder(ctx, tmp_path):
+    """Issue 11 item 1: the metadata node's parameter list arrives after the timeout.
+
+    At start-up under ``ros2 launch`` the simulator answers ``list_parameters``
+    late; the recorder's timeout check then ran before any per-parameter request
+    existed and died (AttributeError). Here the list answer takes 1 s.
+    """
+    from rcl_interfaces.msg import ParameterValue
+    from rcl_interfaces.srv import GetParameters, ListParameters
+
+    slow = rclpy.create_node('slow_metadata', context=ctx, start_parameter_services=False)
+
+    def list_late(request, response):
+        time.sleep(1.0)
+        response.result.names = ['answer']
+        return response
+
+    def get(request, response):
+        response.values = [ParameterValue(type=2, integer_value=42) for _ in request.names]
+        return response
+
+    slow.create_service(ListParameters, '/slow_metadata/list_parameters', list_late)
+    slow.create_service(GetParameters, '/slow_metadata/get_parameters', get)
+    peer = contract.Spinner(ctx, [slow])  # its own thread: the slow answer blocks only it
+    recorder = RecorderNode(
+        context=ctx,
+        parameter_overrides=params(
+            path=str(tmp_path / 'late'), topics=['/maglev/currents'], metadata_node='slow_metadata'
+        ),
+    )
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(recorder)
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while not recorder.metadata_complete:
+            assert time.monotonic() < deadline, 'metadata never fetched'
+            executor.spin_once(timeout_sec=0.05)  # raises if a callback dies
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        peer.close()
+        slow.destroy_node()
+    assert recorder.writer.metadata['slow_metadata.answer'] == 42

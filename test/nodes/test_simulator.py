@@ -484,3 +484,23 @@ def test_signal_ends_the_node_cleanly(ctx, domain, signum):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_diagnostics_are_stamped_with_the_node_clock_under_sim_time(make_peer):
+    """Issue 11 item 6: under use_sim_time the /diagnostics stamps are simulated time."""
+    peer = make_peer(
+        lockstep=False,
+        magnet='fixed',
+        diagnostics_period=0.1,
+        marker_rate=0.0,
+        use_sim_time=True,
+    )
+    peer.run(2000)
+    wait_for(lambda: peer.sim.get_clock().now().nanoseconds > 0, what='sim time')
+    peer.sim.publish_diagnostics()  # (the node's timer runs on sim time too)
+    wait_for(lambda: len(peer.diagnostics) >= 1, what='diagnostics')
+    time.sleep(0.3)
+    newest_clock = max(c.clock.sec + c.clock.nanosec * 1e-9 for c in list(peer.clock))
+    stamps = [d.header.stamp.sec + d.header.stamp.nanosec * 1e-9 for d in list(peer.diagnostics)]
+    assert max(stamps) <= newest_clock + 1e-9, (stamps, newest_clock)  # not wall time
+    assert max(stamps) > 0.0

@@ -1,0 +1,128 @@
+"""Session fixtures shared by every test directory: one colcon build of the package.
+
+``colcon_build`` copies the package source into a temporary workspace and runs
+``colcon build --packages-select maglev_ros`` once per session (a plain copy
+install, which is what ``ros2 run`` users get by default; a few seconds). The
+install-tree checks (``test_colcon_build.py``) and the real command-line tests
+(``test/ros2cli``) use the same build.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+
+PACKAGE = 'maglev_ros'
+PKG_DIR = Path(__file__).resolve().parents[1]
+COLCON = Path(sys.executable).parent / 'colcon'
+
+BUILD_TIMEOUT = 300  # seconds; the build itself takes a few
+
+# Excluded wherever they occur in the source tree.
+_IGNORED_ANYWHERE = {'__pycache__', '.pytest_cache', '.ruff_cache', '.mypy_cache'}
+# Excluded only at the top of the package (a subpackage may well be called ``build``).
+_IGNORED_AT_TOP = {'.git', '.venv', 'venv', 'build', 'install', 'log'}
+
+
+def _ignore(directory: str, names: list[str]) -> set[str]:
+    ignored = {n for n in names if n in _IGNORED_ANYWHERE or n.endswith('.egg-info')}
+    if Path(directory).resolve() == PKG_DIR:
+        ignored |= _IGNORED_AT_TOP.intersection(names)
+    return ignored
+
+
+def tail(text: str, limit: int = 12000) -> str:
+    """The last ``limit`` characters of ``text`` (marked when cut)."""
+    return text if len(text) <= limit else '[...]\n' + text[-limit:]
+
+
+@dataclass
+class ColconBuild:
+    """Result of one ``colcon build`` in a temporary workspace."""
+
+    workspace: Path
+    returncode: int | None
+    stdout: str
+    stderr: str
+
+    @property
+    def prefix(self) -> Path:
+        return self.workspace / 'install' / PACKAGE
+
+    @property
+    def lib_dir(self) -> Path:
+        return self.prefix / 'lib' / PACKAGE
+
+    @property
+    def share_dir(self) -> Path:
+        return self.prefix / 'share' / PACKAGE
+
+    def report(self) -> str:
+        log = self.workspace / 'log' / 'latest_build' / PACKAGE / 'stdout_stderr.log'
+        log_text = log.read_text(errors='replace') if log.is_file() else f'({log} missing)'
+        return (
+            f'colcon build in {self.workspace} exited with {self.returncode}\n'
+            f'--- colcon stdout ---\n{tail(self.stdout)}\n'
+            f'--- colcon stderr ---\n{tail(self.stderr)}\n'
+            f'--- {log.relative_to(self.workspace)} ---\n{tail(log_text)}'
+        )
+
+    def require(self) -> None:
+        if self.returncode != 0:
+            pytest.fail('colcon build failed (details in test_colcon_build_succeeds)')
+
+    def site_packages(self) -> Path:
+        found = sorted(self.prefix.glob('lib/python3*/site-packages'))
+        assert len(found) == 1, f'expected one site-packages dir under {self.prefix}: {found}'
+        return found[0]
+
+    def run_env(self) -> dict[str, str]:
+        """Environment roughly as ``source install/setup.bash`` would leave it."""
+        env = os.environ.copy()
+        site = str(self.site_packages())
+        env['PYTHONPATH'] = os.pathsep.join(filter(None, [site, env.get('PYTHONPATH')]))
+        env['AMENT_PREFIX_PATH'] = os.pathsep.join(
+            filter(None, [str(self.prefix), env.get('AMENT_PREFIX_PATH')])
+        )
+        env['PYTHONNOUSERSITE'] = '1'
+        return env
+
+
+@pytest.fixture(scope='session')
+def colcon_build(tmp_path_factory: pytest.TempPathFactory) -> ColconBuild:
+    """The package built once per session with colcon (skips without colcon)."""
+    if not COLCON.is_file():
+        pytest.skip(
+            f'colcon is not installed next to {sys.executable} '
+            "(pip install 'colcon-common-extensions')"
+        )
+    workspace = tmp_path_factory.mktemp('colcon') / 'ws'
+    shutil.copytree(PKG_DIR, workspace / 'src' / PACKAGE, ignore=_ignore)
+
+    env = os.environ.copy()
+    # Keep the user's colcon defaults and mixins out of the build.
+    env['COLCON_HOME'] = str(workspace.parent / 'colcon_home')
+    env.pop('COLCON_DEFAULTS_FILE', None)
+    env['PATH'] = os.pathsep.join(filter(None, [str(COLCON.parent), env.get('PATH')]))
+    cmd = [
+        str(COLCON), 'build',
+        '--base-paths', 'src',
+        '--packages-select', PACKAGE,
+        '--event-handlers', 'console_direct-',
+    ]  # fmt: skip
+    try:
+        proc = subprocess.run(
+            cmd, cwd=workspace, env=env, capture_output=True, text=True,
+            timeout=BUILD_TIMEOUT, stdin=subprocess.DEVNULL,
+        )  # fmt: skip
+    except subprocess.TimeoutExpired as exc:
+        out = exc.stdout.decode(errors='replace') if isinstance(exc.stdout, bytes) else ''
+        err = exc.stderr.decode(errors='replace') if isinstance(exc.stderr, bytes) else ''
+        return ColconBuild(workspace, None, out, err + f'\n(timed out after {BUILD_TIMEOUT} s)')
+    return ColconBuild(workspace, proc.returncode, proc.stdout, proc.stderr)
