@@ -104,6 +104,17 @@ def build_parser() -> argparse.ArgumentParser:
         metavar=('NA', 'NB', 'NK'),
         help='four-stage instrumental variables (iv4)',
     )
+    p.add_argument(
+        '--instruments',
+        action='append',
+        default=[],
+        metavar='CHANNEL',
+        help='closed-loop data: external signal (the excitation) used as the '
+        'instruments of --iv, repeat for more. A bag: a channel spec like '
+        "--input ('r=maglev/currents/excitation:data[0]'); a channel matrix "
+        'with --rows: its row (counted from 1); CSV: a column name; npz/mat: a '
+        'variable of shape (N,) or (N, k)',
+    )
     p.add_argument('--armax', nargs=4, type=int, action='append', metavar=('NA', 'NB', 'NC', 'NK'))
     p.add_argument('--oe', nargs=3, type=int, action='append', metavar=('NB', 'NF', 'NK'))
     p.add_argument(
@@ -194,14 +205,14 @@ def _requested(args: argparse.Namespace) -> list[tuple[str, dict[str, Any]]]:
     return out
 
 
-def _fit(structure: str, orders: dict[str, Any], data: Any) -> Any:
+def _fit(structure: str, orders: dict[str, Any], data: Any, instruments: Any = None) -> Any:
     from maglev_ros import sysid
 
     nk = orders.get('nk', 1)
     if structure == 'arx':
         return sysid.arx(data, orders['na'], orders['nb'], nk)
     if structure == 'iv':
-        return sysid.iv4(data, orders['na'], orders['nb'], nk)
+        return sysid.iv4(data, orders['na'], orders['nb'], nk, instruments=instruments)
     if structure == 'armax':
         return sysid.armax(data, orders['na'], orders['nb'], orders['nc'], nk)
     if structure == 'oe':
@@ -215,6 +226,71 @@ def _label(model: Any) -> str:
         text = o.describe().replace('  ', ' ').replace('=', '')
         return f'{model.structure} {text}'
     return f'{model.structure} {o.ny}x{o.nu}'
+
+
+def _file_with_instruments(args: argparse.Namespace, load: Any) -> tuple[Any, int]:
+    """Load a data file with the ``--instruments`` channels appended as the last inputs.
+
+    Returns the data set and the number of instrument columns appended.
+    """
+    path = Path(args.data)
+    specs = list(args.instruments)
+    if args.rows:
+        try:
+            rows = [int(text) for text in specs]
+        except ValueError:
+            raise UsageError(
+                f'--instruments with --rows takes rows of {args.matrix} counted from 1, '
+                f'got {specs}'
+            ) from None
+        return load(rows=(args.rows[0], list(args.rows[1]) + rows)), len(rows)
+    if path.suffix.lower() == '.csv':
+        inputs = args.inputs.split(',') if args.inputs else None
+        if inputs is None:
+            raise UsageError('--instruments with a CSV file needs --inputs (the input columns)')
+        return load(inputs=inputs + specs), len(specs)
+    data = load()
+    variables: dict[str, Any] = {}
+    if path.suffix.lower() == '.npz':
+        with np.load(path, allow_pickle=False) as npz:
+            variables = {k: npz[k] for k in npz.files if k in specs}
+    elif path.suffix.lower() == '.mat':
+        from scipy.io import loadmat
+
+        variables = loadmat(path, variable_names=specs)
+    columns = []
+    for name in specs:
+        if name not in variables:
+            raise UsageError(f'--instruments: {path.name} has no variable {name!r}')
+        value = np.asarray(variables[name], dtype=float)
+        value = value.reshape(value.shape[0], -1) if value.shape[0] == data.N else value.T
+        if value.ndim != 2 or value.shape[0] != data.N:
+            raise UsageError(
+                f'--instruments: variable {name!r} has shape {np.shape(variables[name])}, '
+                f'expected ({data.N},) or ({data.N}, k) like the data'
+            )
+        columns.append(value)
+    from maglev_ros import sysid
+
+    z = np.hstack(columns)
+    combined = sysid.IdData(
+        data.y,
+        np.hstack([data.u, z]),
+        data.Ts,
+        data.output_names,
+        list(data.input_names) + [f'instrument{k + 1}' for k in range(z.shape[1])],
+        data.output_units,
+        list(data.input_units) + [''] * z.shape[1],
+    )
+    return combined, z.shape[1]
+
+
+def _split_instruments(data: Any, count: int) -> tuple[Any, Any]:
+    """Split the last ``count`` inputs off as instruments: ``(data, z (N, count) or None)``."""
+    if not count:
+        return data, None
+    keep = data.nu - count
+    return data.select(inputs=range(keep)), data.u[:, keep:]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -247,19 +323,25 @@ def run(args: argparse.Namespace) -> int:
         data = load_bag_dataset(
             args.data,
             outputs=args.output,
-            inputs=args.input,
+            inputs=list(args.input) + list(args.instruments),
             Ts=args.ts,
             allow_gaps=args.allow_gaps,
             tolerance=args.tolerance,
         )
+        n_instruments = len(args.instruments)
     else:
-        data = sysid.load_data(
-            args.data,
-            Ts=args.ts,
-            rows=tuple(args.rows) if args.rows else None,
-            matrix=args.matrix,
-            outputs=args.outputs.split(',') if args.outputs else None,
-            inputs=args.inputs.split(',') if args.inputs else None,
+
+        def load(**chosen: Any) -> Any:
+            options = {
+                'rows': tuple(args.rows) if args.rows else None,
+                'outputs': args.outputs.split(',') if args.outputs else None,
+                'inputs': args.inputs.split(',') if args.inputs else None,
+            }
+            options.update(chosen)
+            return sysid.load_data(args.data, Ts=args.ts, matrix=args.matrix, **options)
+
+        data, n_instruments = (
+            _file_with_instruments(args, load) if args.instruments else (load(), 0)
         )
     if args.detrend:
         data = data.detrend(args.detrend)
@@ -268,17 +350,22 @@ def run(args: argparse.Namespace) -> int:
     if args.decimate != 1:
         data = data.decimate(args.decimate)
     est, val = data.split(split)
+    est, instruments = _split_instruments(est, n_instruments)
+    val, _ = _split_instruments(val, n_instruments)
+    if instruments is not None and not any(s == 'iv' for s, _ in models_requested):
+        raise UsageError('--instruments are used by --iv only: add --iv NA NB NK')
     result: dict[str, Any] = {
         'data': {
             'file': str(args.data),
             'N': data.N,
             'ny': data.ny,
-            'nu': data.nu,
+            'nu': est.nu,
             'Ts': data.Ts,
             'n_estimation': est.N,
             'n_validation': val.N,
             'outputs': list(data.output_names),
-            'inputs': list(data.input_names),
+            'inputs': list(est.input_names),
+            'instruments': list(data.input_names[est.nu :]),
         },
         'models': [],
     }
@@ -298,7 +385,7 @@ def run(args: argparse.Namespace) -> int:
         models_requested.append(('arx', {'na': best[0], 'nb': best[1], 'nk': best[2]}))
     models, texts = [], []
     for structure, orders in models_requested:
-        model = _fit(structure, orders, est)
+        model = _fit(structure, orders, est, instruments)
         models.append(model)
         fit_est = sysid.compare(model, est, args.horizon, args.ic).fit
         fit_val = sysid.compare(model, val, args.horizon, args.ic).fit
@@ -347,9 +434,11 @@ def run(args: argparse.Namespace) -> int:
         print(json.dumps(result, indent=1))
     else:
         header = (
-            f'{PROG}: {data.N} samples of {data.ny} output(s), {data.nu} input(s), '
+            f'{PROG}: {data.N} samples of {data.ny} output(s), {est.nu} input(s), '
             f'Ts = {data.Ts:g} s; estimation {est.N}, validation {val.N}'
         )
+        if result['data']['instruments']:
+            header += '\nInstruments of --iv: ' + ', '.join(result['data']['instruments'])
         if 'selection' in result:
             s = result['selection']
             header += (

@@ -26,6 +26,20 @@ of Soderstrom & Stoica (*System Identification*, 1989, sec. 8.2):
    ``theta = (R^T W R)^-1 R^T W r`` with ``R = Z^T Phi``, ``r = Z^T y`` and
    ``W = (Z^T Z)^-1``.
 
+``iv4(..., instruments=r)`` is IV for data taken in closed loop.  With
+feedback the noise reaches the input, so direct ARX and the IVs above (whose
+instruments are built from the measured input) are biased.  An external
+signal ``r`` that drives the loop (the excitation added to the controller's
+command) is uncorrelated with the noise, and delayed copies of it are valid
+instruments (Soderstrom & Stoica 1989, sec. 10.3; Gilson & Van den Hof,
+Automatica 41, 2005):
+
+1. weighted IV (as above) with ``p`` delays of every instrument channel,
+   ``r(t - k0) .. r(t - k0 - p + 1)``, ``k0`` the row's smallest input delay;
+2. AR(na + nb) prefilter ``L`` of its equation error; regressors, outputs and
+   instruments are filtered by ``L`` and the weighted IV is repeated
+   (``refine`` extra passes rebuild ``L`` from the latest estimate).
+
 All products come from lagged correlations (no regression matrix).
 """
 
@@ -249,6 +263,68 @@ def _noise_prefilters(
     return filters
 
 
+def _instrument_arrays(instruments: object, experiments: Sequence[IdData]) -> list[np.ndarray]:
+    """Check external instruments against the experiments; one (N_e, nz) array each."""
+    given = (
+        list(instruments)
+        if isinstance(instruments, (list, tuple)) and len(experiments) > 1
+        else [instruments]
+    )
+    if len(given) != len(experiments):
+        raise ValueError(
+            f'instruments: {len(given)} array(s) given for {len(experiments)} experiments'
+        )
+    out = []
+    for k, (z, d) in enumerate(zip(given, experiments, strict=True)):
+        z = np.asarray(z, dtype=float)
+        if z.ndim == 1:
+            z = z[:, None]
+        if z.ndim != 2 or z.shape[0] != d.N or z.shape[1] < 1:
+            raise ValueError(
+                f'instruments of experiment {k + 1} must have shape ({d.N},) or '
+                f'({d.N}, n_instruments) like its data, got {z.shape}'
+            )
+        if not np.all(np.isfinite(z)):
+            raise ValueError(f'instruments of experiment {k + 1} contain NaN or infinite values')
+        if not np.any(z):
+            raise ValueError(f'instruments of experiment {k + 1} are all zero')
+        out.append(np.ascontiguousarray(z))
+    return out
+
+
+def _external_iv(
+    experiments: Sequence[IdData], orders: Orders, instruments: Sequence[np.ndarray], refine: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted IV with delayed external signals as instruments, then prefiltered passes."""
+    ny, nu = orders.ny, orders.nu
+    nz = instruments[0].shape[1]
+    full = [signal_matrix(d, z) for d, z in zip(experiments, instruments, strict=True)]
+    sizes = orders.row_sizes()
+    blocks = []
+    for i in range(ny):
+        used = [int(orders.nk[i, j]) for j in range(nu) if orders.nb[i, j]]
+        first = max(0, min(used)) if used else 1
+        count = max(1, sizes[i])
+        ins = np.array([(ny + nu + j, first, count, 1) for j in range(nz)], dtype=np.int64)
+        start = max(orders.row_start(i), first + count - 1)
+        blocks.append((ins, start))
+
+    def solve(prefilters: list[np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+        thetas, covs = [], []
+        for i, (ins, start) in enumerate(blocks):
+            L = np.ones(1) if prefilters is None else prefilters[i]
+            signals = full if len(L) == 1 else [fir_rows(L, S) for S in full]
+            theta, cov = _weighted_iv(signals, row_blocks(orders, i), ins, i, start + len(L) - 1)
+            thetas.append(theta)
+            covs.append(cov)
+        return np.concatenate(thetas), sla.block_diag(*covs)
+
+    theta, cov = solve(None)
+    for _ in range(1 + max(0, int(refine))):
+        theta, cov = solve(_noise_prefilters(experiments, orders, theta))
+    return theta, cov
+
+
 def iv4(
     data: IdData | Sequence[IdData],
     na: object,
@@ -256,6 +332,7 @@ def iv4(
     nk: object = 1,
     refine: int = 0,
     method: str = 'toolbox',
+    instruments: object = None,
 ) -> PolyModel:
     """Estimate an ARX model by the four-stage instrumental-variable method.
 
@@ -288,7 +365,14 @@ def iv4(
         inputs per input channel as instruments, the final stage those plus
         ``na`` lags of the simulated output; the covariance is
         ``lambda (R^T W R)^-1`` (``lambda``: variance of the prefiltered
-        equation error).
+        equation error).  Ignored with ``instruments``.
+    instruments : array_like, shape (N,) or (N, nz), optional
+        External signals uncorrelated with the noise, e.g. the excitation
+        added to a feedback controller's command (one array per experiment
+        for several experiments).  Then the instruments are ``p`` delays of
+        each of them, not signals built from the input: consistent in
+        closed loop, where direct ARX and input-based IV are biased (module
+        docstring).  ``refine`` adds prefiltered passes.
 
     Returns
     -------
@@ -302,6 +386,17 @@ def iv4(
     first = experiments[0]
     orders = make_orders(first.ny, first.nu, na=na, nb=nb, nk=nk)
     check_data(experiments, orders)
+    if instruments is not None:
+        z = _instrument_arrays(instruments, experiments)
+        theta, cov = _external_iv(experiments, orders, z, refine)
+        return finish_model(
+            'iv4',
+            orders,
+            theta,
+            cov,
+            experiments,
+            f'IV with {z[0].shape[1]} external instrument channel(s) (weighted, prefiltered)',
+        )
     if method == 'extended':
         theta, cov = _extended_iv(experiments, orders)
         return finish_model(
