@@ -56,6 +56,11 @@ class EstimationReport:
         Akaike's information criterion.
     iterations : int
         Iterations of an iterative method (0 for direct solutions).
+    converged : bool
+        False if an iterative method stopped at its cap ``max_iter`` while the
+        loss was still decreasing.
+    max_iter : int
+        The iteration cap (0 for direct solutions).
     """
 
     method: str
@@ -65,6 +70,8 @@ class EstimationReport:
     fpe: float
     aic: float
     iterations: int = 0
+    converged: bool = True
+    max_iter: int = 0
 
 
 def _poly_text(coeffs: np.ndarray, monic: bool, first_lag: int = 0) -> str:
@@ -566,6 +573,11 @@ class PolyModel:
                 + (f', {r.iterations} iterations' if r.iterations else '')
                 + '.'
             )
+            if not r.converged:
+                lines.append(
+                    f'  Stopped at the iteration cap ({r.max_iter}) before converging: '
+                    'raise it (max_iter, --max-iter).'
+                )
             lines.append(f'  Fit to estimation data: {fits} (prediction focus)')
             lines.append(f'  FPE: {r.fpe:.4g}, MSE: {mses}')
         return '\n'.join(lines)
