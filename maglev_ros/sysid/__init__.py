@@ -15,7 +15,7 @@ from .datafile import DataFileError, load_data
 from .dataset import IdData, merge
 from .io import export_mat, load_model, model_from_dict, model_to_dict, save_model
 from .iv import iv4
-from .model import EstimationReport, PolyModel
+from .model import DivergenceError, EstimationReport, PolyModel
 from .oe_bj import bj, oe
 from .orders import OrderError, Orders, make_orders
 from .plots import bode_plot, compare_plot, resid_plot
@@ -26,6 +26,7 @@ from .validation import CompareResult, ResidualAnalysis, compare, resid
 __all__ = [
     'CompareResult',
     'DataFileError',
+    'DivergenceError',
     'EstimationReport',
     'IdData',
     'OrderError',
