@@ -34,8 +34,10 @@ command) is uncorrelated with the noise, and delayed copies of it are valid
 instruments (Soderstrom & Stoica 1989, sec. 10.3; Gilson & Van den Hof,
 Automatica 41, 2005):
 
-1. weighted IV (as above) with ``p`` delays of every instrument channel,
-   ``r(t - k0) .. r(t - k0 - p + 1)``, ``k0`` the row's smallest input delay;
+1. weighted IV (as above) with ``m >= p`` delays of every instrument
+   channel, ``r(t - k0) .. r(t - k0 - m + 1)``, ``k0`` the row's smallest
+   input delay; ``m`` doubles from ``p`` until the delays span ``p + 2``
+   directions (a band-limited excitation needs more delays than ``p``);
 2. AR(na + nb) prefilter ``L`` of its equation error; regressors, outputs and
    instruments are filtered by ``L`` and the weighted IV is repeated
    (``refine`` extra passes rebuild ``L`` from the latest estimate).
@@ -292,6 +294,31 @@ def _instrument_arrays(instruments: object, experiments: Sequence[IdData]) -> li
     return out
 
 
+def _instrument_lags(instruments: Sequence[np.ndarray], p: int, limit: int) -> int:
+    """Delays per instrument channel: enough for ``p + 2`` independent instruments.
+
+    A band-limited excitation (a multisine or a slow PRBS) is nearly a
+    combination of its few neighbouring delays, so ``p`` delays may span
+    fewer than ``p`` directions.  The count doubles from ``p`` until the
+    Toeplitz matrices of the channels' autocorrelations have a numerical
+    rank (singular values above 1e-9 of the largest) of ``p + 2`` together,
+    or ``limit`` is reached.
+    """
+    z = np.vstack(instruments)
+    centred = z - z.mean(axis=0)
+    size = 1 << int(2 * z.shape[0] - 1).bit_length()
+    acfs = np.fft.irfft(np.abs(np.fft.rfft(centred, size, axis=0)) ** 2, size, axis=0)
+    count = p
+    while True:
+        rank = 0
+        for acf in acfs.T:
+            s = np.linalg.eigvalsh(sla.toeplitz(acf[:count]))
+            rank += int(np.count_nonzero(s > 1e-9 * max(float(s[-1]), 1e-300)))
+        if rank >= p + 2 or count >= limit:
+            return count
+        count = min(2 * count, limit)
+
+
 def _external_iv(
     experiments: Sequence[IdData], orders: Orders, instruments: Sequence[np.ndarray], refine: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -300,11 +327,12 @@ def _external_iv(
     nz = instruments[0].shape[1]
     full = [signal_matrix(d, z) for d, z in zip(experiments, instruments, strict=True)]
     sizes = orders.row_sizes()
+    shortest = min(d.N for d in experiments)
     blocks = []
     for i in range(ny):
         used = [int(orders.nk[i, j]) for j in range(nu) if orders.nb[i, j]]
         first = max(0, min(used)) if used else 1
-        count = max(1, sizes[i])
+        count = _instrument_lags(instruments, max(1, sizes[i]), max(8, shortest // 4))
         ins = np.array([(ny + nu + j, first, count, 1) for j in range(nz)], dtype=np.int64)
         start = max(orders.row_start(i), first + count - 1)
         blocks.append((ins, start))

@@ -15,10 +15,13 @@ B_CL = np.array([0.0, 0.5, 0.2])
 THETA_CL = np.array([-1.5, 0.7, 0.5, 0.2])  # ARX 2 2 1 layout: a1 a2 b1 b2
 
 
-def simulate_loop(N, seed, gain=0.5, noise=0.5):
-    """Return ``(data, r)``: the closed-loop data set and the excitation (N,)."""
+def simulate_loop(N, seed, gain=0.5, noise=0.5, hold=1):
+    """Return ``(data, r)``: the closed-loop data set and the excitation (N,).
+
+    ``hold`` > 1 holds each random level that many samples (a slow, band-limited PRBS).
+    """
     rng = np.random.default_rng(seed)
-    r = rng.choice([-1.0, 1.0], N)
+    r = np.repeat(rng.choice([-1.0, 1.0], -(-N // hold)), hold)[:N]
     v = noise * rng.standard_normal(N)
     y0 = np.zeros(N)
     y = np.zeros(N)

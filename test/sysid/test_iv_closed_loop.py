@@ -47,3 +47,11 @@ def test_bad_instruments_name_the_problem(make, match):
     data, r = simulate_loop(4000, 5)
     with pytest.raises(ValueError, match=match):
         iv4(data, 2, 2, 1, instruments=make(r))
+
+
+def test_band_limited_excitation_gets_enough_delays():
+    """A slow PRBS (levels held 6 samples): 4 delays span too few directions; more are used."""
+    data, r = simulate_loop(30000, 6, hold=6)
+    model = iv4(data, 2, 2, 1, instruments=r)
+    assert relative_error(model.theta) < 0.03
+    assert relative_error(arx(data, 2, 2, 1).theta) > 0.2

@@ -106,3 +106,18 @@ def test_bad_band():
     plant = local_plant(first_order(1.0, [1, -1, 0, 0], 1.0, [0, 0, 0, 0]), TS)
     with pytest.raises(PhysicsCheckError, match='band must be'):
         compare_response(plant, plant, (10.0, 5.0))
+
+
+def test_undamped_resonances_are_left_out():
+    """The linearised V2 magnet has undamped modes: 14.3 Hz shows in the x path, 6.6 Hz not."""
+    plant = local_plant(linearize(make_model('maggy_v2')).reduced(), TS, 'Bx_0', 'x', 1)
+    cancelled, resonance = plant.resonances()
+    assert 6.4 < cancelled < 6.8 and 14.0 < resonance < 14.6
+    near = compare_response(plant, plant, (5.0, 50.0), n=400)
+    assert near.excluded == (resonance,)
+    assert np.all(np.abs(near.frequencies - resonance) > 1.0)
+    assert 'without +-1 Hz around the undamped resonance(s) at 14.30 Hz' in near.summary()
+    kept = compare_response(plant, plant, (5.0, 50.0), n=400, resonance_width=0.0)
+    assert kept.excluded == () and kept.frequencies.size == 400
+    with pytest.raises(PhysicsCheckError, match='nothing left to compare'):
+        compare_response(plant, plant, (14.0, 14.5))
