@@ -22,9 +22,10 @@ class PdController:
     same cut-off (the difference of a filtered noisy field is still white).
     ``g = kp e + kd de/dt`` and the coil pairs are driven antisymmetrically:
     ``x+ = -g_x, x- = +g_x`` (a positive x+ current pushes the magnet to +x,
-    and Bx grows with x), the same for y. Active only while ``|Bz - Bz_base|`` (the field without the
-    magnet) exceeds ``magnet_threshold``; z and the tilts are left to the
-    permanent magnets, as on the board.
+    and Bx grows with x), the same for y. Active only while
+    ``|Bz - Bz_base|`` (Bz_base: the field without the magnet) exceeds
+    ``magnet_threshold``; z and the tilts are left to the permanent magnets,
+    as on the board.
 
     Parameters
     ----------
