@@ -8,6 +8,7 @@ from ..physics import linearize
 from ..physics.linearization import REDUCED_STATES
 from .config import ControllerConfig
 from .design import design_lqr, steady_state
+from .kernels import lqr_law
 from .safety import ControllerStatus, Watchdog
 
 __all__ = ['LqrController']
@@ -49,6 +50,21 @@ class LqrController:
         self.limit = self.config.current_limit
         self.watchdog = Watchdog(self.config.input_timeout, self.config.rearm_samples)
         self.enabled = True
+        # the gain split per part of xi, on the full 12-state (gamma, wz: zero columns)
+        K = self.design.K
+        layout = self.design.layout
+        m = self.n_inputs
+        self._Kx = np.zeros((m, 12))
+        self._Kx[:, self.reduced] = K[:, layout['dx']]
+        self._Ki = np.ascontiguousarray(K[:, layout['i']]) if 'i' in layout else np.zeros((m, m))
+        self._Kc = (
+            np.ascontiguousarray(K[:, layout['c_prev']])
+            if 'c_prev' in layout
+            else np.zeros((m, m))
+        )
+        self._Ke = np.ascontiguousarray(K[:, layout['e']]) if 'e' in layout else np.zeros((m, 3))
+        self._has_i = 'i' in layout
+        self._has_e = 'e' in layout
         self.set_reference(None)
         self.reset()
 
@@ -84,6 +100,10 @@ class LqrController:
             offset = p - self.x_eq[:3]
         self.reference = self.x_eq[:3] + offset
         self._dx_ss, self._u_ss = steady_state(self.linear.A, self.linear.B, offset)
+        x_ss = self.x_eq.copy()
+        x_ss[self.reduced] += self._dx_ss
+        u = self._u_ss
+        self._bias = u + self._Kx @ x_ss + self._Ki @ u + self._Kc @ u
 
     def command(self, t: float, state=None, currents=None) -> np.ndarray:
         """Return the coil command for time ``t``.
@@ -114,22 +134,22 @@ class LqrController:
         if was_safe:  # just re-armed: start clean
             self._e[:] = 0.0
         x = np.asarray(state, dtype=float)
-        layout = self.design.layout
-        xi = np.empty(self.design.K.shape[1])
-        xi[layout['dx']] = (x - self.x_eq)[self.reduced] - self._dx_ss
-        if 'i' in layout:
-            i = self._c_prev if currents is None else np.asarray(currents, dtype=float)
-            xi[layout['i']] = i - self._u_ss
-        if 'c_prev' in layout:
-            xi[layout['c_prev']] = self._c_prev - self._u_ss
-        if 'e' in layout:
-            xi[layout['e']] = self._e
-        c = self._u_ss - self.design.K @ xi
-        clipped = np.clip(c, -self.limit, self.limit)
-        saturated = bool(np.any(clipped != c))
+        i = self._c_prev if currents is None or not self._has_i else currents
+        clipped, saturated = lqr_law(
+            x,
+            np.asarray(i, dtype=float),
+            self._c_prev,
+            self._e,
+            self._Kx,
+            self._Ki,
+            self._Kc,
+            self._Ke,
+            self._bias,
+            self.limit,
+        )
         if saturated:
             self.saturated += 1
-        elif 'e' in layout:  # conditional integration (anti-windup)
+        elif self._has_e:  # conditional integration (anti-windup)
             self._e += self.config.dt * (x[:3] - self.reference)
         self._c_prev = clipped
         self.last_command = clipped

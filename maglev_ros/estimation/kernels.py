@@ -15,6 +15,7 @@ from numba import njit
 from ..physics import kernels as phys
 
 __all__ = [
+    'spd_inverse',
     'kf_predict',
     'gated_update',
     'ekf_predict',
@@ -26,11 +27,101 @@ __all__ = [
 
 
 @njit(cache=True)
+def _mm(a, b):  # pragma: no cover - jitted
+    """Return a @ b by plain loops (no BLAS call: faster for these small matrices)."""
+    n, k = a.shape
+    m = b.shape[1]
+    out = np.zeros((n, m))
+    for i in range(n):
+        for p in range(k):
+            v = a[i, p]
+            if v != 0.0:
+                for j in range(m):
+                    out[i, j] += v * b[p, j]
+    return out
+
+
+@njit(cache=True)
+def _mmt(a, b):  # pragma: no cover - jitted
+    """Return a @ b.T by plain loops."""
+    n, k = a.shape
+    m = b.shape[0]
+    out = np.empty((n, m))
+    for i in range(n):
+        for j in range(m):
+            acc = 0.0
+            for p in range(k):
+                acc += a[i, p] * b[j, p]
+            out[i, j] = acc
+    return out
+
+
+@njit(cache=True)
+def _mv(a, v):  # pragma: no cover - jitted
+    n, k = a.shape
+    out = np.zeros(n)
+    for i in range(n):
+        acc = 0.0
+        for p in range(k):
+            acc += a[i, p] * v[p]
+        out[i] = acc
+    return out
+
+
+@njit(cache=True)
+def spd_inverse(s):  # pragma: no cover - jitted
+    """Inverse of a small symmetric positive definite matrix (Cholesky), symmetric."""
+    n = s.shape[0]
+    L = np.zeros((n, n))
+    for j in range(n):
+        d = s[j, j]
+        for p in range(j):
+            d -= L[j, p] * L[j, p]
+        if not d > 0.0:
+            return np.linalg.inv(s)  # not SPD to round-off: fall back to LU
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, n):
+            acc = s[i, j]
+            for p in range(j):
+                acc -= L[i, p] * L[j, p]
+            L[i, j] = acc / L[j, j]
+    # inverse of L (lower triangular), then inv(S) = inv(L)' inv(L)
+    li = np.zeros((n, n))
+    for j in range(n):
+        li[j, j] = 1.0 / L[j, j]
+        for i in range(j + 1, n):
+            acc = 0.0
+            for p in range(j, i):
+                acc -= L[i, p] * li[p, j]
+            li[i, j] = acc / L[i, i]
+    out = np.empty((n, n))
+    for i in range(n):
+        for j in range(i, n):
+            acc = 0.0
+            for p in range(j, n):
+                acc += li[p, i] * li[p, j]
+            out[i, j] = acc
+            out[j, i] = acc
+    return out
+
+
+@njit(cache=True)
+def _symmetrise(p):  # pragma: no cover - jitted
+    n = p.shape[0]
+    for i in range(n):
+        for j in range(i + 1, n):
+            v = 0.5 * (p[i, j] + p[j, i])
+            p[i, j] = v
+            p[j, i] = v
+    return p
+
+
+@njit(cache=True)
 def kf_predict(x, P, F, B, u, Q):  # pragma: no cover - jitted
     """Linear prediction: returns (F x + B u, F P F' + Q), P symmetrised."""
-    xn = F @ x + B @ u
-    Pn = F @ P @ F.T + Q
-    return xn, 0.5 * (Pn + Pn.T)
+    xn = _mv(F, x) + _mv(B, u)
+    Pn = _mmt(_mm(F, P), F) + Q
+    return xn, _symmetrise(Pn)
 
 
 @njit(cache=True)
@@ -68,8 +159,8 @@ def gated_update(x, P, H, r_diag, nu, available, gate):  # pragma: no cover - ji
     """
     n = x.shape[0]
     k = available.shape[0]
-    PHT = P @ H.T
-    S = H @ PHT
+    PHT = _mmt(P, H)
+    S = _mm(H, PHT)
     for i in range(S.shape[0]):
         S[i, i] += r_diag[i]
     accepted = np.zeros(k, dtype=np.bool_)
@@ -80,7 +171,7 @@ def gated_update(x, P, H, r_diag, nu, available, gate):  # pragma: no cover - ji
             continue
         block = S[3 * s : 3 * s + 3, 3 * s : 3 * s + 3].copy()
         v = nu[3 * s : 3 * s + 3].copy()
-        value = v @ np.linalg.solve(block, v)
+        value = v @ _mv(spd_inverse(block), v)
         nis_sensor[s] = value
         if value <= gate:
             accepted[s] = True
@@ -107,16 +198,16 @@ def gated_update(x, P, H, r_diag, nu, available, gate):  # pragma: no cover - ji
         rs[a] = r_diag[ia]
         for b in range(rows):
             Ss[a, b] = S[ia, index[b]]
-    SI = np.linalg.inv(Ss)
-    K = PHTs @ SI
-    xn = x + K @ vs
-    IKH = -K @ Hs
+    SI = spd_inverse(Ss)
+    K = _mm(PHTs, SI)
+    xn = x + _mv(K, vs)
+    IKH = -_mm(K, Hs)
     for i in range(n):
         IKH[i, i] += 1.0
     KR = K * rs  # K R (R diagonal)
-    Pn = IKH @ P @ IKH.T + KR @ K.T
-    nis = vs @ SI @ vs
-    return xn, 0.5 * (Pn + Pn.T), accepted, nis_sensor, nis, rows
+    Pn = _mmt(_mm(IKH, P), IKH) + _mmt(KR, K)
+    nis = vs @ _mv(SI, vs)
+    return xn, _symmetrise(Pn), accepted, nis_sensor, nis, rows
 
 
 @njit(cache=True)
@@ -230,8 +321,8 @@ def kf_sample(
     m = y.shape[0]
     du = held - u_eq
     nu = np.empty(m)
-    hx = H @ x
-    ddu = D @ du
+    hx = _mv(H, x)
+    ddu = _mv(D, du)
     for i in range(m):
         v = y[i] - y_eq[i] - ddu[i] - hx[i]
         nu[i] = v if np.isfinite(v) else 0.0
