@@ -7,6 +7,7 @@ line on stderr, ``<prog>: error: <what is wrong>``, never a traceback.
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from collections.abc import Callable, Sequence
 
@@ -18,7 +19,15 @@ class UsageError(ValueError):
 
 
 class Parser(argparse.ArgumentParser):
-    """An ArgumentParser that raises :class:`UsageError` instead of printing usage."""
+    """An ArgumentParser that raises :class:`UsageError` instead of printing usage.
+
+    Negative numbers in exponent notation (``--ts -2e-4``) are values, not
+    options: argparse's own pattern knows only ``-2`` and ``-0.5``.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
 
     def error(self, message: str) -> None:  # noqa: D102 - one-line usage errors
         raise UsageError(message)
