@@ -38,6 +38,8 @@ from .fortran_output import captured_fd_stdout
 from .iv import iv4
 from .model import PolyModel
 from .oe_bj import bj, oe
+from .orders import OrderError, make_orders
+from .regression import check_data
 from .validation import ResidualAnalysis, compare, resid
 
 __all__ = [
@@ -103,6 +105,42 @@ class ModelSpec:
         if all(np.ndim(v) == 0 for v in values):
             return f'{head} {" ".join(str(int(v)) for v in values)}'
         return head
+
+    def check(self, data: IdData) -> None:
+        """Refuse orders that cannot be estimated on ``data`` (before anything is fitted).
+
+        Parameters
+        ----------
+        data : IdData
+            Estimation data.
+
+        Raises
+        ------
+        ValueError
+            Orders inconsistent with the channels (``OrderError``), a
+            single-input structure on multi-channel data, or fewer samples than
+            parameters; the message names the model.
+        """
+        o = dict(self.orders)
+        if self.structure in ('oe', 'bj') and (data.ny, data.nu) != (1, 1):
+            raise OrderError(
+                f'{self.label}: OE and BJ are single-input single-output here; the data '
+                f'have {data.ny} outputs and {data.nu} inputs'
+            )
+        try:
+            if self.structure in ('oe', 'bj'):
+                orders = make_orders(
+                    1, 1, na=0, nb=o['nb'], nk=o.get('nk', 1), nc=o.get('nc', 0),
+                    nd=o.get('nd', 0), nf=o['nf'],
+                )  # fmt: skip
+            else:
+                orders = make_orders(
+                    data.ny, data.nu, na=o['na'], nb=o['nb'], nk=o.get('nk', 1),
+                    nc=o.get('nc', 0),
+                )  # fmt: skip
+            check_data([data], orders)
+        except ValueError as err:
+            raise type(err)(f'{self.label}: {err}') from None
 
     def fit(
         self,
@@ -317,8 +355,15 @@ def _fit_row(
     try:
         model = spec.fit(est, max_iter, progress)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+        reason = f'estimation failed: {err}'
+        if isinstance(err, np.linalg.LinAlgError) and 'singular' in str(err).lower():
+            reason = (
+                'estimation failed: singular equations, the data do not determine the '
+                'parameters (an input that excites nothing, such as a constant one, or '
+                'more parameters than the input excites): lower the orders or check the inputs'
+            )
         return ModelRow(
-            label, spec.structure, 'failed', f'estimation failed: {err}', None, None,
+            label, spec.structure, 'failed', reason, None, None,
             _nan(ny), _nan(ny), _nan(ny), None, (), outputs,
         )  # fmt: skip
     notes = []
@@ -344,7 +389,7 @@ def _fit_row(
             reason = (
                 f'unstable (largest pole {_largest_pole(model):.3g}); its unstable poles '
                 f'cancel against zeros: validated without the {len(pairs)} cancelling '
-                f'pair(s), as {reduced.orders.describe()}'
+                f'pair(s), as {" ".join(reduced.orders.describe().split())}'
             )
         else:
             status, validated = 'unstable', None
@@ -400,7 +445,8 @@ def identify(
     max_iter : int, optional
         Iteration cap of the prediction-error methods.
     progress : callable, optional
-        ``(label, step, loss)`` after every iteration of an iterative estimator.
+        ``(label, step, loss)``: step 0 (loss NaN) when a model starts, then
+        after every iteration of an iterative estimator.
     hints : sequence of str
         Advice about the data, passed through to the result.
 
@@ -413,11 +459,19 @@ def identify(
     ------
     DegenerateDataError
         If an output is the same signal as an input.
+    ValueError
+        If some spec's orders cannot be estimated on the data (checked for all
+        specs before any model is fitted, so nothing computed is lost).
     """
     check_channels(estimation)
+    for spec in specs:
+        spec.check(estimation)
     rows = []
     for spec in specs:
-        step = None if progress is None else _bind(progress, spec.label)
+        step = None
+        if progress is not None:
+            progress(spec.label, 0, float('nan'))
+            step = _bind(progress, spec.label)
         with captured_fd_stdout() as lapack:
             row = _fit_row(spec, estimation, validation, horizon, ic, max_iter, step, spec.label)
         if lapack.text:
