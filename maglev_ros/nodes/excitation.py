@@ -9,7 +9,8 @@ band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
 
 One period of ``length`` samples is generated at start and repeated
 ``cycles`` times (0: forever); afterwards zero currents plus ``offset`` are
-sent. Triggers:
+sent. ``max_commands`` (0: no limit) stops publishing after that many
+commands: a lockstep simulation then takes exactly that many steps. Triggers:
 
 ``sample`` (default)
     one command per sample received on ``maglev/currents`` (from the
@@ -84,6 +85,8 @@ class ExcitationConfig:
         ``sample`` or ``timer``.
     sample_rate : float
         Hz (timer trigger).
+    max_commands : int
+        Commands to publish before stopping (0: no limit).
     """
 
     signal: str
@@ -96,6 +99,7 @@ class ExcitationConfig:
     cycles: int
     trigger: str
     sample_rate: float
+    max_commands: int = 0
 
 
 _PARAMETERS = {
@@ -109,6 +113,7 @@ _PARAMETERS = {
     'cycles': (0, 'periods to send (0: forever); then offset only'),
     'trigger': ('sample', 'sample: one command per maglev/currents message; timer: wall clock'),
     'sample_rate': (5000.0, 'timer trigger: commands per second, Hz'),
+    'max_commands': (0, 'commands to publish, then none (0: no limit; lockstep: exact samples)'),
 }
 
 
@@ -170,6 +175,7 @@ def build_config(values: dict) -> ExcitationConfig:
         cycles=integer('cycles', 0),
         trigger=choice('trigger', TRIGGERS),
         sample_rate=rate,
+        max_commands=integer('max_commands', 0),
     )
 
 
@@ -232,8 +238,15 @@ class ExcitationNode(Node):
         """True once all cycles were sent (offset only from then on)."""
         return bool(self.config.cycles) and self.sent >= self.config.cycles * self.config.length
 
+    @property
+    def exhausted(self) -> bool:
+        """True once ``max_commands`` commands were published (nothing more is sent)."""
+        return bool(self.config.max_commands) and self.sent >= self.config.max_commands
+
     def publish_next(self) -> None:
-        """Publish the next command of the sequence."""
+        """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
+        if self.exhausted:
+            return
         if self.finished:
             data = self._rest
         else:
