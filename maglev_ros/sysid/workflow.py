@@ -519,7 +519,7 @@ def identify_outputs(
                     label,
                     spec.structure,
                     'no response',
-                    'no response to the inputs',
+                    'constant after detrending (e.g. zero by symmetry)',
                     None,
                     None,
                     _nan(1),
