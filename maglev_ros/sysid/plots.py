@@ -42,7 +42,7 @@ __all__ = [
     'resid_plot',
 ]
 
-ZOOM_SAMPLES = 150  # samples in the zoomed window of compare (30 ms at 5 kHz)
+ZOOM_SAMPLES = 60  # samples in the zoomed window of compare (12 ms at 5 kHz)
 MEASURED = dict(color='black', lw=1.0)
 
 
@@ -73,7 +73,7 @@ def display_scale(unit: str) -> tuple[float, str]:
 def _axis_label(ax, name: str, unit: str) -> None:
     """Label a y axis; without a unit scale, use engineering prefixes (no 1e-4 offsets)."""
     ax.set_ylabel(f'{name} [{unit}]' if unit else name)
-    if unit not in ('mT',):
+    if unit not in ('mT', 'µT'):
         ax.yaxis.set_major_formatter(EngFormatter(unit='', places=None, sep=''))
 
 
@@ -113,9 +113,10 @@ def compare_figure(
 ) -> Figure:
     """Plot measured outputs against each model's output, with a zoom and the errors.
 
-    Per output three panels: the whole record (the zoomed window shaded), the
-    zoomed window (measured samples as dots, the inputs' steps visible), and
-    the error ``y - yhat`` of each model over the whole record.
+    Per output: the whole record (the zoomed window shaded), the zoomed window
+    (measured samples as dots), the inputs' steps in that window, and the error
+    ``y - yhat`` of each model over the whole record (in µT when a field's
+    error is below 10 uT).
 
     Parameters
     ----------
@@ -135,7 +136,8 @@ def compare_figure(
     Returns
     -------
     Figure
-        Three axes per output: whole record, zoom, error.
+        Per output the axes whole record, zoom, inputs in the zoom (if any
+        input), error.
     """
     labels = list(labels) if labels else [m.structure for m in models]
     results = [compare(model, data, horizon, ic) for model in models]
@@ -143,13 +145,18 @@ def compare_figure(
     n_zoom = int(min(max(zoom, 10), data.N))
     z0 = (data.N - n_zoom) // 2
     zs = slice(z0, z0 + n_zoom)
-    fig = Figure(figsize=(11, 6.6 * data.ny), layout='constrained')
-    grid = fig.subplots(3 * data.ny, 1, squeeze=False)[:, 0]
+    panels = 4 if data.nu else 3
+    ratios = [3, 3, 1.4, 2.2] if data.nu else [3, 3, 2.2]
+    fig = Figure(figsize=(11, 7.6 * data.ny), layout='constrained')
+    grid = fig.subplots(
+        panels * data.ny, 1, squeeze=False, gridspec_kw={'height_ratios': ratios * data.ny}
+    )[:, 0]
     what = 'simulation' if horizon is None else f'{horizon}-step prediction'
     for i in range(data.ny):
         scale, unit = display_scale(data.output_units[i])
         name = data.output_names[i]
-        full, close, error = grid[3 * i : 3 * i + 3]
+        axes = list(grid[panels * i : panels * (i + 1)])
+        full, close, error = axes[0], axes[1], axes[-1]
         y = data.y[:, i] * scale
         full.plot(t, y, label='measured', **MEASURED)
         close.plot(t[zs], y[zs], marker='o', ms=2.5, label='measured (samples)', **MEASURED)
@@ -161,21 +168,26 @@ def compare_figure(
             full.plot(t, yhat, color=color, lw=0.7, alpha=0.8, label=text)
             close.plot(t[zs], yhat[zs], color=color, lw=1.2, label=text)
             errors.append((float(np.sqrt(np.mean((y - yhat) ** 2))), k, label, y - yhat))
+        # an error far below the signal gets its own unit (mT -> µT)
+        escale, eunit = (
+            (1e3, 'µT') if unit == 'mT' and max(e[0] for e in errors) < 1e-2 else (1.0, unit)
+        )
         # largest error first, so that the best model is drawn on top and stays visible
         for rms, k, label, e in sorted(errors, key=lambda item: -item[0]):
-            rms_text = EngFormatter(unit=unit, places=3 if unit != 'mT' else None)(rms)
-            error.plot(t, e, color=f'C{k}', lw=0.6, label=f'{label} (rms {rms_text})')
+            rms_text = f'{rms * escale:.3g} {eunit}' if eunit else EngFormatter(places=3)(rms)
+            error.plot(t, e * escale, color=f'C{k}', lw=0.6, label=f'{label} (rms {rms_text})')
         if data.nu:
-            inputs = close.twinx()
+            inputs = axes[2]
             for j in range(data.nu):
-                label = f'input {data.input_names[j]}'
-                style = dict(color='0.55', lw=0.9, ls='--', drawstyle='steps-post')
-                inputs.plot(t[zs], data.u[zs, j], label=label, **style)
+                inputs.plot(t[zs], data.u[zs, j], color=f'C{7 + j % 3}', lw=1.0,
+                            drawstyle='steps-post', label=data.input_names[j])  # fmt: skip
             iunit = data.input_units[0]
-            inputs.set_ylabel(f'input [{iunit}]' if iunit else 'input', color='0.4')
-        # one legend for the zoom: measured samples and inputs (model colours as above)
-        handles = close.get_lines()[:1] + (inputs.get_lines() if data.nu else [])
-        close.legend(handles=handles, loc='lower left', fontsize='small', framealpha=0.9)
+            inputs.set_ylabel(f'input [{iunit}]' if iunit else 'input')
+            inputs.set_title('inputs in the zoomed window', loc='left')
+            inputs.legend(loc='upper right', fontsize='small', framealpha=0.9, ncols=data.nu)
+        for ax in axes[1:-1]:  # zoom and its inputs: the same window, one sample past
+            ax.set_xlim(t[z0] - 0.5 * data.Ts, t[z0 + n_zoom - 1] + 1.5 * data.Ts)
+        close.legend(loc='upper right', fontsize='small', framealpha=0.9)
         full.axvspan(t[zs][0], t[zs][-1], color='0.85', zorder=0)
         full.set_title(f'{name}: measured vs model {what} on validation data', loc='left')
         close.set_title(
@@ -184,8 +196,10 @@ def compare_figure(
         )
         error.set_title(f'error: measured - model ({what})', loc='left')
         error.axhline(0.0, color='k', lw=0.5)
-        for ax in (full, close, error):
+        for ax in (full, close):
             _axis_label(ax, name, unit)
+        _axis_label(error, 'error', eunit)
+        for ax in axes:
             ax.grid(True, lw=0.3)
             ax.set_xlabel('time [s]')
         full.set_xlim(t[0], t[-1])

@@ -33,7 +33,7 @@ def test_compare_figure_content():
     est, val = lab_second_order(N=4000).detrend().split(0.5)
     models = [arx(est, 2, 2, 1), arx(est, 1, 1, 1)]
     fig = compare_figure(val, models, ['ARX 2 2 1', 'ARX 1 1 1'], ic='estimate', zoom=100)
-    full, zoom, error = fig.axes[:3]
+    full, zoom, inputs, error = fig.axes[:4]
     assert full.get_ylabel() == 'Bx [mT]'  # fields in T are drawn in mT
     assert full.get_xlim()[0] == val.time[0] == 0.4  # the validation half's own time axis
     legend = [t.get_text() for t in full.get_legend().get_texts()]
@@ -47,6 +47,8 @@ def test_compare_figure_content():
     assert error.get_title(loc='left').startswith('error: measured - model')
     assert 0.5 < np.abs(full.get_lines()[0].get_ydata()).max() < 10  # about 2 mT, not 2e-3
     assert len(error.get_lines()) == 3  # two models and the zero line
+    steps = inputs.get_lines()[0]
+    assert steps.get_drawstyle() == 'steps-post' and len(steps.get_xdata()) == 100
 
 
 def test_bode_skips_structural_zeros_and_resid_names_the_model():
