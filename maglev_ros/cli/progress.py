@@ -10,9 +10,10 @@ import sys
 
 from tqdm import tqdm
 
-__all__ = ['progress_bar']
+__all__ = ['progress_bar', 'stage']
 
 _FORMAT = '{desc}: {percentage:3.0f}%|{bar}| {n:.3g}/{total:.3g} {unit} [{elapsed}<{remaining}]'
+_PERCENT = '{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]'
 
 
 def progress_bar(total: float | None, desc: str, unit: str, quiet: bool = False) -> tqdm:
@@ -43,5 +44,33 @@ def progress_bar(total: float | None, desc: str, unit: str, quiet: bool = False)
         disable=True if quiet else None,  # None: off when stderr is not a TTY
         leave=False,
         dynamic_ncols=True,
-        bar_format=_FORMAT if total else None,
+        bar_format=(_PERCENT if unit == '%' else _FORMAT) if total else None,
+    )
+
+
+def stage(text: str, quiet: bool = False) -> tqdm:
+    """Return a one-line status (``text...``) on stderr for a step of unknown length.
+
+    Shown, like :func:`progress_bar`, only on a terminal and without ``--quiet``;
+    cleared when the context ends.
+
+    Parameters
+    ----------
+    text : str
+        What is being done, e.g. ``'finding the equilibrium'``.
+    quiet : bool
+        ``--quiet``: nothing.
+
+    Returns
+    -------
+    tqdm
+        Use as a context manager.
+    """
+    return tqdm(
+        total=None,
+        desc=text,
+        file=sys.stderr,
+        disable=True if quiet else None,
+        leave=False,
+        bar_format='{desc}...',
     )
