@@ -20,9 +20,11 @@ default ARX delay is 0 (a record's field and PWM are simultaneous)::
     maglev-lab --virtual-board --magnet fixed --duration 3 --amplitude 0.2 --out lab/
 
 Outputs in ``--out``: ``bag/`` (rosbag2, MCAP), ``models.json`` (fits and
-coefficients), ``compare_<output>.png`` (validation data vs model). Exit status
-0, 2 on bad input (one line on stderr), 130 when interrupted (the bag is
-finalised).
+coefficients), ``compare_<output>.png`` (validation data vs model). In lockstep
+exactly ``--samples`` samples are recorded (the excitation stops after that many
+commands). Exit status 0, 1 when a model failed or is unstable (its row says
+why; everything else is written), 2 on bad input (one line on stderr), 130 when
+interrupted (the bag is finalised).
 """
 
 from __future__ import annotations
@@ -631,7 +633,14 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
         start = recorder.counts[currents_topic]
         wall = time.monotonic()
         end = wall + args.duration
-        _wait(lambda: time.monotonic() >= end, ctx, 'the recording', timeout=args.duration + 1)
+        with progress_bar(args.duration, 'recording', 's', args.quiet) as bar:
+
+            def done() -> bool:
+                now = time.monotonic()
+                bar.update(min(now - wall, args.duration) - bar.n)
+                return now >= end
+
+            _wait(done, ctx, 'the recording', timeout=args.duration + 1)
         recorder.close()  # finalised; the driver zeroes the currents when destroyed
         wall = time.monotonic() - wall
         samples = recorder.counts[currents_topic] - start
@@ -744,10 +753,10 @@ def _run(args: argparse.Namespace) -> int:
     print(f'{"output":<10} {"fit est. %":>11} {"fit val. %":>11}  status')
     for row in result.rows:
         status = '' if row.status == 'ok' else f'{row.status}: {row.reason}'
-        print(
-            f'{row.outputs[0]:<10} {row.fit_estimation[0]:>11.2f} '
-            f'{row.fit_validation[0]:>11.2f}  {status}'
+        line = (
+            f'{row.outputs[0]:<10} {row.fit_estimation[0]:>11.2f} {row.fit_validation[0]:>11.2f}'
         )
+        print(f'{line}  {status}' if status else line)
         for note in row.notes:
             print(f'{"":<10} note: {note}')
     if not args.no_plots:
