@@ -17,21 +17,15 @@ line on stderr).
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import math
+from pathlib import Path
+from typing import Any
 
-# Small least-squares problems gain nothing from threaded BLAS, and on a shared
-# machine its spinning threads can make a 2 ms solve take 400 ms.
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import math  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from maglev_ros.cli.usage import Parser, UsageError, run_command  # noqa: E402
+from .usage import Parser, UsageError, limit_blas_threads, run_command
 
 __all__ = ['build_parser', 'main', 'run']
 
@@ -474,12 +468,13 @@ def main(argv: list[str] | None = None) -> int:
     int
         0 every model usable, 1 some model failed or is unstable, 2 bad input.
     """
+    return run_command(PROG, build_parser(), _run_quietly, argv)
 
-    def guarded(args: argparse.Namespace) -> int:
-        with np.errstate(all='ignore'):
-            return run(args)
 
-    return run_command(PROG, build_parser(), guarded, argv)
+def _run_quietly(args: argparse.Namespace) -> int:
+    limit_blas_threads(1)  # small solves: see limit_blas_threads
+    with np.errstate(all='ignore'):
+        return run(args)
 
 
 if __name__ == '__main__':
