@@ -635,9 +635,12 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
                 len(recorder.subscribed) == len(topics) - 1
                 and recorder.metadata_complete
                 and driver.link_state == 'connected'
+                # the board streams: a virtual board's physics plant may take seconds
+                # to compile after the port opens, and the recording clock starts now
+                and driver.counters['records'] > 0
             ),
             ctx,
-            'the driver and the recorder',
+            'the driver, its first board record and the recorder',
         )
         # the excitation starts once everything listens: its first command is recorded
         excite = ExcitationNode(
