@@ -491,7 +491,8 @@ def identify_outputs(
 
     An output that does not move relative to the others (standard deviation
     below 1e-9 of the largest, e.g. a field component that is zero by
-    symmetry) gets a ``no response`` row instead of a model.
+    symmetry) gets a ``no response`` row instead of a model; if no output moves
+    at all, every row is ``failed`` (nothing was excited).
 
     Parameters
     ----------
@@ -514,12 +515,15 @@ def identify_outputs(
     for i, name in enumerate(estimation.output_names):
         label = f'{spec.label} {name}'
         if spread[i] <= 1e-9 * spread.max():
+            silent = not spread.max() > 0  # no output moves at all: nothing was excited
             rows.append(
                 ModelRow(
                     label,
                     spec.structure,
-                    'no response',
-                    'constant after detrending (e.g. zero by symmetry)',
+                    'failed' if silent else 'no response',
+                    'no output varies: the inputs did not reach the plant'
+                    if silent
+                    else 'constant after detrending (e.g. zero by symmetry)',
                     None,
                     None,
                     _nan(1),

@@ -116,6 +116,10 @@ def test_a_silent_output_gets_a_no_response_row(lab_halves):
     bx, bz = result.rows
     assert bx.status == 'ok' and bx.outputs == ('Bx',) and bx.fit_validation[0] > 99.0
     assert bz.status == 'no response' and bz.usable and result.exit_status == 0
+    still = [IdData(np.zeros((d.N, 2)), d.u, d.Ts, ['Bx', 'Bz']) for d in (est, val)]
+    result = identify_outputs(*still, ModelSpec('arx', {'na': 2, 'nb': 2, 'nk': 1}))
+    assert [r.status for r in result.rows] == ['failed', 'failed'] and result.exit_status == 1
+    assert 'the inputs did not reach the plant' in result.rows[0].reason
 
 
 def test_validation_half_keeps_the_record_time_axis(lab_halves):
