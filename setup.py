@@ -54,6 +54,7 @@ setup(
         'pyserial>=3.5',
         'rosbags>=0.10',
         'matplotlib>=3.7',
+        'tqdm>=4.60',
     ],
     extras_require={
         # The PyPI build of ROS 2 Jazzy's Python side, for machines without ROS.

@@ -428,7 +428,7 @@ class Simulator:
         self._last_input = drive
         return self._observe(self._true_output() if y is None else y)
 
-    def run(self, inputs, x0=None) -> SimulationResult:
+    def run(self, inputs, x0=None, progress=None) -> SimulationResult:
         """Simulate a whole input sequence from ``x0`` (resets first).
 
         Parameters
@@ -437,6 +437,11 @@ class Simulator:
             Input per sample (ZOH).
         x0 : array_like, shape (12,), optional
             Initial state.
+        progress : callable, optional
+            ``progress(done, total)`` as the work advances (the uncompiled
+            accurate and filament models: integration steps, then sensor
+            readings, ``total = 2 N + 1``; the compiled path reports once at the
+            end).
 
         Returns
         -------
@@ -450,21 +455,26 @@ class Simulator:
         if not np.all(np.isfinite(drives)):
             raise ValueError('inputs must be finite')
         self.reset(x0)
+        total = 2 * len(drives) + 1
         if self._fast:
             states, truth, done, status, last = kernels.rk4_run(self._xe, drives, *self._step_args)
         else:
-            states, done, status, last = self._python_run(drives)
+            states, done, status, last = self._python_run(drives, progress, total)
             truth = None
         currents = (
             states[:, 12:] if self._coil_mode else np.vstack([np.zeros((1, n_s)), drives[:done]])
         )
         if truth is None:
-            truth = np.array(
-                [
+            truth = []
+            for x, i in zip(states, currents, strict=True):
+                truth.append(
                     self.model.measurement(x[:12], i, with_magnet=self.magnet != 'absent')
-                    for x, i in zip(states, currents, strict=True)
-                ]
-            )
+                )
+                if progress is not None and len(truth) % 16 == 0:
+                    progress(len(drives) + len(truth), total)
+            truth = np.array(truth)
+        if progress is not None:
+            progress(total, total)
         self._rng = np.random.default_rng(self.seed)
         self._reset_freeze()
         self._pending = []
@@ -516,9 +526,11 @@ class Simulator:
             x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
         return x
 
-    def _python_run(self, drives: np.ndarray):
+    def _python_run(self, drives: np.ndarray, progress=None, total: int = 0):
         states = [self._xe.copy()]
         for k, drive in enumerate(drives):
+            if progress is not None and k % 16 == 0:
+                progress(k, total)
             new = self._python_rk4(states[-1], drive)
             status = self._status(new)
             if status != kernels.STATUS_OK:

@@ -18,7 +18,7 @@ from .iv import iv4
 from .model import DivergenceError, EstimationReport, PolyModel
 from .oe_bj import bj, oe
 from .orders import OrderError, Orders, make_orders
-from .plots import bode_plot, compare_plot, resid_plot
+from .plots import bode_figure, bode_plot, compare_figure, compare_plot, resid_figure, resid_plot
 from .rls import RecursiveArx, RlsResult, rls_arx
 from .selection import OrderSearch, arxstruc, delayest, selstruc
 from .validation import CompareResult, ResidualAnalysis, compare, resid
@@ -41,8 +41,10 @@ __all__ = [
     'arx',
     'arxstruc',
     'bj',
+    'bode_figure',
     'bode_plot',
     'compare',
+    'compare_figure',
     'compare_plot',
     'delayest',
     'export_mat',
@@ -59,6 +61,7 @@ __all__ = [
     'model_to_dict',
     'oe',
     'resid',
+    'resid_figure',
     'resid_plot',
     'rls_arx',
     'save_model',

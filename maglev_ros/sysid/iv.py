@@ -65,6 +65,7 @@ from .regression import check_data, equation_errors, finish_model, fir_rows
 __all__ = ['iv4']
 
 METHODS = ('toolbox', 'extended')
+SINGULAR_RCOND = 1e-12  # relative singular value cut-off of singular IV equations
 
 
 def _simulate(
@@ -135,11 +136,20 @@ def _iv_rows(
                 Pty += lag_gram(S, reg, tgt, start)[:, 0]
                 yy += float(lag_gram(S, tgt, tgt, start)[0, 0])
             M += S.shape[1] - start
-        theta = np.linalg.solve(ZtPhi, Zty)
+        try:
+            theta = np.linalg.solve(ZtPhi, Zty)
+            Minv = np.linalg.solve(ZtPhi, np.eye(p)) if covariance else None
+        except np.linalg.LinAlgError:
+            # singular IV equations: orders above the data's on noise-free data (the
+            # extra parameters are not determined). The minimum-norm solution (SVD,
+            # singular values below 1e-12 of the largest dropped) regularises them
+            # like the toolbox's ridge option; the extra poles and zeros then come in
+            # cancelling pairs (see sysid.cancellation).
+            theta = np.linalg.lstsq(ZtPhi, Zty, rcond=SINGULAR_RCOND)[0]
+            Minv = np.linalg.pinv(ZtPhi, rcond=SINGULAR_RCOND) if covariance else None
         thetas.append(theta)
         if covariance:
             sse = max(yy - 2.0 * theta @ Pty + theta @ PtP @ theta, 0.0)
-            Minv = np.linalg.solve(ZtPhi, np.eye(p))
             covs.append(sse / max(1, M - p) * Minv @ ZtZ @ Minv.T)
     return thetas, covs
 

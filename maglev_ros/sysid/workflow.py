@@ -38,6 +38,8 @@ from .fortran_output import captured_fd_stdout
 from .iv import iv4
 from .model import PolyModel
 from .oe_bj import bj, oe
+from .orders import OrderError, make_orders
+from .regression import check_data
 from .validation import ResidualAnalysis, compare, resid
 
 __all__ = [
@@ -104,11 +106,48 @@ class ModelSpec:
             return f'{head} {" ".join(str(int(v)) for v in values)}'
         return head
 
+    def check(self, data: IdData) -> None:
+        """Refuse orders that cannot be estimated on ``data`` (before anything is fitted).
+
+        Parameters
+        ----------
+        data : IdData
+            Estimation data.
+
+        Raises
+        ------
+        ValueError
+            Orders inconsistent with the channels (``OrderError``), a
+            single-input structure on multi-channel data, or fewer samples than
+            parameters; the message names the model.
+        """
+        o = dict(self.orders)
+        if self.structure in ('oe', 'bj') and (data.ny, data.nu) != (1, 1):
+            raise OrderError(
+                f'{self.label}: OE and BJ are single-input single-output here; the data '
+                f'have {data.ny} outputs and {data.nu} inputs'
+            )
+        try:
+            if self.structure in ('oe', 'bj'):
+                orders = make_orders(
+                    1, 1, na=0, nb=o['nb'], nk=o.get('nk', 1), nc=o.get('nc', 0),
+                    nd=o.get('nd', 0), nf=o['nf'],
+                )  # fmt: skip
+            else:
+                orders = make_orders(
+                    data.ny, data.nu, na=o['na'], nb=o['nb'], nk=o.get('nk', 1),
+                    nc=o.get('nc', 0),
+                )  # fmt: skip
+            check_data([data], orders)
+        except ValueError as err:
+            raise type(err)(f'{self.label}: {err}') from None
+
     def fit(
         self,
         data: IdData,
         max_iter: int | None = None,
         progress: Callable[[int, float], None] | None = None,
+        instruments: np.ndarray | None = None,
     ) -> PolyModel:
         """Estimate this model on ``data``.
 
@@ -121,6 +160,9 @@ class ModelSpec:
             default theirs: 50, 100, 100).
         progress : callable, optional
             ``(step, loss)`` after every Levenberg-Marquardt step of ARMAX.
+        instruments : ndarray, shape (N, nz), optional
+            External instruments of IV (closed-loop data: the excitation),
+            see :func:`~.iv.iv4`; ignored by the other structures.
 
         Returns
         -------
@@ -133,7 +175,7 @@ class ModelSpec:
         if self.structure == 'arx':
             return arx(data, o['na'], o['nb'], nk)
         if self.structure == 'iv':
-            return iv4(data, o['na'], o['nb'], nk)
+            return iv4(data, o['na'], o['nb'], nk, instruments=instruments)
         if self.structure == 'armax':
             return armax(data, o['na'], o['nb'], o['nc'], nk, progress=progress, **extra)
         if self.structure == 'oe':
@@ -311,14 +353,22 @@ def _fit_row(
     max_iter: int | None,
     progress: Callable[[int, float], None] | None,
     label: str,
+    instruments: np.ndarray | None = None,
 ) -> ModelRow:
     ny = est.ny
     outputs = tuple(est.output_names)
     try:
-        model = spec.fit(est, max_iter, progress)
+        model = spec.fit(est, max_iter, progress, instruments)
     except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+        reason = f'estimation failed: {err}'
+        if isinstance(err, np.linalg.LinAlgError) and 'singular' in str(err).lower():
+            reason = (
+                'estimation failed: singular equations, the data do not determine the '
+                'parameters (an input that excites nothing, such as a constant one, or '
+                'more parameters than the input excites): lower the orders or check the inputs'
+            )
         return ModelRow(
-            label, spec.structure, 'failed', f'estimation failed: {err}', None, None,
+            label, spec.structure, 'failed', reason, None, None,
             _nan(ny), _nan(ny), _nan(ny), None, (), outputs,
         )  # fmt: skip
     notes = []
@@ -344,7 +394,7 @@ def _fit_row(
             reason = (
                 f'unstable (largest pole {_largest_pole(model):.3g}); its unstable poles '
                 f'cancel against zeros: validated without the {len(pairs)} cancelling '
-                f'pair(s), as {reduced.orders.describe()}'
+                f'pair(s), as {" ".join(reduced.orders.describe().split())}'
             )
         else:
             status, validated = 'unstable', None
@@ -384,6 +434,7 @@ def identify(
     max_iter: int | None = None,
     progress: Callable[[str, int, float], None] | None = None,
     hints: Sequence[str] = (),
+    instruments: np.ndarray | None = None,
 ) -> Identification:
     """Fit and validate every requested model; one row each, none lost.
 
@@ -400,9 +451,13 @@ def identify(
     max_iter : int, optional
         Iteration cap of the prediction-error methods.
     progress : callable, optional
-        ``(label, step, loss)`` after every iteration of an iterative estimator.
+        ``(label, step, loss)``: step 0 (loss NaN) when a model starts, then
+        after every iteration of an iterative estimator.
     hints : sequence of str
         Advice about the data, passed through to the result.
+    instruments : ndarray, shape (N, nz), optional
+        External instruments for the IV models (the excitation of a closed
+        loop), samples of ``estimation``.
 
     Returns
     -------
@@ -413,13 +468,23 @@ def identify(
     ------
     DegenerateDataError
         If an output is the same signal as an input.
+    ValueError
+        If some spec's orders cannot be estimated on the data (checked for all
+        specs before any model is fitted, so nothing computed is lost).
     """
     check_channels(estimation)
+    for spec in specs:
+        spec.check(estimation)
     rows = []
     for spec in specs:
-        step = None if progress is None else _bind(progress, spec.label)
+        step = None
+        if progress is not None:
+            progress(spec.label, 0, float('nan'))
+            step = _bind(progress, spec.label)
         with captured_fd_stdout() as lapack:
-            row = _fit_row(spec, estimation, validation, horizon, ic, max_iter, step, spec.label)
+            row = _fit_row(
+                spec, estimation, validation, horizon, ic, max_iter, step, spec.label, instruments
+            )
         if lapack.text:
             row = _with_note(row, 'LAPACK: ' + ' '.join(lapack.text.split()))
         rows.append(row)
@@ -437,7 +502,8 @@ def identify_outputs(
 
     An output that does not move relative to the others (standard deviation
     below 1e-9 of the largest, e.g. a field component that is zero by
-    symmetry) gets a ``no response`` row instead of a model.
+    symmetry) gets a ``no response`` row instead of a model; if no output moves
+    at all, every row is ``failed`` (nothing was excited).
 
     Parameters
     ----------
@@ -460,12 +526,15 @@ def identify_outputs(
     for i, name in enumerate(estimation.output_names):
         label = f'{spec.label} {name}'
         if spread[i] <= 1e-9 * spread.max():
+            silent = not spread.max() > 0  # no output moves at all: nothing was excited
             rows.append(
                 ModelRow(
                     label,
                     spec.structure,
-                    'no response',
-                    'no response to the inputs',
+                    'failed' if silent else 'no response',
+                    'no output varies: the inputs did not reach the plant'
+                    if silent
+                    else 'constant after detrending (e.g. zero by symmetry)',
                     None,
                     None,
                     _nan(1),

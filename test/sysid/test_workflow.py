@@ -53,15 +53,29 @@ def test_cancelling_pairs_of_a_constructed_model():
 
 
 def test_a_failed_model_gets_its_row_and_the_others_are_kept(lab_halves):
-    est, val = lab_halves
-    short = est[:200]
-    specs = [ModelSpec('arx', {'na': 2, 'nb': 2, 'nk': 1}), ModelSpec('arx', {'na': 90, 'nb': 90})]
-    result = identify(short, val, specs)
-    ok, failed = result.rows
+    # a second input that stays at zero: a model using it has singular equations
+    est, val = (
+        IdData(d.y, np.column_stack([d.u[:, 0], np.zeros(d.N)]), d.Ts, t0=d.t0) for d in lab_halves
+    )
+    specs = [
+        ModelSpec('arx', {'na': 2, 'nb': [[2, 0]], 'nk': 1}),
+        ModelSpec('arx', {'na': 2, 'nb': 2, 'nk': 1}),
+        ModelSpec('iv', {'na': 2, 'nb': [[2, 0]], 'nk': 1}),
+    ]
+    result = identify(est, val, specs)
+    ok, failed, iv = result.rows
     assert ok.status == 'ok' and ok.fit_validation[0] > 99.0
+    assert iv.status == 'ok' and iv.fit_validation[0] > 99.0
     assert failed.status == 'failed' and failed.model is None
-    assert 'fewer samples than parameters' in failed.reason
+    assert 'singular equations' in failed.reason
     assert np.isnan(failed.fit_validation).all() and result.exit_status == 1
+
+
+def test_orders_that_cannot_be_estimated_are_refused_before_fitting(lab_halves):
+    est, val = lab_halves
+    specs = [ModelSpec('arx', {'na': 2, 'nb': 2}), ModelSpec('arx', {'na': 90, 'nb': 90})]
+    with pytest.raises(ValueError, match='ARX 90 90 1: .* fewer samples than parameters'):
+        identify(est[:150], val, specs)
 
 
 def test_an_unstable_model_keeps_its_prediction_fit():
@@ -102,6 +116,10 @@ def test_a_silent_output_gets_a_no_response_row(lab_halves):
     bx, bz = result.rows
     assert bx.status == 'ok' and bx.outputs == ('Bx',) and bx.fit_validation[0] > 99.0
     assert bz.status == 'no response' and bz.usable and result.exit_status == 0
+    still = [IdData(np.zeros((d.N, 2)), d.u, d.Ts, ['Bx', 'Bz']) for d in (est, val)]
+    result = identify_outputs(*still, ModelSpec('arx', {'na': 2, 'nb': 2, 'nk': 1}))
+    assert [r.status for r in result.rows] == ['failed', 'failed'] and result.exit_status == 1
+    assert 'the inputs did not reach the plant' in result.rows[0].reason
 
 
 def test_validation_half_keeps_the_record_time_axis(lab_halves):
