@@ -24,6 +24,7 @@ NODES: dict[str, str] = {
     'excitation': 'maglev_ros.nodes.excitation:main',
     'recorder': 'maglev_ros.nodes.recorder:main',
     'player': 'maglev_ros.nodes.player:main',
+    'identifier': 'maglev_ros.nodes.identifier:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]

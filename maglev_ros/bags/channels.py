@@ -84,7 +84,13 @@ def parse_field_path(text: str) -> tuple[str | int, ...]:
 
 
 def format_field_path(path: tuple[str | int, ...]) -> str:
-    """Return the text of a parsed field path (inverse of :func:`parse_field_path`)."""
+    """Return the text of a parsed field path (inverse of :func:`parse_field_path`).
+
+    Parameters
+    ----------
+    path : tuple of str or int
+        Field names and array indices, as :func:`parse_field_path` returns them.
+    """
     out = ''
     for part in path:
         out += f'[{part}]' if isinstance(part, int) else (f'.{part}' if out else part)

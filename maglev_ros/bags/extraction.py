@@ -24,7 +24,7 @@ from .channels import FieldRef, check_field, format_field_path
 from .errors import BagError
 from .reader import BagReader
 
-__all__ = ['TopicSamples', 'read_topic', 'read_topics']
+__all__ = ['TopicSamples', 'read_topics']
 
 _STAMP = ('header.stamp.sec', 'header.stamp.nanosec')
 
@@ -240,23 +240,3 @@ def read_topics(
             out[topic] = TopicSamples(info.name, logs, logs, values, 'log')
         raws[info.name] = []  # free the bytes early
     return out
-
-
-def read_topic(reader: BagReader, topic: str, refs: Sequence[FieldRef]) -> TopicSamples:
-    """Read the stamps and the given fields of every message of one topic.
-
-    Parameters
-    ----------
-    reader : BagReader
-        An open bag.
-    topic : str
-        Topic name.
-    refs : sequence of FieldRef
-        Fields of this topic.
-
-    Returns
-    -------
-    TopicSamples
-        Stamps and values.
-    """
-    return read_topics(reader, {topic: refs})[topic]

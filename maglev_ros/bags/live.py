@@ -33,7 +33,7 @@ from .channels import Channel, FieldRef, parse_channel
 from .errors import BagError
 from .names import normalize_topic
 
-__all__ = ['ChannelIdentifier', 'ChannelSampler', 'SamplerCounts']
+__all__ = ['ChannelIdentifier', 'ChannelSampler', 'SamplerCounts', 'StampAligner']
 
 
 def _getter(ref: FieldRef) -> Callable[[object], float]:
@@ -188,6 +188,85 @@ class ChannelSampler:
         self._fresh = dict.fromkeys(self.topics, False)
         self._samples += 1
         return self._out_matrix @ self._values, self._in_matrix @ self._values
+
+
+class StampAligner:
+    """Complete samples by header stamp before they reach a :class:`ChannelSampler`.
+
+    The rule of the identifier node: a sample is complete when every
+    **stamped** topic that the channels read (messages with a header: fields,
+    currents, states) has delivered a message of the same stamp. Its messages
+    are then released in topic order with the trigger topic last, so the
+    sampler returns exactly one sample per stamp, whatever the order in which
+    the topics' messages arrived. **Unstamped** topics (``std_msgs``
+    commands, which carry no header) are released as they arrive and are
+    held by the sampler (zero-order hold), as the bag converter uses their log
+    time. A stamp still incomplete when a newer stamp completes is dropped
+    (counted in :attr:`dropped`); at most ``depth`` incomplete stamps are kept.
+
+    Parameters
+    ----------
+    topics : sequence of str
+        Every topic the channels read (absolute names).
+    stamped : collection of str
+        Those whose messages carry a header stamp.
+    trigger : str
+        The sampler's trigger topic (released last in a stamp's set).
+    depth : int
+        Incomplete stamps kept at most.
+    """
+
+    def __init__(self, topics, stamped, trigger: str, depth: int = 64) -> None:
+        stamped = set(stamped)
+        self.stamped = tuple(t for t in topics if t in stamped and t != trigger)
+        if trigger in stamped:
+            self.stamped += (trigger,)  # released last
+        self.depth = int(depth)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the pending messages and the count of dropped stamps."""
+        self._pending: dict[int, dict[str, object]] = {}
+        self._last: int | None = None
+        self.dropped = 0
+
+    def add(self, topic: str, stamp_ns: int | None, message: object) -> list[tuple[str, object]]:
+        """Take one message; return the ``(topic, message)`` pairs to give the sampler now.
+
+        Parameters
+        ----------
+        topic : str
+            Absolute topic name.
+        stamp_ns : int or None
+            Header stamp, ns (None for an unstamped topic).
+        message : object
+            The message.
+
+        Returns
+        -------
+        list of (str, object)
+            Empty while the message's stamp is incomplete; a stamp's full set
+            (trigger last) when this message completes it; the message itself
+            for an unstamped topic.
+        """
+        if topic not in self.stamped or stamp_ns is None:
+            return [(topic, message)]
+        if self._last is not None and stamp_ns <= self._last:
+            self.dropped += 1  # late: its stamp was completed or dropped already
+            return []
+        group = self._pending.setdefault(stamp_ns, {})
+        group[topic] = message
+        if len(group) < len(self.stamped):
+            while len(self._pending) > self.depth:
+                del self._pending[min(self._pending)]
+                self.dropped += 1
+            return []
+        for old in [s for s in self._pending if s <= stamp_ns]:
+            if old != stamp_ns:
+                self.dropped += 1
+            del self._pending[old]
+        self._last = stamp_ns
+        return [(t, group[t]) for t in self.stamped]
 
 
 class ChannelIdentifier:

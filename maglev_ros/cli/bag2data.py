@@ -30,7 +30,13 @@ PROG = 'maglev-bag2data'
 
 
 def split_point(text: str) -> float | int:
-    """Argparse type: a split fraction in (0, 1) (``0.5``) or a sample count (``12500``)."""
+    """Argparse type: a split fraction in (0, 1) (``0.5``) or a sample count (``12500``).
+
+    Parameters
+    ----------
+    text : str
+        The command-line text.
+    """
     try:
         value: float | int = float(text) if any(c in text for c in '.eE') else int(text)
     except ValueError:

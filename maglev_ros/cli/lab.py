@@ -192,7 +192,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def on_board(args: argparse.Namespace) -> bool:
-    """Whether the session runs against a board (driver) rather than the simulator."""
+    """Whether the session runs against a board (driver) rather than the simulator.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments.
+    """
     return bool(getattr(args, 'board', None) or getattr(args, 'virtual_board', False))
 
 
@@ -365,7 +371,13 @@ def _wait(predicate, ctx, what: str, timeout: float = WAIT_S) -> None:
 
 
 def overrides(**values) -> list:
-    """Return ROS parameter overrides ``name=value`` for a node built in this process."""
+    """Return ROS parameter overrides ``name=value`` for a node built in this process.
+
+    Parameters
+    ----------
+    **values : object
+        Parameter values by name.
+    """
     from rclpy.parameter import Parameter
 
     return [Parameter(k, value=v) for k, v in values.items()]
@@ -393,9 +405,9 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
     """
     import rclpy
 
-    from maglev_ros.nodes import contract
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.runtime import Spinner
     from maglev_ros.nodes.simulator import SimulatorNode
 
     topics = [field_topic(k) for k in args.sensors] + [
@@ -446,7 +458,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
             ),
         )
         nodes.insert(0, recorder)  # destroyed last: finalises the bag
-        spinner = contract.Spinner(ctx, nodes)
+        spinner = Spinner(ctx, nodes)
         _wait(
             lambda: (
                 len(recorder.subscribed) == len(topics)
@@ -538,7 +550,13 @@ def start_virtual_board(params: str, magnet: str) -> tuple[subprocess.Popen, str
 
 
 def stop_child(child: subprocess.Popen) -> None:
-    """Stop a child process with SIGINT (SIGKILL after 10 s) and reap it."""
+    """Stop a child process with SIGINT (SIGKILL after 10 s) and reap it.
+
+    Parameters
+    ----------
+    child : subprocess.Popen
+        The child process.
+    """
     if child.poll() is None:
         child.send_signal(signal.SIGINT)
         try:
@@ -552,7 +570,13 @@ def stop_child(child: subprocess.Popen) -> None:
 
 
 def board_sensors(args: argparse.Namespace) -> int:
-    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1."""
+    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments.
+    """
     if args.board_sensors is not None:
         return args.board_sensors
     if args.virtual_board:
@@ -596,10 +620,10 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
     """
     import rclpy
 
-    from maglev_ros.nodes import contract
     from maglev_ros.nodes.driver import DriverNode
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.runtime import Spinner
 
     topics = [field_topic(k) for k in args.sensors] + [
         CURRENTS_TOPIC,
@@ -629,7 +653,7 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
             ),
         )
         nodes.append(driver)
-        spinner = contract.Spinner(ctx, nodes)
+        spinner = Spinner(ctx, nodes)
         _wait(
             lambda: (
                 len(recorder.subscribed) == len(topics) - 1

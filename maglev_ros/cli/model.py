@@ -17,7 +17,7 @@ import numpy as np
 from .usage import Parser, UsageError, non_negative_float, positive_float, run_command
 
 PROG = 'maglev-model'
-__all__ = ['build_parser', 'main']
+__all__ = ['build_parser', 'main', 'simulation_figure']
 
 
 def _state_assignments(text: str) -> dict[str, float]:
@@ -253,7 +253,7 @@ def _linearize(args) -> int:
 
 
 def _simulate(args) -> int:
-    from ..physics.equilibria import find_equilibria
+    from ..physics.equilibria import rest_state
     from ..physics.model import STATE_NAMES
     from ..physics.simulation import CoilDynamics, SensorEffects, Simulator
 
@@ -267,10 +267,10 @@ def _simulate(args) -> int:
     from .progress import progress_bar, stage
 
     with stage(f'finding the equilibrium ({args.model} field model)', args.quiet):
-        found = find_equilibria(model)
-    if not found:
-        raise UsageError(f'{model.params.name}: no equilibrium to start from')
-    x0 = model.hover_state(found[0].z)
+        try:
+            x0 = rest_state(model)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     for name, value in args.perturb.items():
         x0[STATE_NAMES.index(name)] += value
     coil = CoilDynamics.from_parameters(model.params) if args.coil else None
@@ -349,7 +349,21 @@ def _state_text(x: np.ndarray) -> str:
     )
 
 
-def _plot(result, path: str, title: str) -> None:
+def simulation_figure(result, title: str):
+    """Figure of a simulation: position (mm), angles (rad) and the sensors' Bz (mT) over time.
+
+    Parameters
+    ----------
+    result : maglev_ros.physics.SimulationResult
+        The simulation.
+    title : str
+        The parameter set's name, for the title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        Three axes sharing the time axis (s); close it when done.
+    """
     import matplotlib
 
     matplotlib.use('Agg')
@@ -373,6 +387,13 @@ def _plot(result, path: str, title: str) -> None:
     status = 'ok' if not result.crashed else f'crashed at {result.crash_time:.4f} s'
     fig.suptitle(f'{title}: simulation ({status})')
     fig.tight_layout()
+    return fig
+
+
+def _plot(result, path: str, title: str) -> None:
+    import matplotlib.pyplot as plt
+
+    fig = simulation_figure(result, title)
     fig.savefig(path, dpi=100)
     plt.close(fig)
 

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ..topics import EXCITATION_TOPIC
 from .usage import Parser, UsageError, limit_blas_threads, run_command
 
 __all__ = ['build_parser', 'main', 'run']
@@ -114,7 +115,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar='CHANNEL',
         help='closed-loop data: external signal (the excitation) used as the '
         'instruments of --iv, repeat for more. A bag: a channel spec like '
-        "--input ('r=maglev/currents/excitation:data[0]'); a channel matrix "
+        f"--input ('r={EXCITATION_TOPIC}:data[0]'); a channel matrix "
         'with --rows: its row (counted from 1); CSV: a column name; npz/mat: a '
         'variable of shape (N,) or (N, k)',
     )

@@ -40,7 +40,14 @@ class Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
 
-    def error(self, message: str) -> None:  # noqa: D102 - one-line usage errors
+    def error(self, message: str) -> None:
+        """Raise :class:`UsageError` with argparse's message (no usage text, no exit).
+
+        Parameters
+        ----------
+        message : str
+            argparse's message.
+        """
         raise UsageError(message)
 
 
@@ -55,7 +62,13 @@ def _finite_number(text: str) -> float:
 
 
 def positive_float(text: str) -> float:
-    """Argparse type: a finite number > 0."""
+    """Argparse type: a finite number > 0.
+
+    Parameters
+    ----------
+    text : str
+        The command-line text.
+    """
     value = _finite_number(text)
     if value <= 0:
         raise argparse.ArgumentTypeError(f'must be positive, got {text!r}')
@@ -63,7 +76,13 @@ def positive_float(text: str) -> float:
 
 
 def non_negative_float(text: str) -> float:
-    """Argparse type: a finite number >= 0."""
+    """Argparse type: a finite number >= 0.
+
+    Parameters
+    ----------
+    text : str
+        The command-line text.
+    """
     value = _finite_number(text)
     if value < 0:
         raise argparse.ArgumentTypeError(f'must be >= 0, got {text!r}')

@@ -38,7 +38,13 @@ def pattern_matrix(pattern: str) -> np.ndarray:
 
 
 def pattern_signals(pattern: str) -> int:
-    """Return the number of independent signals a pattern takes."""
+    """Return the number of independent signals a pattern takes.
+
+    Parameters
+    ----------
+    pattern : str
+        A coil pattern (:data:`PATTERNS`).
+    """
     return pattern_matrix(pattern).shape[1]
 
 

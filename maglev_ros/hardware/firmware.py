@@ -216,7 +216,13 @@ class V2xFirmware:
         return self._parser
 
     def receive(self, data: bytes) -> None:
-        """Queue bytes from the host; the loop parses them at its next tick."""
+        """Queue bytes from the host; the loop parses them at its next tick.
+
+        Parameters
+        ----------
+        data : bytes
+            Bytes written by the host.
+        """
         self._input += data
 
     def port_opened(self) -> None:
@@ -372,7 +378,13 @@ class V4xFirmware:
         return self._loop.running
 
     def receive(self, data: bytes) -> None:
-        """Ignore host bytes (the V4x firmware reads nothing)."""
+        """Ignore host bytes (the V4x firmware reads nothing).
+
+        Parameters
+        ----------
+        data : bytes
+            Bytes written by the host (ignored by the V4x loop).
+        """
 
     def port_opened(self) -> None:
         """Tell the board that the host opened the port: wait, then recalibrate."""
@@ -387,11 +399,23 @@ class V4xFirmware:
         ]
 
     def tamper_next_burst(self, edit: Callable[[bytes], bytes]) -> None:
-        """Pass the next written line through ``edit`` (fault injection)."""
+        """Pass the next written line through ``edit`` (fault injection).
+
+        Parameters
+        ----------
+        edit : callable
+            ``edit(bytes) -> bytes`` applied to the next burst.
+        """
         self._loop.tampers.append(edit)
 
     def advance_to(self, t_us: int) -> bytes:
-        """Run up to ``t_us`` (us since power-up); return the text written."""
+        """Run up to ``t_us`` (us since power-up); return the text written.
+
+        Parameters
+        ----------
+        t_us : int
+            Time since power-up, us.
+        """
         loop = self._loop
         out = []
         while loop.next_tick_us <= t_us:

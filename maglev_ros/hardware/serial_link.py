@@ -184,6 +184,11 @@ class SerialLink:
     def write(self, data: bytes) -> None:
         """Write all of ``data``.
 
+        Parameters
+        ----------
+        data : bytes
+            Bytes to send.
+
         Raises
         ------
         LinkError

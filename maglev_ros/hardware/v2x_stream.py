@@ -108,7 +108,13 @@ def record_dtype(n_sensors: int) -> np.dtype:
 
 
 def record_size(n_sensors: int) -> int:
-    """Return the size of one record in bytes, ``4 + 12 * n_sensors + 8``."""
+    """Return the size of one record in bytes, ``4 + 12 * n_sensors + 8``.
+
+    Parameters
+    ----------
+    n_sensors : int
+        Sensors per record.
+    """
     return 4 + 12 * _check_n_sensors(n_sensors) + 8
 
 

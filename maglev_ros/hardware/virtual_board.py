@@ -220,12 +220,23 @@ class VirtualBoard:
 
         The edit applies to the next write to an open port: one burst (V2x)
         or line (V4x), or several if the loop had to catch up.
+
+        Parameters
+        ----------
+        edit : callable
+            ``edit(bytes) -> bytes`` applied to the next output.
         """
         with self._lock:
             self._tampers.append(edit)
 
     def inject(self, data: bytes) -> None:
-        """Write raw bytes to the host now, between two bursts."""
+        """Write raw bytes to the host now, between two bursts.
+
+        Parameters
+        ----------
+        data : bytes
+            Raw bytes for the host.
+        """
         with self._lock:
             if self._master is not None and self._port_open:
                 self._write(data)
@@ -278,7 +289,13 @@ class VirtualBoard:
         self._paused.clear()
 
     def replug(self, downtime: float = 0.0) -> None:
-        """Unplug, wait ``downtime`` seconds, plug in again."""
+        """Unplug, wait ``downtime`` seconds, plug in again.
+
+        Parameters
+        ----------
+        downtime : float
+            Seconds unplugged.
+        """
         self.unplug()
         if downtime > 0:
             time.sleep(downtime)
@@ -286,6 +303,13 @@ class VirtualBoard:
 
     def wait_until(self, predicate: Callable[[VirtualBoard], bool], timeout: float) -> bool:
         """Poll ``predicate(self)`` (with ``lock`` held) until true or timeout.
+
+        Parameters
+        ----------
+        predicate : callable
+            ``predicate(board) -> bool``.
+        timeout : float
+            Seconds to wait at most.
 
         Returns
         -------

@@ -6,7 +6,7 @@ equilibria, linearisation and simulation. Specified in ``maggy-model.md``.
 """
 
 from .discretization import zoh
-from .equilibria import Equilibrium, find_equilibria, solenoid_radius_correction, vertical_force
+from .equilibria import Equilibrium, find_equilibria, rest_state, vertical_force
 from .linearization import (
     LinearModel,
     controllability_rank,
@@ -22,6 +22,7 @@ from .model import (
     MaggyModel,
     ModelOptions,
     make_model,
+    solenoid_radius_correction,
 )
 from .parameters import PRESETS, MaggyParameters, ParameterError, load_parameters
 from .sheet import sheet_field
@@ -55,6 +56,7 @@ __all__ = [
     'vertical_force',
     'find_equilibria',
     'solenoid_radius_correction',
+    'rest_state',
     'LinearModel',
     'linearize',
     'controllability_rank',

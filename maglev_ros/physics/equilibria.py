@@ -1,4 +1,4 @@
-"""Equilibria of the centred magnet and the fast model's solenoid radius correction."""
+"""Equilibria of the centred magnet, and the state resting at the first one."""
 
 from __future__ import annotations
 
@@ -8,18 +8,14 @@ import numpy as np
 from scipy.optimize import brentq
 
 from .kernels import GRAVITY
-from .parameters import MaggyParameters
 
 __all__ = [
     'Equilibrium',
     'vertical_force',
     'find_equilibria',
-    'solenoid_radius_correction',
-    'CORRECTION_TEST_CURRENT',
+    'rest_state',
 ]
 
-#: Current in every solenoid when matching the fast model to the filament model, A.
-CORRECTION_TEST_CURRENT = 100.0
 _STIFFNESS_STEP = 1e-6  # m, central difference for dF_z/dz
 
 
@@ -127,50 +123,30 @@ def find_equilibria(
     return found
 
 
-def solenoid_radius_correction(params: MaggyParameters) -> float:
-    """Solenoid radius factor c that makes the fast model match the filament model.
+def rest_state(model) -> np.ndarray:
+    """Return the state of the centred, level magnet resting at its first equilibrium.
 
-    At the first (lowest) equilibrium of the uncorrected fast model (which does
-    not depend on c: the solenoids carry no current there), with 100 A in every
-    solenoid, c is chosen so that the fast model's total vertical force equals
-    the filament model's (magnet as a current sheet over its rim surface).
-    This is the published procedure; it is deterministic.
+    The default initial state of the simulator, the default linearisation
+    point and ``maglev-model simulate``'s start: one rule, written here.
 
     Parameters
     ----------
-    params : MaggyParameters
-        The parameter set (its override, if any, is ignored here).
+    model : MaggyModel
+        The model.
 
     Returns
     -------
-    float
-        The factor c (about 0.56 for the published sets).
+    ndarray, shape (12,)
+        ``model.hover_state(z)`` at the lowest equilibrium height ``z`` (m).
 
     Raises
     ------
     ValueError
-        No equilibrium, or no factor in (0.01, 3] matches.
+        If the model has no equilibrium (then give the state explicitly).
     """
-    from .model import MaggyModel, ModelOptions
-
-    fast = MaggyModel(params, ModelOptions(field='fast', correction='none'))
-    found = find_equilibria(fast)
+    found = find_equilibria(model)
     if not found:
-        raise ValueError(f'{params.name}: no equilibrium, cannot compute the solenoid correction')
-    z_eq = found[0].z
-    u = np.full(params.solenoids.count, CORRECTION_TEST_CURRENT)
-    filament = MaggyModel(params, ModelOptions(field='filament'))
-    target = float(vertical_force(filament, z_eq, u))
-
-    def mismatch(c: float) -> float:
-        model = MaggyModel(params, ModelOptions(field='fast', correction=c))
-        return float(vertical_force(model, z_eq, u)) - target
-
-    grid = np.linspace(0.05, 3.0, 60)
-    values = [mismatch(c) for c in grid]
-    for k in range(len(grid) - 1):
-        if np.sign(values[k]) != np.sign(values[k + 1]):
-            return float(brentq(mismatch, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-14))
-    raise ValueError(
-        f'{params.name}: no solenoid radius factor in (0.05, 3] matches the filament model'
-    )
+        raise ValueError(
+            f'{model.params.name}: no equilibrium of the centred magnet; give the state'
+        )
+    return model.hover_state(found[0].z)

@@ -36,6 +36,9 @@ from numba import njit
 from .loop import FASTMATH, LOOP_WORK_ROWS, loop_batch
 
 __all__ = [
+    'euler_to_quaternion',
+    'odometry_values',
+    'rotation_matrix',
     'WORK_ROWS',
     'TORQUE_TRUE',
     'TORQUE_PUBLISHED',
@@ -81,7 +84,17 @@ P_RIM_RADIUS, P_SCALE, P_K0, P_MASS, P_IXX, P_IYY, P_IZZ, P_TORQUE, P_KINEMATICS
 
 @njit(cache=True, error_model='numpy')
 def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
-    """R = Rz(gamma) Ry(beta) Rx(alpha), body to world, shape (3, 3)."""
+    """R = Rz(gamma) Ry(beta) Rx(alpha), body to world, shape (3, 3).
+
+    Parameters
+    ----------
+    alpha : float
+        Roll angle about x, rad.
+    beta : float
+        Pitch angle about y, rad.
+    gamma : float
+        Yaw angle about z, rad.
+    """
     ca, sa = math.cos(alpha), math.sin(alpha)
     cb, sb = math.cos(beta), math.sin(beta)
     cg, sg = math.cos(gamma), math.sin(gamma)
@@ -98,12 +111,79 @@ def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
     return r
 
 
+def euler_to_quaternion(alpha: float, beta: float, gamma: float) -> tuple[float, ...]:
+    """Quaternion (x, y, z, w) of ``R = Rz(gamma) Ry(beta) Rx(alpha)`` (angles in rad).
+
+    Parameters
+    ----------
+    alpha : float
+        Roll angle about x, rad.
+    beta : float
+        Pitch angle about y, rad.
+    gamma : float
+        Yaw angle about z, rad.
+    """
+    ca, sa = math.cos(alpha / 2), math.sin(alpha / 2)
+    cb, sb = math.cos(beta / 2), math.sin(beta / 2)
+    cg, sg = math.cos(gamma / 2), math.sin(gamma / 2)
+    return (
+        sa * cb * cg - ca * sb * sg,
+        ca * sb * cg + sa * cb * sg,
+        ca * cb * sg - sa * sb * cg,
+        ca * cb * cg + sa * sb * sg,
+    )
+
+
+def odometry_values(x: np.ndarray) -> np.ndarray:
+    """Return the 13 varying numbers of the true-state Odometry of state ``x``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position (m), ZYX Euler angles (rad), world velocity (m/s),
+        body rates (rad/s).
+
+    Returns
+    -------
+    ndarray, shape (13,)
+        Position (3), quaternion x y z w (4), linear velocity in the magnet
+        frame (3, nav_msgs puts the twist in the child frame), body rates (3).
+    """
+    alpha, beta, gamma = float(x[3]), float(x[4]), float(x[5])
+    rot = rotation_matrix(alpha, beta, gamma)
+    out = np.empty(13)
+    out[0:3] = x[0:3]
+    out[3:7] = euler_to_quaternion(alpha, beta, gamma)
+    out[7:10] = rot.T @ np.asarray(x[6:9], dtype=float)
+    out[10:13] = x[9:12]
+    return out
+
+
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def base_field_points(px, py, pz, u, src, coil, work, out):
     """Field of all base loops at the points (px, py, pz) (n,), T.
 
     Writes Bx, By, Bz to ``out`` rows 0-2 (shape (3, >= n)). Builds the
     (point, loop) pairs in ``work`` and evaluates them in one vectorised batch.
+
+    Parameters
+    ----------
+    px : ndarray, shape (n,)
+        x of the points, m.
+    py : ndarray, shape (n,)
+        y of the points, m.
+    pz : ndarray, shape (n,)
+        z of the points, m.
+    u : ndarray, shape (n_s,)
+        Solenoid currents, A.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    out : ndarray, shape (3, >= n)
+        Output: Bx, By, Bz in rows 0-2, T.
     """
     n = px.shape[0]
     n_src = src.shape[0]
@@ -184,7 +264,19 @@ def _tree_sum(values, scratch, n, n_blocks):
 
 @njit(cache=True)
 def loops_field(points, u, src, coil):
-    """Field of the base loops at ``points`` (n, 3), T, shape (n, 3)."""
+    """Field of the base loops at ``points`` (n, 3), T, shape (n, 3).
+
+    Parameters
+    ----------
+    points : ndarray, shape (n, 3)
+        World points, m.
+    u : ndarray, shape (n_s,)
+        Solenoid currents, A.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    """
     n = points.shape[0]
     out = np.zeros((3, n))
     if n > 0 and src.shape[0] > 0:
@@ -202,6 +294,25 @@ def rim_force_torque(x, u, src, coil, rim, par, work, r):
     ``r`` is the magnet's rotation matrix (3, 3) for the angles in ``x``.
     Returns an array of shape (6,): (Fx, Fy, Fz) in N, (tau_x, tau_y, tau_z) in N m
     about the magnet's centre.
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    u : ndarray, shape (n_s,)
+        Solenoid currents, A.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    rim : ndarray, shape (2, n)
+        cos and sin of the rim angles of the magnet.
+    par : ndarray, shape (9,)
+        Model parameters (see the module docstring).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    r : ndarray, shape (3, 3)
+        Rotation matrix of the angles in ``x``, body to world.
     """
     n = rim.shape[1]
     rim_radius = par[P_RIM_RADIUS]
@@ -276,6 +387,21 @@ def rigid_body_rates(x, wrench, mass, inertia, kinematics, r):
     ``kinematics``: KINEMATICS_RIGID (ZYX Euler kinematics, body-frame torque)
     or KINEMATICS_PUBLISHED (Euler rates = w, world torque). ``r``: the rotation
     matrix (3, 3) of the angles in ``x``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    wrench : ndarray, shape (6,)
+        Force (N) and torque (N m) on the magnet, world frame.
+    mass : float
+        Magnet mass, kg.
+    inertia : ndarray, shape (3,)
+        Principal moments of inertia, kg m^2.
+    kinematics : int
+        KINEMATICS_RIGID or KINEMATICS_PUBLISHED.
+    r : ndarray, shape (3, 3)
+        Rotation matrix of the angles in ``x``, body to world.
     """
     dx = np.empty(12)
     dx[0] = x[6]
@@ -312,7 +438,25 @@ def rigid_body_rates(x, wrench, mass, inertia, kinematics, r):
 
 @njit(cache=True, error_model='numpy')
 def fast_dynamics(x, u, src, coil, rim, par, work):
-    """f(x, u) of the fast model, shape (12,)."""
+    """f(x, u) of the fast model, shape (12,).
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    u : ndarray, shape (n_s,)
+        Solenoid currents, A.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    rim : ndarray, shape (2, n)
+        cos and sin of the rim angles of the magnet.
+    par : ndarray, shape (9,)
+        Model parameters (see the module docstring).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    """
     r = rotation_matrix(x[3], x[4], x[5])
     wrench = rim_force_torque(x, u, src, coil, rim, par, work, r)
     return rigid_body_rates(
@@ -322,7 +466,25 @@ def fast_dynamics(x, u, src, coil, rim, par, work):
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')
 def fast_measurement(x, u, src, coil, sens, mag, work):
-    """h(x, u) of the fast model: stacked sensor readings, T, shape (3 k,)."""
+    """h(x, u) of the fast model: stacked sensor readings, T, shape (3 k,).
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    u : ndarray, shape (n_s,)
+        Solenoid currents, A.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    sens : ndarray, shape (k, 18)
+        Per sensor: position, mounting rotation, gain, offset (module docstring).
+    mag : ndarray, shape (2,)
+        The magnet's own loop radius (m) and current (A), for the sensor model.
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    """
     r = rotation_matrix(x[3], x[4], x[5])
     n = sens.shape[0]
     base = np.zeros((3, n))
@@ -363,6 +525,21 @@ def crash_status(x, base_top, magnet_radius, half_thickness, lower, upper):
 
     The lowest point of the (tilted) disc must stay above ``base_top`` (m) and
     the centre inside the box [lower, upper] (m).
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    base_top : float
+        Height of the tops of the base components, m.
+    magnet_radius : float
+        Magnet radius, m.
+    half_thickness : float
+        Half the magnet thickness, m.
+    lower : ndarray, shape (3,)
+        Lower corner of the workspace box, m.
+    upper : ndarray, shape (3,)
+        Upper corner of the workspace box, m.
     """
     for k in range(x.shape[0]):
         if not math.isfinite(x[k]):
@@ -379,7 +556,19 @@ def crash_status(x, base_top, magnet_radius, half_thickness, lower, upper):
 
 @njit(cache=True, error_model='numpy')
 def coil_voltages(drive, coil_mode, coil_r, v_supply):
-    """Coil voltages, V, for the drive signal (see :func:`rk4_sample`), clipped at the supply."""
+    """Coil voltages, V, for the drive signal (see :func:`rk4_sample`), clipped at the supply.
+
+    Parameters
+    ----------
+    drive : ndarray, shape (n_s,)
+        Drive signal per coil, its unit set by ``coil_mode``.
+    coil_mode : int
+        COIL_IDEAL, COIL_CURRENT_COMMAND, COIL_VOLTAGE or COIL_DUTY.
+    coil_r : float
+        Coil resistance, ohm.
+    v_supply : float
+        Supply voltage, V.
+    """
     v = np.empty(drive.shape[0])
     for j in range(drive.shape[0]):
         if coil_mode == COIL_CURRENT_COMMAND:
@@ -394,7 +583,33 @@ def coil_voltages(drive, coil_mode, coil_r, v_supply):
 
 @njit(cache=True, error_model='numpy')
 def extended_rates(xe, drive, coil, v, coil_mode, coil_r, coil_l, src, rim, par, work):
-    """Rates of the state; with coil dynamics, of [12-state, coil currents]."""
+    """Rates of the state; with coil dynamics, of [12-state, coil currents].
+
+    Parameters
+    ----------
+    xe : ndarray, shape (n_x,)
+        Extended state: the 12 mechanical states, then the coil currents (A) with coil dynamics.
+    drive : ndarray, shape (n_s,)
+        Drive signal per coil, its unit set by ``coil_mode``.
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    v : ndarray, shape (n_s,)
+        Coil voltages, V (scratch, overwritten).
+    coil_mode : int
+        COIL_IDEAL, COIL_CURRENT_COMMAND, COIL_VOLTAGE or COIL_DUTY.
+    coil_r : float
+        Coil resistance, ohm.
+    coil_l : float
+        Coil inductance, H.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    rim : ndarray, shape (2, n)
+        cos and sin of the rim angles of the magnet.
+    par : ndarray, shape (9,)
+        Model parameters (see the module docstring).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    """
     if coil_mode == COIL_IDEAL:
         return fast_dynamics(xe, drive, src, coil, rim, par, work)
     n_coils = v.shape[0]
@@ -418,6 +633,31 @@ def rk4_sample(xe, drive, dt, substeps, coil_mode, electrical, src, coil, rim, p
     carries the coil currents after the 12 mechanical states, integrated with
     ``L di/dt = V - R i``. ``electrical`` = (R ohm, L H, supply V). The drive
     is held constant over the sample (zero-order hold).
+
+    Parameters
+    ----------
+    xe : ndarray, shape (n_x,)
+        Extended state: the 12 mechanical states, then the coil currents (A) with coil dynamics.
+    drive : ndarray, shape (n_s,)
+        Drive signal per coil, its unit set by ``coil_mode``.
+    dt : float
+        Sample period, s.
+    substeps : int
+        RK4 steps per sample.
+    coil_mode : int
+        COIL_IDEAL, COIL_CURRENT_COMMAND, COIL_VOLTAGE or COIL_DUTY.
+    electrical : ndarray, shape (3,)
+        (R ohm, L H, supply V).
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    rim : ndarray, shape (2, n)
+        cos and sin of the rim angles of the magnet.
+    par : ndarray, shape (9,)
+        Model parameters (see the module docstring).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
     """
     h = dt / substeps
     coil_r = electrical[0]
@@ -451,6 +691,19 @@ def coil_step(xe, drive, dt, coil_mode, electrical):
     """Advance only the coil currents by one sample (exact first-order solution).
 
     Used when the magnet is held fixed or absent: the mechanical state is frozen.
+
+    Parameters
+    ----------
+    xe : ndarray, shape (n_x,)
+        Extended state: the 12 mechanical states, then the coil currents (A) with coil dynamics.
+    drive : ndarray, shape (n_s,)
+        Drive signal per coil, its unit set by ``coil_mode``.
+    dt : float
+        Sample period, s.
+    coil_mode : int
+        COIL_IDEAL, COIL_CURRENT_COMMAND, COIL_VOLTAGE or COIL_DUTY.
+    electrical : ndarray, shape (3,)
+        (R ohm, L H, supply V).
     """
     new = xe.copy()
     if coil_mode == COIL_IDEAL:
@@ -488,6 +741,23 @@ def simulator_config(dt, substeps, coil_mode, check, frozen, electrical, crash) 
 
     ``electrical`` = (R ohm, L H, supply V); ``crash`` = (base top m, magnet radius m,
     half thickness m, lower xyz m, upper xyz m).
+
+    Parameters
+    ----------
+    dt : float
+        Sample period, s.
+    substeps : int
+        RK4 steps per sample.
+    coil_mode : int
+        COIL_IDEAL, COIL_CURRENT_COMMAND, COIL_VOLTAGE or COIL_DUTY.
+    check : bool
+        Check for crashes.
+    frozen : bool
+        Magnet held fixed or absent: only the coil currents advance.
+    electrical : ndarray, shape (3,)
+        (R ohm, L H, supply V).
+    crash : ndarray
+        (base top m, magnet radius m, half thickness m, lower xyz m, upper xyz m).
     """
     cfg = np.empty(CONFIG_SIZE)
     cfg[C_DT] = dt
@@ -509,6 +779,29 @@ def sample_step(xe, drive, cfg, src, coil, rim, par, work, sens, mag):
     reading is taken at the previous state; a non-finite drive returns
     STATUS_BAD_INPUT and leaves the state alone. A frozen simulator (fixed or
     absent magnet) only advances the coil currents.
+
+    Parameters
+    ----------
+    xe : ndarray, shape (n_x,)
+        Extended state: the 12 mechanical states, then the coil currents (A) with coil dynamics.
+    drive : ndarray, shape (n_s,)
+        Drive signal per coil, its unit set by ``coil_mode``.
+    cfg : ndarray
+        The settings of :func:`simulator_config`.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    rim : ndarray, shape (2, n)
+        cos and sin of the rim angles of the magnet.
+    par : ndarray, shape (9,)
+        Model parameters (see the module docstring).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    sens : ndarray, shape (k, 18)
+        Per sensor: position, mounting rotation, gain, offset (module docstring).
+    mag : ndarray, shape (2,)
+        The magnet's own loop radius (m) and current (A), for the sensor model.
     """
     for j in range(drive.shape[0]):
         if not math.isfinite(drive[j]):
@@ -551,6 +844,29 @@ def rk4_run(x0, drives, cfg, src, coil, rim, par, work, sens, mag):
     ``cfg`` is :func:`simulator_config`'s array. Returns (states (K + 1, n_x),
     true readings (K + 1, 3 k), samples done K, status, attempted state at the
     crash).
+
+    Parameters
+    ----------
+    x0 : ndarray, shape (n_x,)
+        Initial extended state.
+    drives : ndarray, shape (K, n_s)
+        Drive signal of each sample.
+    cfg : ndarray
+        The settings of :func:`simulator_config`.
+    src : ndarray, shape (S, 6)
+        Packed loop sources of the base (see the module docstring).
+    coil : ndarray of int64, shape (S,)
+        Input feeding each loop (-1: none).
+    rim : ndarray, shape (2, n)
+        cos and sin of the rim angles of the magnet.
+    par : ndarray, shape (9,)
+        Model parameters (see the module docstring).
+    work : ndarray, shape (WORK_ROWS, >= n S)
+        Scratch space, overwritten.
+    sens : ndarray, shape (k, 18)
+        Per sensor: position, mounting rotation, gain, offset (module docstring).
+    mag : ndarray, shape (2,)
+        The magnet's own loop radius (m) and current (A), for the sensor model.
     """
     n = drives.shape[0]
     n_y = 3 * sens.shape[0]

@@ -31,12 +31,24 @@ REDUCED_STATES = tuple(i for i, name in enumerate(STATE_NAMES) if name not in ('
 
 
 def input_names(n_inputs: int) -> tuple[str, ...]:
-    """Solenoid names in the package's order (x+, x-, y+, y-, then s4, s5, ...)."""
+    """Solenoid names in the package's order (x+, x-, y+, y-, then s4, s5, ...).
+
+    Parameters
+    ----------
+    n_inputs : int
+        Number of solenoids.
+    """
     return tuple(COIL_NAMES[j] if j < 4 else f's{j}' for j in range(n_inputs))
 
 
 def output_names(n_sensors: int) -> tuple[str, ...]:
-    """Measurement names: Bx_0, By_0, Bz_0, Bx_1, ... (tesla)."""
+    """Measurement names: Bx_0, By_0, Bz_0, Bx_1, ... (tesla).
+
+    Parameters
+    ----------
+    n_sensors : int
+        Number of sensors.
+    """
     return tuple(f'B{axis}_{k}' for k in range(n_sensors) for axis in 'xyz')
 
 
@@ -145,12 +157,9 @@ def linearize(model, x_eq=None, u_eq=None, step: float = FD_STEP) -> LinearModel
         A (12, 12), B (12, n_s), C (3k, 12), D (3k, n_s).
     """
     if x_eq is None:
-        from .equilibria import find_equilibria
+        from .equilibria import rest_state
 
-        found = find_equilibria(model)
-        if not found:
-            raise ValueError(f'{model!r} has no equilibrium to linearise about')
-        x_eq = model.hover_state(found[0].z)
+        x_eq = rest_state(model)
     x0 = np.asarray(x_eq, dtype=float).copy()
     u0 = np.zeros(model.n_inputs) if u_eq is None else np.asarray(u_eq, dtype=float).copy()
     if not step > 0:

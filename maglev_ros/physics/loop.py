@@ -142,6 +142,11 @@ def loop_batch(dx, dy, z, a, current, brho_over_rho, bz, work):  # pragma: no co
 def as_points(points) -> np.ndarray:
     """Validate observation points: a C-contiguous float array of shape (n, 3).
 
+    Parameters
+    ----------
+    points : array_like, shape (n, 3) or (3,)
+        Points, m.
+
     Raises
     ------
     ValueError

@@ -27,8 +27,10 @@ import hashlib
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 from . import kernels
+from .equilibria import find_equilibria, vertical_force
 from .filament import filament_loops
 from .loop import MU0, as_points, loop_field
 from .parameters import MaggyParameters, load_parameters
@@ -41,10 +43,12 @@ __all__ = [
     'STATE_NAMES',
     'DEFAULT_RIM_POINTS',
     'DEFAULT_AXIAL_POINTS',
+    'CORRECTION_TEST_CURRENT',
     'ModelOptions',
     'MaggyModel',
     'make_model',
     'rim_angles',
+    'solenoid_radius_correction',
 ]
 
 FIELD_MODELS = ('fast', 'accurate', 'filament')
@@ -146,6 +150,11 @@ def rim_angles(n: int) -> tuple[np.ndarray, np.ndarray]:
     sin(-t) = -sin t, exact zeros on the axes) and a centred magnet in a
     symmetric base feels exactly zero horizontal force.
 
+    Parameters
+    ----------
+    n : int
+        Number of rim points.
+
     Returns
     -------
     cos, sin : ndarray, shape (n,)
@@ -229,8 +238,6 @@ class MaggyModel:
             return float(self.params.solenoid_radius_correction)
         key = _params_key(self.params)
         if key not in _CORRECTION_CACHE:
-            from .equilibria import solenoid_radius_correction
-
             _CORRECTION_CACHE[key] = solenoid_radius_correction(self.params)
         return _CORRECTION_CACHE[key]
 
@@ -321,6 +328,13 @@ class MaggyModel:
         Fast model: a loop of radius R with current ``-J l / (2 mu0)``, half the
         magnet's equivalent current, as published. Accurate/filament: the exact
         current sheet (``-J l / mu0``).
+
+        Parameters
+        ----------
+        points : array_like, shape (n, 3)
+            World points, m.
+        x : array_like, shape (12,)
+            State of the magnet.
         """
         pts = as_points(points)
         state = self._state(x)
@@ -357,7 +371,15 @@ class MaggyModel:
         return wrench[:3], wrench[3:]
 
     def wrench(self, x, u=None) -> np.ndarray:
-        """Force and torque stacked, shape (6,): (F (N), tau (N m)), world frame."""
+        """Force and torque stacked, shape (6,): (F (N), tau (N m)), world frame.
+
+        Parameters
+        ----------
+        x : array_like, shape (12,)
+            State of the magnet.
+        u : array_like, shape (n_s,), optional
+            Solenoid currents, A (default zero).
+        """
         state = self._state(x)
         current = self._inputs(u)
         if self.options.field == 'fast':
@@ -522,7 +544,13 @@ class MaggyModel:
         return current
 
     def with_options(self, **changes) -> MaggyModel:
-        """Return a model of the same parameters with some options changed."""
+        """Return a model of the same parameters with some options changed.
+
+        Parameters
+        ----------
+        **changes : object
+            :class:`ModelOptions` fields to change.
+        """
         return MaggyModel(self.params, dataclasses.replace(self.options, **changes))
 
     def inverted(self) -> MaggyModel:
@@ -536,7 +564,13 @@ class MaggyModel:
         return model
 
     def hover_state(self, z: float) -> np.ndarray:
-        """Return the centred, level, resting state at height ``z`` (m), shape (12,)."""
+        """Return the centred, level, resting state at height ``z`` (m), shape (12,).
+
+        Parameters
+        ----------
+        z : float
+            Height of the magnet's centre, m.
+        """
         x = np.zeros(12)
         x[2] = z
         return x
@@ -562,3 +596,54 @@ def make_model(params: str | MaggyParameters = 'maggy_v2', **options) -> MaggyMo
     if not isinstance(params, MaggyParameters):
         params = load_parameters(params)
     return MaggyModel(params, ModelOptions(**options))
+
+
+#: Current in every solenoid when matching the fast model to the filament model, A.
+CORRECTION_TEST_CURRENT = 100.0
+
+
+def solenoid_radius_correction(params: MaggyParameters) -> float:
+    """Solenoid radius factor c that makes the fast model match the filament model.
+
+    At the first (lowest) equilibrium of the uncorrected fast model (which does
+    not depend on c: the solenoids carry no current there), with 100 A in every
+    solenoid, c is chosen so that the fast model's total vertical force equals
+    the filament model's (magnet as a current sheet over its rim surface).
+    This is the published procedure; it is deterministic.
+
+    Parameters
+    ----------
+    params : MaggyParameters
+        The parameter set (its override, if any, is ignored here).
+
+    Returns
+    -------
+    float
+        The factor c (about 0.56 for the published sets).
+
+    Raises
+    ------
+    ValueError
+        No equilibrium, or no factor in [0.05, 3] matches.
+    """
+    fast = MaggyModel(params, ModelOptions(field='fast', correction='none'))
+    found = find_equilibria(fast)
+    if not found:
+        raise ValueError(f'{params.name}: no equilibrium, cannot compute the solenoid correction')
+    z_eq = found[0].z
+    u = np.full(params.solenoids.count, CORRECTION_TEST_CURRENT)
+    filament = MaggyModel(params, ModelOptions(field='filament'))
+    target = float(vertical_force(filament, z_eq, u))
+
+    def mismatch(c: float) -> float:
+        model = MaggyModel(params, ModelOptions(field='fast', correction=c))
+        return float(vertical_force(model, z_eq, u)) - target
+
+    grid = np.linspace(0.05, 3.0, 60)
+    values = [mismatch(c) for c in grid]
+    for k in range(len(grid) - 1):
+        if np.sign(values[k]) != np.sign(values[k + 1]):
+            return float(brentq(mismatch, grid[k], grid[k + 1], xtol=1e-14, rtol=1e-14))
+    raise ValueError(
+        f'{params.name}: no solenoid radius factor in [0.05, 3] matches the filament model'
+    )

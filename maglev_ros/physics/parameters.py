@@ -209,11 +209,23 @@ class MaggyParameters:
     source: str = '<memory>'
 
     def replace(self, **changes: Any) -> MaggyParameters:
-        """Return a copy with some fields replaced (the object is immutable)."""
+        """Return a copy with some fields replaced (the object is immutable).
+
+        Parameters
+        ----------
+        **changes : object
+            Fields to replace.
+        """
         return dataclasses.replace(self, **changes)
 
     def with_inertia(self, inertia: Any) -> MaggyParameters:
-        """Return a copy whose levitating magnet has other principal moments, kg m^2."""
+        """Return a copy whose levitating magnet has other principal moments, kg m^2.
+
+        Parameters
+        ----------
+        inertia : array_like, shape (3,)
+            Principal moments, kg m^2.
+        """
         values = _frozen(inertia)
         if values.shape != (3,) or not np.all(values > 0):
             raise ParameterError(f'inertia must be 3 positive numbers, got {inertia!r}')
@@ -435,6 +447,11 @@ def _config_dirs() -> list[Path]:
 
 def preset_path(name: str) -> Path:
     """Return the file of a shipped parameter set (``maggy_v2`` or ``maggy_v4``).
+
+    Parameters
+    ----------
+    name : str
+        ``maggy_v2`` or ``maggy_v4``.
 
     Raises
     ------

@@ -85,7 +85,15 @@ class CoilDynamics:
 
     @classmethod
     def from_parameters(cls, params, drive: str = 'current') -> CoilDynamics:
-        """Coil electrics of a parameter set's ``coils`` section."""
+        """Coil electrics of a parameter set's ``coils`` section.
+
+        Parameters
+        ----------
+        params : MaggyParameters
+            The parameter set.
+        drive : str
+            What the commands are: 'current' (default), 'voltage' or 'duty'.
+        """
         c = params.coils
         return cls(drive, c.resistance, c.inductance, c.supply_voltage)
 
@@ -329,6 +337,11 @@ class Simulator:
     # ------------------------------------------------------------------ state
     def reset(self, x0=None) -> np.ndarray:
         """Restart at ``x0`` (default: the constructor's, else the equilibrium).
+
+        Parameters
+        ----------
+        x0 : array_like, shape (12,), optional
+            Initial state.
 
         Returns
         -------
@@ -625,12 +638,9 @@ class Simulator:
         return state.copy()
 
     def _equilibrium_state(self) -> np.ndarray:
-        from .equilibria import find_equilibria
+        from .equilibria import rest_state
 
-        found = find_equilibria(self.model)
-        if not found:
-            raise ValueError(f'{self.model!r} has no equilibrium; give x0')
-        return self.model.hover_state(found[0].z)
+        return rest_state(self.model)
 
 
 def _compiled(dispatcher, *example):

@@ -178,7 +178,15 @@ def arx_rows(
 
 
 def signal_matrix(data: IdData, *extra: np.ndarray) -> np.ndarray:
-    """Stack ``y`` (N, ny), ``u`` (N, nu) and extra (N, k) signals as rows, (ny+nu+k, N)."""
+    """Stack ``y`` (N, ny), ``u`` (N, nu) and extra (N, k) signals as rows, (ny+nu+k, N).
+
+    Parameters
+    ----------
+    data : IdData
+        The data set.
+    *extra : ndarray, shape (N, k)
+        Further signals.
+    """
     return np.ascontiguousarray(np.vstack([data.y.T, data.u.T, *[e.T for e in extra]]))
 
 

@@ -28,7 +28,13 @@ __all__ = ['block_sizes', 'lag_gram']
 
 
 def block_sizes(blocks: np.ndarray) -> int:
-    """Return the number of regressors described by ``blocks`` (sum of counts)."""
+    """Return the number of regressors described by ``blocks`` (sum of counts).
+
+    Parameters
+    ----------
+    blocks : ndarray
+        Regressor blocks, one row each with its count.
+    """
     return int(np.asarray(blocks)[:, 2].sum()) if len(blocks) else 0
 
 

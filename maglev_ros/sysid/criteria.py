@@ -37,7 +37,13 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
 
 
 def loss_determinant(e: np.ndarray) -> float:
-    """Return ``det(E^T E / N)`` of residuals ``e`` (N, ny): the toolbox's loss ``V``."""
+    """Return ``det(E^T E / N)`` of residuals ``e`` (N, ny): the toolbox's loss ``V``.
+
+    Parameters
+    ----------
+    e : ndarray, shape (N, ny)
+        Residuals.
+    """
     e = np.atleast_2d(np.asarray(e, dtype=float).T).T
     return float(np.linalg.det(e.T @ e / e.shape[0]))
 
@@ -64,13 +70,29 @@ def fpe(e: np.ndarray, n_params: int) -> float:
 
 
 def aic(e: np.ndarray, n_params: int) -> float:
-    """Akaike's information criterion ``N log V + 2 d + N ny (log 2 pi + 1)`` (the toolbox's)."""
+    """Akaike's information criterion ``N log V + 2 d + N ny (log 2 pi + 1)`` (the toolbox's).
+
+    Parameters
+    ----------
+    e : ndarray, shape (N, ny)
+        Residuals.
+    n_params : int
+        Number of estimated parameters d.
+    """
     e = np.atleast_2d(np.asarray(e, dtype=float).T).T
     N, ny = e.shape
     return float(N * np.log(loss_determinant(e)) + 2 * n_params + N * ny * (np.log(2 * np.pi) + 1))
 
 
 def mdl(e: np.ndarray, n_params: int) -> float:
-    """Rissanen's minimum description length ``V (1 + d log(N) / N)`` (as ``selstruc``)."""
+    """Rissanen's minimum description length ``V (1 + d log(N) / N)`` (as ``selstruc``).
+
+    Parameters
+    ----------
+    e : ndarray, shape (N, ny)
+        Residuals.
+    n_params : int
+        Number of estimated parameters d.
+    """
     N = np.asarray(e).shape[0]
     return loss_determinant(e) * (1 + n_params * np.log(N) / N)

@@ -276,27 +276,6 @@ class IdData:
         u = signal.decimate(self.u, q, axis=0, zero_phase=True) if self.nu else self.u[::q]
         return replace(self, y=y, u=u, Ts=self.Ts * q)
 
-    # ------------------------------------------------------------ constructors
-    @classmethod
-    def from_file(cls, path: str, **options: object) -> IdData:
-        """Load a data set from ``.npz``, ``.csv`` or ``.mat`` (see :func:`~.datafile.load_data`).
-
-        Parameters
-        ----------
-        path : str
-            File name.
-        **options
-            Passed to :func:`maglev_ros.sysid.datafile.load_data`.
-
-        Returns
-        -------
-        IdData
-            The loaded data.
-        """
-        from .datafile import load_data
-
-        return load_data(path, **options)  # type: ignore[arg-type]
-
     def __repr__(self) -> str:
         return (
             f'IdData(N={self.N}, ny={self.ny}, nu={self.nu}, Ts={self.Ts:g} s, '

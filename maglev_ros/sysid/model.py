@@ -17,7 +17,6 @@ from .dataset import IdData
 from .orders import Orders
 from .polynomial import (
     Polynomials,
-    equivalent_armax,
     free_response,
     innovations_form,
     predictor_errors,
@@ -380,6 +379,11 @@ class PolyModel:
 
         Equal to :meth:`residuals` with ``ic='zero'``; kept as an independent
         cross-check of the polynomial filters.
+
+        Parameters
+        ----------
+        data : IdData
+            The data set.
         """
         A, B, C, D, K = self.innovations_form()
         return predictor_errors(
@@ -446,7 +450,15 @@ class PolyModel:
         return np.concatenate(out) if out else np.zeros(0, dtype=complex)
 
     def zeros(self, output: int = 0, input: int = 0) -> np.ndarray:  # noqa: A002
-        """Zeros (in z) of the numerator ``B_ij`` of one input-output channel."""
+        """Zeros (in z) of the numerator ``B_ij`` of one input-output channel.
+
+        Parameters
+        ----------
+        output : int
+            Output index.
+        input : int
+            Input index.
+        """
         b = np.trim_zeros(self.polynomial('B', output, input), 'f')
         return np.roots(b) if len(b) > 1 else np.zeros(0, dtype=complex)
 
@@ -635,8 +647,3 @@ def _cofactor(M: list[list[np.ndarray]], row: int, col: int) -> np.ndarray:
         return np.ones(1)
     c = _poly_det(_minor(M, row, col))
     return c if (row + col) % 2 == 0 else -c
-
-
-def equivalent_polynomials(model: PolyModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the matrix-ARMAX form ``(Ae, Be, Ce)`` of a model (see ``equivalent_armax``)."""
-    return equivalent_armax(model._polys)

@@ -84,7 +84,13 @@ class Orders:
         return int(sum(self.row_sizes()))
 
     def row_start(self, i: int) -> int:
-        """Index of the first sample with all regressors of output ``i`` available."""
+        """Index of the first sample with all regressors of output ``i`` available.
+
+        Parameters
+        ----------
+        i : int
+            Output index.
+        """
         lags = [int(self.na[i].max(initial=0))]
         lags += [
             int(self.nk[i, j] + self.nb[i, j] - 1) for j in range(self.nu) if self.nb[i, j] > 0

@@ -76,7 +76,15 @@ def stabilize(poly: np.ndarray, radius: float = 0.999) -> np.ndarray:
 
 
 def shift(x: np.ndarray, k: int) -> np.ndarray:
-    """Return ``x(t - k)`` with zeros before the start, same shape as ``x`` (axis 0)."""
+    """Return ``x(t - k)`` with zeros before the start, same shape as ``x`` (axis 0).
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, ...)
+        Signal.
+    k : int
+        Delay in samples (>= 0).
+    """
     if k == 0:
         return x.copy()
     out = np.zeros_like(x)
@@ -88,7 +96,13 @@ Normal = Callable[[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]
 
 
 def from_jacobian(gradient: Callable[[np.ndarray, np.ndarray], np.ndarray]) -> Normal:
-    """Wrap ``(theta, e) -> psi`` (N, p) as ``(theta, e) -> (psi^T psi, psi^T e)``."""
+    """Wrap ``(theta, e) -> psi`` (N, p) as ``(theta, e) -> (psi^T psi, psi^T e)``.
+
+    Parameters
+    ----------
+    gradient : callable
+        ``(theta, e) -> psi`` (N, p).
+    """
 
     def normal(theta: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         psi = gradient(theta, e)

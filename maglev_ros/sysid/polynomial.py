@@ -212,7 +212,23 @@ def innovations_form(
 def simulate_ss(
     A: np.ndarray, B: np.ndarray, C: np.ndarray, D: np.ndarray, x0: np.ndarray, u: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - numba
-    """Simulate ``x+ = Ax + Bu``, ``y = Cx + Du``; ``u`` (N, nu) -> ``y`` (N, ny)."""
+    """Simulate ``x+ = Ax + Bu``, ``y = Cx + Du``; ``u`` (N, nu) -> ``y`` (N, ny).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix.
+    B : ndarray, shape (n, nu)
+        Input matrix.
+    C : ndarray, shape (ny, n)
+        Output matrix.
+    D : ndarray, shape (ny, nu)
+        Feedthrough.
+    x0 : ndarray, shape (n,)
+        Initial state.
+    u : ndarray, shape (N, nu)
+        Inputs.
+    """
     N, nu = u.shape
     ny, n = C.shape
     y = np.empty((N, ny))
@@ -248,7 +264,27 @@ def predictor_errors(
     u: np.ndarray,
     y: np.ndarray,
 ) -> np.ndarray:  # pragma: no cover - numba
-    """One-step prediction errors of the innovations form (Kalman predictor), (N, ny)."""
+    """One-step prediction errors of the innovations form (Kalman predictor), (N, ny).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix.
+    B : ndarray, shape (n, nu)
+        Input matrix.
+    C : ndarray, shape (ny, n)
+        Output matrix.
+    D : ndarray, shape (ny, nu)
+        Feedthrough.
+    K : ndarray, shape (n, ny)
+        Kalman (innovations) gain.
+    x0 : ndarray, shape (n,)
+        Initial state.
+    u : ndarray, shape (N, nu)
+        Inputs.
+    y : ndarray, shape (N, ny)
+        Outputs.
+    """
     N, nu = u.shape
     ny, n = C.shape
     e = np.empty((N, ny))
@@ -277,7 +313,17 @@ def predictor_errors(
 
 @njit(cache=True)
 def free_response(A: np.ndarray, C: np.ndarray, N: int) -> np.ndarray:  # pragma: no cover
-    """Stacked ``C A^t`` for t = 0..N-1, shape (N, ny, n)."""
+    """Stacked ``C A^t`` for t = 0..N-1, shape (N, ny, n).
+
+    Parameters
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix.
+    C : ndarray, shape (ny, n)
+        Output matrix.
+    N : int
+        Number of samples.
+    """
     ny, n = C.shape
     out = np.empty((N, ny, n))
     M = C.copy()

@@ -142,12 +142,24 @@ def equation_errors(
 
 
 def stack_rows(blocks: Sequence[np.ndarray]) -> np.ndarray:
-    """Stack per-experiment blocks along axis 0 (no copy for a single experiment)."""
+    """Stack per-experiment blocks along axis 0 (no copy for a single experiment).
+
+    Parameters
+    ----------
+    blocks : sequence of ndarray
+        One block per experiment.
+    """
     return blocks[0] if len(blocks) == 1 else np.vstack(blocks)
 
 
 def join(blocks: Sequence[np.ndarray]) -> np.ndarray:
-    """Concatenate per-experiment vectors (no copy for a single experiment)."""
+    """Concatenate per-experiment vectors (no copy for a single experiment).
+
+    Parameters
+    ----------
+    blocks : sequence of ndarray
+        One vector per experiment.
+    """
     return blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
 
 
@@ -214,6 +226,13 @@ def arx_regressors(y: np.ndarray, u: np.ndarray, orders: Orders, i: int, start: 
 
 def check_data(experiments: Sequence[IdData], orders: Orders) -> None:
     """Check that the data match the orders and hold more samples than parameters.
+
+    Parameters
+    ----------
+    experiments : sequence of IdData
+        The data sets.
+    orders : Orders
+        The model orders.
 
     Raises
     ------

@@ -195,7 +195,15 @@ class RecursiveArx:
     def update(
         self, y: Sequence[float] | np.ndarray, u: Sequence[float] | np.ndarray
     ) -> np.ndarray:
-        """Add one sample ``y(t)`` (ny,) and ``u(t)`` (nu,); return the new parameters."""
+        """Add one sample ``y(t)`` (ny,) and ``u(t)`` (nu,); return the new parameters.
+
+        Parameters
+        ----------
+        y : array_like, shape (ny,)
+            Output sample y(t).
+        u : array_like, shape (nu,)
+            Input sample u(t).
+        """
         y = np.atleast_1d(np.asarray(y, dtype=float))
         u = np.atleast_1d(np.asarray(u, dtype=float))
         o = self.orders
@@ -218,5 +226,11 @@ class RecursiveArx:
         return self.theta
 
     def model(self, Ts: float) -> PolyModel:
-        """Return the current estimate as an ARX :class:`PolyModel` with sample time ``Ts`` (s)."""
+        """Return the current estimate as an ARX :class:`PolyModel` with sample time ``Ts`` (s).
+
+        Parameters
+        ----------
+        Ts : float
+            Sample time, s.
+        """
         return PolyModel('arx', self.orders, self.theta, Ts, np.eye(self.orders.ny))

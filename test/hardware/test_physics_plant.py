@@ -1,12 +1,11 @@
 import numpy as np
 import pytest
 
+from maglev_ros import physics
 from maglev_ros.hardware.firmware import V2xFirmware
 from maglev_ros.hardware.physics_plant import SimulatorPlant, make_simulator_plant
 from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.v2x_stream import RecordDecoder
-
-physics = pytest.importorskip('maglev_ros.physics')
 
 SCALING = CurrentScaling(1000.0)  # counts per A
 

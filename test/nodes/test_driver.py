@@ -17,6 +17,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
+from waiting import wait_for
 
 from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.packet import sendable_pwm
@@ -27,13 +28,6 @@ from maglev_ros.nodes.driver import DriverNode, DriverParameterError, build_conf
 
 TIMEOUT = 15.0  # s, generous: the machine is shared
 RELIABLE_DEEP = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
-
-
-def wait_for(predicate, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.005)
 
 
 class Harness:
@@ -560,7 +554,6 @@ def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypa
 
 
 def test_published_fields_equal_the_physics_model_in_tesla(make_harness):
-    pytest.importorskip('maglev_ros.physics')
     from maglev_ros.hardware.physics_plant import make_simulator_plant
 
     plant = make_simulator_plant('fixed', scaling=CurrentScaling(1000.0))

@@ -8,12 +8,12 @@ back with :func:`maglev_ros.bags.read_bag`, inputs being the currents the
 driver reports as applied.
 """
 
-import time
 from functools import partial
 
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
+from waiting import wait_for
 
 from maglev_ros.bags import BagReader, load_bag_dataset, parse_channel, read_bag
 from maglev_ros.bags.extraction import read_topics
@@ -46,13 +46,6 @@ def compiled_kernels():
     firmware = V2xFirmware(LinearPlant.default(1), 1, startup_delay=0.0)
     batch = RecordDecoder(1).feed(firmware.advance_to(10_000))
     assert len(batch) > 0
-
-
-def wait_for(predicate, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.01)
 
 
 def overrides(**values):

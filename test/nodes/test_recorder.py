@@ -11,6 +11,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import MagneticField
 from std_msgs.msg import Float64MultiArray
+from waiting import wait_for
 
 from maglev_ros.bags import BagReader, read_bag
 from maglev_ros.nodes import contract
@@ -20,13 +21,6 @@ from maglev_ros.nodes.recorder import RecorderNode, RecorderParameterError, buil
 from maglev_ros.nodes.simulator import SimulatorNode
 
 TIMEOUT = 30.0
-
-
-def wait_for(predicate, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.005)
 
 
 def params(**values):

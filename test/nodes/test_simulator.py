@@ -18,6 +18,7 @@ from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
+from waiting import wait_for
 
 from maglev_ros.nodes import contract
 from maglev_ros.nodes.simulator import (
@@ -28,13 +29,6 @@ from maglev_ros.nodes.simulator import (
 )
 
 TIMEOUT = 30.0  # s, generous: the machine is shared
-
-
-def wait_for(predicate, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.005)
 
 
 class Peer:

@@ -3,12 +3,9 @@
 import numpy as np
 import pytest
 
-from maglev_ros.physics.equilibria import (
-    find_equilibria,
-    solenoid_radius_correction,
-)
+from maglev_ros.physics.equilibria import find_equilibria
 from maglev_ros.physics.kernels import GRAVITY
-from maglev_ros.physics.model import DEFAULT_RIM_POINTS, make_model
+from maglev_ros.physics.model import DEFAULT_RIM_POINTS, make_model, solenoid_radius_correction
 from maglev_ros.physics.parameters import load_parameters
 
 

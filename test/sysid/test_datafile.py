@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 from scipy.io import savemat
 
-from maglev_ros.sysid import DataFileError, IdData, load_data
+from maglev_ros.sysid import DataFileError, load_data
 
 
 @pytest.fixture
@@ -17,7 +17,7 @@ def test_mat_data_matrix_rows_counted_from_one(tmp_path, channels):
     d = load_data(path, Ts=2e-4, rows=([1, 2], [4, 5]))
     assert (d.ny, d.nu, d.N) == (2, 2, 50)
     assert np.allclose(d.y[:, 1], channels[1]) and np.allclose(d.u[:, 0], channels[3])
-    assert IdData.from_file(path, Ts=2e-4, rows=([3], [5])).y[0, 0] == channels[2, 0]
+    assert load_data(path, Ts=2e-4, rows=([3], [5])).y[0, 0] == channels[2, 0]
 
 
 def test_npz_with_y_u_and_ts(tmp_path, channels):

@@ -77,3 +77,31 @@ def test_bad_input_exits_2_with_one_line(capsys, argv, message):
     lines = captured.err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('maglev-model: error: ')
     assert message in lines[0]
+
+
+def test_simulation_figure_shows_the_simulated_signals():
+    import matplotlib.pyplot as plt
+
+    from maglev_ros.cli.model import simulation_figure
+    from maglev_ros.physics import Simulator, make_model, rest_state
+
+    model = make_model('maggy_v2')
+    x0 = rest_state(model)
+    x0[0] += 0.001  # off centre: the magnet moves, then crashes
+    result = Simulator(model, sample_rate=5000.0).run(np.zeros((100, 4)), x0=x0)
+    fig = simulation_figure(result, 'maggy_v2')
+    try:
+        position, angles, field = fig.axes
+        assert [ax.get_ylabel() for ax in fig.axes] == ['position, mm', 'angle, rad', 'field, mT']
+        assert field.get_xlabel() == 'time, s'
+        assert fig._suptitle.get_text().startswith('maggy_v2: simulation (')
+        assert [line.get_label() for line in position.lines] == ['x', 'y', 'z']
+        np.testing.assert_array_equal(position.lines[0].get_xdata(), result.t)
+        np.testing.assert_allclose(position.lines[2].get_ydata(), result.x[:, 2] * 1e3)
+        assert [line.get_label() for line in angles.lines] == ['alpha', 'beta', 'gamma']
+        n_sensors = result.y.shape[1] // 3
+        assert [line.get_label() for line in field.lines] == [f'Bz_{k}' for k in range(n_sensors)]
+        np.testing.assert_allclose(field.lines[1].get_ydata(), result.y[:, 5] * 1e3)
+        assert np.ptp(position.lines[0].get_ydata()) > 0  # the x motion is drawn
+    finally:
+        plt.close(fig)

@@ -91,7 +91,6 @@ def test_runs_until_signal_and_cleans_up(signum, tmp_path):
     ],
 )
 def test_physics_plant_arguments(argv, match, capsys):
-    pytest.importorskip('maglev_ros.physics')
     assert main(argv) == 2
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 1 and match in lines[0]

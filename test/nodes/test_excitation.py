@@ -9,6 +9,7 @@ import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from waiting import wait_for
 
 from maglev_ros.nodes import contract
 from maglev_ros.nodes.excitation import (
@@ -20,13 +21,6 @@ from maglev_ros.nodes.excitation import (
 from maglev_ros.nodes.simulator import SimulatorNode
 
 TIMEOUT = 30.0
-
-
-def wait_for(predicate, timeout=TIMEOUT, what='condition'):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.005)
 
 
 def params(**values):

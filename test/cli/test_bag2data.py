@@ -3,12 +3,11 @@ import re
 
 import numpy as np
 import pytest
+from bags.recordings import METADATA, SENSOR, TS, lockstep_data, write_lockstep_bag
 from scipy.io import loadmat
 
 from maglev_ros.cli.bag2data import main
 from maglev_ros.sysid import load_data
-
-from .recordings import METADATA, SENSOR, TS, lockstep_data, write_lockstep_bag
 
 OUT = [
     '--output',

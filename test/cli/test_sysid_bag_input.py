@@ -5,11 +5,10 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from bags.recordings import COMMAND, SENSOR, lockstep_data, write_lockstep_bag
 from scipy.signal import lfilter
 
 from maglev_ros.cli.sysid import main
-
-from .recordings import COMMAND, SENSOR, lockstep_data, write_lockstep_bag
 
 
 @pytest.fixture(scope='module')

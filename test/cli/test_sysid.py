@@ -3,10 +3,9 @@ import json
 import numpy as np
 import pytest
 from scipy.io import savemat
+from sysid.systems import simulate_mimo_arx, simulate_siso
 
 from maglev_ros.cli.sysid import main
-
-from .systems import simulate_mimo_arx, simulate_siso
 
 
 @pytest.fixture
