@@ -310,7 +310,26 @@ class ChannelIdentifier:
         return self.sampler.topics
 
     def add(self, topic: str, message: object) -> np.ndarray | None:
-        """Take one message; on a completed sample update, return the prediction error (ny,)."""
+        """Take one message; on a completed sample update, return the prediction error (ny,).
+
+        Parameters
+        ----------
+        topic : str
+            The message's topic (with or without the leading ``/``).
+        message : object
+            The message (fields as in the channel paths).
+
+        Returns
+        -------
+        ndarray or None
+            The a-priori prediction error, shape (ny,), output units; None when
+            the message completes no sample.
+
+        Raises
+        ------
+        ValueError
+            If the sample is not finite (the estimate is left unchanged).
+        """
         sample = self.sampler.add(topic, message)
         if sample is None:
             return None
@@ -331,6 +350,12 @@ class ChannelIdentifier:
         return coefficient_layout(self.arx.orders, self.arx.theta, outs, ins)
 
     def model(self, Ts: float):  # noqa: ANN201 - PolyModel
-        """Return the current estimate as an ARX PolyModel with sample time ``Ts`` (s)."""
+        """Return the current estimate as an ARX PolyModel with sample time ``Ts`` (s).
+
+        Parameters
+        ----------
+        Ts : float
+            Sample time, s.
+        """
         outs, ins = self.sampler.names
         return self.arx.model(Ts, outs, ins)

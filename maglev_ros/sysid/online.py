@@ -186,6 +186,13 @@ class OnlineArx:
         The error is ``y(t) - phi(t)^T theta(t-1)``, before the update (NaN for
         a row that is still waiting for its history).
 
+        Parameters
+        ----------
+        y : array_like, shape (ny,)
+            Outputs at ``t``, output units.
+        u : array_like, shape (nu,)
+            Inputs at ``t``, input units.
+
         Raises
         ------
         ValueError
@@ -273,7 +280,15 @@ class OnlineArx:
         output_names: Sequence[str] = (),
         input_names: Sequence[str] = (),
     ) -> PolyModel:
-        """Return the current estimate as an ARX :class:`PolyModel` (sample time ``Ts``, s)."""
+        """Return the current estimate as an ARX :class:`PolyModel` (sample time ``Ts``, s).
+
+        Parameters
+        ----------
+        Ts : float
+            Sample time, s.
+        output_names, input_names : sequence of str
+            Channel names (default ``y1 ..``, ``u1 ..``).
+        """
         return PolyModel(
             'arx',
             self.orders,
@@ -314,7 +329,18 @@ class CoefficientLayout:
         return tuple(d[0] for d in self.dims)
 
     def block(self, label: str) -> np.ndarray:
-        """Coefficients of the block whose label starts with ``label`` (e.g. ``'A[y1,y1]'``)."""
+        """Coefficients of the block whose label starts with ``label`` (e.g. ``'A[y1,y1]'``).
+
+        Parameters
+        ----------
+        label : str
+            The block's label, or its first word (``'B[y1,u1]'``).
+
+        Raises
+        ------
+        KeyError
+            If no block has that label.
+        """
         for name, size, offset in self.dims[1:]:
             if name.split(' ')[0] == label or name == label:
                 return self.data[offset : offset + size]

@@ -44,6 +44,19 @@ def rls_step(
     so that it stays exactly symmetric: with ``lam < 1`` the rounding
     asymmetry of ``P - K (P phi)^T`` grows without bound (the estimate drifts
     from the least-squares one after a few thousand samples).
+
+    Parameters
+    ----------
+    P : ndarray, shape (p, p)
+        Covariance, updated in place.
+    theta : ndarray, shape (p,)
+        Parameters, updated in place.
+    phi : ndarray, shape (p,)
+        Regressor.
+    y : float
+        Measured output.
+    lam : float
+        Forgetting factor in (0, 1].
     """
     p = phi.shape[0]
     Pphi = np.empty(p)
