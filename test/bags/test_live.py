@@ -8,7 +8,7 @@ import pytest
 from scipy.signal import lfilter
 
 from maglev_ros.bags import BagError, BagReader, load_bag_dataset
-from maglev_ros.bags.live import ChannelIdentifier, ChannelSampler
+from maglev_ros.bags.live import ChannelIdentifier, ChannelSampler, StampAligner
 from maglev_ros.sysid import arx
 
 from .recordings import COMMAND, CURRENTS, SENSOR, lockstep_data, write_lockstep_bag
@@ -98,3 +98,29 @@ def test_identifier_on_a_replayed_bag_equals_batch_arx_of_the_converted_bag(tmp_
 def test_identifier_needs_an_input():
     with pytest.raises(BagError, match='at least one input'):
         ChannelIdentifier([BX], [], 2, 2, 1)
+
+
+def test_stamp_aligner_completes_a_sample_whatever_the_arrival_order():
+    topics = ('/f0', '/f1', '/cur', '/cmd')
+    aligner = StampAligner(topics, {'/f0', '/f1', '/cur'}, trigger='/cur')
+    assert aligner.add('/cur', 10, 'c10') == []  # trigger first: waits for the fields
+    assert aligner.add('/f1', 10, 'b10') == []
+    assert aligner.add('/cmd', None, 'u') == [('/cmd', 'u')]  # unstamped: at once
+    assert aligner.add('/f0', 10, 'a10') == [('/f0', 'a10'), ('/f1', 'b10'), ('/cur', 'c10')]
+    # stamp 20 never completes; 30 does: 20 is dropped, and a late 20 too
+    assert aligner.add('/f0', 20, 'a20') == []
+    for topic in ('/cur', '/f0', '/f1'):
+        out = aligner.add(topic, 30, topic + '30')
+    assert [t for t, _ in out] == ['/f0', '/f1', '/cur'] and aligner.dropped == 1
+    assert aligner.add('/f1', 20, 'late') == [] and aligner.dropped == 2
+    aligner.reset()
+    assert aligner.dropped == 0 and aligner.add('/f0', 5, 'a5') == []
+
+
+def test_stamp_aligner_keeps_at_most_depth_incomplete_stamps():
+    aligner = StampAligner(('/a', '/b'), {'/a', '/b'}, trigger='/b', depth=3)
+    for k in range(5):
+        assert aligner.add('/a', k, k) == []
+    assert aligner.dropped == 2  # stamps 0 and 1 pushed out
+    assert aligner.add('/b', 4, 'b4') == [('/a', 4), ('/b', 'b4')]
+    assert aligner.dropped == 4  # 2 and 3 were older than the completed 4
