@@ -29,7 +29,7 @@ from maglev_ros.nodes.identifier import (
 from maglev_ros.nodes.qos import SENSOR_QOS
 from maglev_ros.nodes.runtime import Spinner
 from maglev_ros.nodes.simulator import SimulatorNode
-from maglev_ros.sysid import RecursiveArx
+from maglev_ros.sysid import IdData, RecursiveArx, arx
 from maglev_ros.sysid.online import OnlineArx
 
 N = 600  # samples of the run
@@ -48,8 +48,15 @@ CASES = {
     'siso': (
         [topics.field_channel(0, 'x')],
         [f'ux=0.5*{topics.current_channel(0)}-0.5*{topics.current_channel(1)}'],
-        dict(na=[2], nb=[2], nk=[0], wait_for_history=False),
+        dict(na=[2], nb=[2], nk=[0], wait_for_history=False, forgetting=0.995),
         lambda f, c: ([f[0]], [0.5 * c[0] - 0.5 * c[1]]),
+    ),
+    # forgetting factor 1, output in mT (the channel's scale), a weak prior: batch ARX
+    'batch': (
+        [f'Bx_mT=1000*{topics.field_channel(0, "x")}'],
+        [f'ux=0.5*{topics.current_channel(0)}-0.5*{topics.current_channel(1)}'],
+        dict(na=[2], nb=[3], nk=[0], wait_for_history=True, forgetting=1.0),
+        lambda f, c: ([1000 * f[0]], [0.5 * c[0] - 0.5 * c[1]]),
     ),
     # MISO: z field of sensor 0 against u_x and u_y
     'miso': (
@@ -58,7 +65,7 @@ CASES = {
             f'ux=0.5*{topics.current_channel(0)}-0.5*{topics.current_channel(1)}',
             f'uy=0.5*{topics.current_channel(2)}-0.5*{topics.current_channel(3)}',
         ],
-        dict(na=[1], nb=[2, 1], nk=[0, 1], wait_for_history=True),
+        dict(na=[1], nb=[2, 1], nk=[0, 1], wait_for_history=True, forgetting=0.995),
         lambda f, c: ([f[2]], [0.5 * c[0] - 0.5 * c[1], 0.5 * c[2] - 0.5 * c[3]]),
     ),
 }
@@ -67,7 +74,8 @@ CASES = {
 @pytest.mark.parametrize('case', sorted(CASES))
 def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
     outputs, inputs, orders, sample_of = CASES[case]
-    wait = orders['wait_for_history']
+    wait, lam = orders['wait_for_history'], orders['forgetting']
+    p0 = 1e8 if case == 'batch' else 1e6
     sim = SimulatorNode(
         context=ctx,
         parameter_overrides=params(
@@ -94,8 +102,7 @@ def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
         parameter_overrides=params(
             outputs=outputs,
             inputs=inputs,
-            forgetting=0.995,
-            initial_covariance=1e6,
+            initial_covariance=p0,
             publish_rate=50.0,
             **orders,
         ),
@@ -147,13 +154,19 @@ def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
         o = ident.identifier.arx.orders
         na, nb, nk = o.na, o.nb, o.nk
         if wait:  # the node's default: rows start once their regressor is complete
-            reference = OnlineArx(na, nb, nk, 1, u.shape[1], 0.995, 1e6)
+            reference = OnlineArx(na, nb, nk, 1, u.shape[1], lam, p0)
         else:  # zeros before the first sample: sysid.RecursiveArx itself
-            reference = RecursiveArx(na, nb, nk, 1, u.shape[1], forgetting=0.995, p0=1e6)
+            reference = RecursiveArx(na, nb, nk, 1, u.shape[1], forgetting=lam, p0=p0)
         for yt, ut in zip(y, u, strict=True):
             reference.update(yt, ut)
         published = np.array(model.data)
         np.testing.assert_allclose(published, reference.theta, rtol=1e-9, atol=1e-15)
+        if case == 'batch':  # converged to the batch ARX of the same samples
+            batch = arx(IdData(y, u, 2e-4), na, nb, nk).theta
+            assert np.max(np.abs(published - batch)) <= 1e-6 * np.max(np.abs(batch)), (
+                published,
+                batch,
+            )
         assert np.all(published != 0)
         # the layout names the channels' polynomials and their offsets
         labels = [d.label for d in model.layout.dim]

@@ -128,7 +128,7 @@ def test_integers_for_doubles_run_and_param_dump_is_complete(
         ('identifier', 'na:=[1,2]', 'na must have 1 or 1*1 = 1 values, got [1, 2]'),
         (
             'identifier',
-            'inputs:=[maglev/nowhere:data[0]]',
+            "inputs:=['maglev/nowhere:data[0]']",
             "channel topic '/maglev/nowhere' is not in the topic contract",
         ),
     ],
