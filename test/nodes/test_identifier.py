@@ -127,7 +127,7 @@ def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
     peer.create_subscription(
         DiagnosticArray,
         topics.DIAGNOSTICS_TOPIC,
-        lambda m: diags.extend(s for s in m.status if 'identifier' in s.name),
+        lambda m: diags.extend((_stamp(m), s) for s in m.status if 'identifier' in s.name),
         10,
     )
     spinner = Spinner(ctx, [sim, excite, ident, peer])
@@ -175,10 +175,17 @@ def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
         assert any(label.startswith('B[') and ',ux] nb=' in label for label in labels), labels
         # diagnostics: stamped, with the covariance trace and the drift
         last = [
-            s for s in diags if dict((kv.key, kv.value) for kv in s.values)['samples'] == str(N)
+            (t, s)
+            for t, s in diags
+            if dict((kv.key, kv.value) for kv in s.values)['samples'] == str(N)
         ]
-        assert last, [s.message for s in diags[-3:]]
-        values = {kv.key: kv.value for kv in last[-1].values}
+        assert last, [s.message for _, s in diags[-3:]]
+        stamp, status = last[-1]
+        assert 0 < stamp <= ident.get_clock().now().nanoseconds  # the node's clock
+        values = {kv.key: kv.value for kv in status.values}
+        if wait:
+            trace = reference.status().covariance_trace
+            assert float(values['covariance trace']) == pytest.approx(trace, rel=1e-8)
         assert float(values['covariance trace']) > 0
         assert float(values['parameter drift']) >= 0
         assert values['incomplete stamps dropped'] == '0'
