@@ -24,6 +24,7 @@ NODES: dict[str, str] = {
     'excitation': 'maglev_ros.nodes.excitation:main',
     'recorder': 'maglev_ros.nodes.recorder:main',
     'player': 'maglev_ros.nodes.player:main',
+    'identifier': 'maglev_ros.nodes.identifier:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]
@@ -54,6 +55,7 @@ setup(
         'pyserial>=3.5',
         'rosbags>=0.10',
         'matplotlib>=3.7',
+        'tqdm>=4.60',
     ],
     extras_require={
         # The PyPI build of ROS 2 Jazzy's Python side, for machines without ROS.

@@ -20,6 +20,10 @@ Topics (relative names resolve in the node's namespace; ``/clock`` and
 * ``maglev/reference`` (PoseStamped, m): user, scripts;
 * ``maglev/currents/excitation`` (Float64MultiArray, A): controller;
 * ``maglev/identifier/model`` (Float64MultiArray, ARX coefficients): identifier;
+* ``maglev/identifier/prediction_error`` (Float64MultiArray, one-step prediction
+  error per output, output units): identifier;
+* ``maglev/identifier/fit`` (Float64MultiArray, fit of the one-step predictions
+  over a sliding window per output, percent): identifier;
 * ``/clock`` (rosgraph_msgs/Clock): simulator, player;
 * ``/diagnostics`` (DiagnosticArray): every node.
 """
@@ -39,7 +43,10 @@ __all__ = [
     'ESTIMATE_TOPIC',
     'FIELD_MESSAGE_TYPE',
     'EXCITATION_TOPIC',
+    'IDENTIFIER_FIT_TOPIC',
     'IDENTIFIER_MODEL_TOPIC',
+    'IDENTIFIER_PREDICTION_ERROR_TOPIC',
+    'IDENTIFIER_RESET_SERVICE',
     'MAGNET_FRAME',
     'MARKERS_TOPIC',
     'METADATA_TOPIC',
@@ -73,6 +80,8 @@ ESTIMATE_TOPIC = 'maglev/state/estimate'
 REFERENCE_TOPIC = 'maglev/reference'
 EXCITATION_TOPIC = 'maglev/currents/excitation'
 IDENTIFIER_MODEL_TOPIC = 'maglev/identifier/model'
+IDENTIFIER_PREDICTION_ERROR_TOPIC = 'maglev/identifier/prediction_error'
+IDENTIFIER_FIT_TOPIC = 'maglev/identifier/fit'
 CLOCK_TOPIC = '/clock'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 #: Run metadata the bag writer adds to a bag (std_msgs/String, YAML mapping).
@@ -82,6 +91,7 @@ METADATA_TOPIC = '/maglev/metadata'
 SIMULATOR_RESET_SERVICE = 'maglev/simulator/reset'  # std_srvs/Trigger
 SIMULATOR_PAUSE_SERVICE = 'maglev/simulator/pause'  # std_srvs/SetBool: true pauses
 ENABLE_SERVICE = 'maglev/enable'  # std_srvs/SetBool: the driver's enable
+IDENTIFIER_RESET_SERVICE = 'maglev/identifier/reset'  # std_srvs/Trigger: restart the estimate
 
 
 def field_topic(k: int) -> str:
@@ -124,6 +134,8 @@ MESSAGE_TYPES: dict[str, str] = {
     REFERENCE_TOPIC: 'geometry_msgs/msg/PoseStamped',
     EXCITATION_TOPIC: 'std_msgs/msg/Float64MultiArray',
     IDENTIFIER_MODEL_TOPIC: 'std_msgs/msg/Float64MultiArray',
+    IDENTIFIER_PREDICTION_ERROR_TOPIC: 'std_msgs/msg/Float64MultiArray',
+    IDENTIFIER_FIT_TOPIC: 'std_msgs/msg/Float64MultiArray',
     CLOCK_TOPIC: 'rosgraph_msgs/msg/Clock',
     DIAGNOSTICS_TOPIC: 'diagnostic_msgs/msg/DiagnosticArray',
 }

@@ -20,9 +20,11 @@ default ARX delay is 0 (a record's field and PWM are simultaneous)::
     maglev-lab --virtual-board --magnet fixed --duration 3 --amplitude 0.2 --out lab/
 
 Outputs in ``--out``: ``bag/`` (rosbag2, MCAP), ``models.json`` (fits and
-coefficients), ``compare_<output>.png`` (validation data vs model). Exit status
-0, 2 on bad input (one line on stderr), 130 when interrupted (the bag is
-finalised).
+coefficients), ``compare_<output>.png`` (validation data vs model). In lockstep
+exactly ``--samples`` samples are recorded (the excitation stops after that many
+commands). Exit status 0, 1 when a model failed or is unstable (its row says
+why; everything else is written), 2 on bad input (one line on stderr), 130 when
+interrupted (the bag is finalised).
 """
 
 from __future__ import annotations
@@ -40,6 +42,7 @@ from pathlib import Path
 import numpy as np
 
 from maglev_ros.bags.reader import is_bag_directory
+from maglev_ros.cli.progress import progress_bar
 from maglev_ros.cli.usage import (
     Parser,
     UsageError,
@@ -79,6 +82,7 @@ PROG = 'maglev-lab'
 WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
 BOARD_TS = 200e-6  # s, the board's sample period (V2x and V4x)
 BOARD_READ_INTERVAL = 0.002  # s between port reads in board runs (open loop: latency is free)
+DEFAULT_SAMPLES = 25000  # the lab's record: 5 s at 5 kHz, split 12500 / 12500
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -87,11 +91,20 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description='Simulate, excite, record and identify: the Maggy lab session in one command.',
     )
-    p.add_argument(
+    length = p.add_mutually_exclusive_group()
+    length.add_argument(
+        '--samples',
+        type=int,
+        default=None,
+        help='samples to record (simulator: exactly this many; default 25000 at 5 kHz, '
+        "the lab's 5 s record)",
+    )
+    length.add_argument(
         '--duration',
         type=positive_float,
-        default=5.0,
-        help='simulated seconds to record (default 5)',
+        default=None,
+        help='seconds to record instead: simulated (--samples = duration x --sample-rate), '
+        'or wall-clock seconds against a board (default 5)',
     )
     p.add_argument(
         '--params', default='maggy_v2', help='parameter set (maggy_v2, maggy_v4, or a YAML path)'
@@ -150,6 +163,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="replace a previous session's results in --out (its bag/ is removed)",
     )
     p.add_argument('--no-plots', action='store_true', help='write no plots')
+    p.add_argument('--quiet', action='store_true', help='no progress display')
     board = p.add_mutually_exclusive_group()
     board.add_argument(
         '--board',
@@ -286,71 +300,45 @@ def load_data(bag: Path, sensors, pattern: str, board: bool = False):
     return read_bag(bag, output_channels(sensors), input_channels(pattern))
 
 
-def identify(data, na: int, nb: int, nk: int, split: float) -> list[dict]:
-    """Estimate one ARX model per output (all inputs), fits on estimation/validation data.
+def identify(data, na: int, nb: int, nk: int, split: float, quiet: bool = True):
+    """Estimate one ARX model per output (all inputs) with :mod:`maglev_ros.sysid.workflow`.
 
     Parameters
     ----------
     data : IdData
-        The experiment.
+        The experiment (raw; detrended here).
     na, nb, nk : int
         ARX orders (``nb``, ``nk`` for every input).
     split : float
         Fraction of samples for estimation.
+    quiet : bool
+        No progress display.
 
     Returns
     -------
-    list of dict
-        Per output: ``output``, ``model`` (PolyModel), ``fit_estimation``,
-        ``fit_validation`` (percent), ``estimation``/``validation`` (IdData),
-        ``note``. An output that does not respond to the inputs (constant
-        after detrending, e.g. by symmetry) gets no model and NaN fits.
+    maglev_ros.sysid.workflow.Identification
+        One row per output: ``ok``, ``reduced``, ``unstable``, ``failed``, or
+        ``no response`` for an output that does not respond to the inputs
+        (constant after detrending, e.g. by symmetry); fits in percent.
     """
-    from maglev_ros.sysid import arx, compare
+    from maglev_ros.sysid.workflow import ModelSpec, identify_outputs
 
-    est_all, val_all = data.detrend().split(split)
-    spread = np.std(np.asarray(est_all.y), axis=0)
-    rows = []
-    for i, name in enumerate(data.output_names):
-        if spread[i] <= 1e-9 * spread.max():
-            # e.g. Bz at the centre sensor under antisymmetric pairs: zero by symmetry
-            rows.append(
-                {
-                    'output': name,
-                    'model': None,
-                    'fit_estimation': float('nan'),
-                    'fit_validation': float('nan'),
-                    'note': 'no response to the inputs',
-                }
-            )
-            continue
-        est, val = est_all.select(outputs=[i]), val_all.select(outputs=[i])
-        nu = data.nu
-        model = arx(est, na, [[nb] * nu], [[nk] * nu])
-        try:
-            fits = [float(compare(model, d, ic='estimate').fit[0]) for d in (est, val)]
-            note = ''
-        except np.linalg.LinAlgError:
-            # e.g. noise-free data of a static plant (a fixed magnet on a virtual board):
-            # A is not identifiable and the model's simulation diverges
-            fits, note = [float('nan')] * 2, 'simulation diverged: try lower orders'
-        rows.append(
-            {
-                'output': name,
-                'model': model,
-                'fit_estimation': fits[0],
-                'fit_validation': fits[1],
-                'estimation': est,
-                'validation': val,
-                'note': note,
-            }
-        )
-    return rows
+    est, val = data.detrend().split(split)
+    spec = ModelSpec('arx', {'na': na, 'nb': nb, 'nk': nk})
+    with progress_bar(None, 'identifying', 'outputs', quiet):
+        return identify_outputs(est, val, spec, ic='estimate')
 
 
 def _check(args: argparse.Namespace) -> None:
+    if args.samples is not None and args.samples < 2:
+        raise UsageError(f'--samples must be >= 2, got {args.samples}')
+    if args.duration is None:
+        args.duration = (args.samples or DEFAULT_SAMPLES) / args.sample_rate
+    if args.samples is None:
+        args.samples = max(2, int(round(args.duration * args.sample_rate)))
     if not 0.0 < args.split < 1.0:
         raise UsageError(f'--split must be in (0, 1), got {args.split}')
+    _check_params(args.params)
     for name in ('na', 'nb', 'length'):
         if getattr(args, name) < 1:
             raise UsageError(f'--{name} must be >= 1, got {getattr(args, name)}')
@@ -362,6 +350,16 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError('--nk and --delay must be >= 0')
     if not 0.0 <= args.band[0] < args.band[1] <= 1.0:
         raise UsageError(f'--band must be LOW HIGH with 0 <= LOW < HIGH <= 1, got {args.band}')
+
+
+def _check_params(params: str) -> None:
+    """Refuse a parameter set that cannot be read, before anything is started or created."""
+    from maglev_ros.physics import ParameterError, load_parameters
+
+    try:
+        load_parameters(params)
+    except ParameterError as err:
+        raise UsageError(f'--params {params!r}: {err}') from None
 
 
 def _wait(predicate, ctx, what: str, timeout: float = WAIT_S, stop=None) -> None:
@@ -453,6 +451,7 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
                 pattern=args.pattern,
                 seed=args.seed,
                 length=args.length,
+                max_commands=args.samples,
             ),
         )
         nodes.append(excite)
@@ -477,13 +476,16 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
         )
         wall = time.monotonic()
         sim.set_paused(False)
-        _wait(
-            lambda: sim.sim.time >= args.duration or sim.sim.crashed,
-            ctx,
-            'the simulation',
-            timeout=1e9,
-            stop=stop,
-        )
+        # the first sample is published before any command; each command then steps the
+        # simulation once, and the excitation stops after exactly `samples` commands
+        target = args.samples + 1
+        with progress_bar(args.samples, 'simulating', 'samples', args.quiet) as bar:
+
+            def done() -> bool:
+                bar.update(max(0, min(sim.counters['samples'] - 1, args.samples) - bar.n))
+                return sim.counters['samples'] >= target or sim.sim.crashed
+
+            _wait(done, ctx, 'the simulation', timeout=1e9, stop=stop)
         sim.set_paused(True)
         wall = time.monotonic() - wall
         published = sim.counters['samples']
@@ -497,7 +499,7 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
             stop=stop,
         )
         return {
-            'samples': published,
+            'samples': published - 1,  # the initial sample answers no command: not in the data
             'simulated_s': sim.sim.time,
             'wall_s': wall,
             'timeouts': sim.counters['timeouts'],
@@ -667,9 +669,12 @@ def run_board_experiment(
                 len(recorder.subscribed) == len(topics) - 1
                 and recorder.metadata_complete
                 and driver.link_state == 'connected'
+                # the board streams: a virtual board's physics plant may take seconds
+                # to compile after the port opens, and the recording clock starts now
+                and driver.counters['records'] > 0
             ),
             ctx,
-            'the driver and the recorder',
+            'the driver, its first board record and the recorder',
             stop=stop,
         )
         # the excitation starts once everything listens: its first command is recorded
@@ -700,13 +705,14 @@ def run_board_experiment(
         start = recorder.counts[currents_topic]
         wall = time.monotonic()
         end = wall + args.duration
-        _wait(
-            lambda: time.monotonic() >= end,
-            ctx,
-            'the recording',
-            timeout=args.duration + 1,
-            stop=stop,
-        )
+        with progress_bar(args.duration, 'recording', 's', args.quiet) as bar:
+
+            def done() -> bool:
+                now = time.monotonic()
+                bar.update(min(now - wall, args.duration) - bar.n)
+                return now >= end
+
+            _wait(done, ctx, 'the recording', timeout=args.duration + 1, stop=stop)
         recorder.close()  # finalised; the driver zeroes the currents when destroyed
         wall = time.monotonic() - wall
         samples = recorder.counts[currents_topic] - start
@@ -790,7 +796,8 @@ def _run(args: argparse.Namespace) -> int:
         )
     else:
         print(
-            f'{PROG}: {args.duration:g} s of {args.params}, magnet {args.magnet}, '
+            f'{PROG}: {args.samples} samples ({args.duration:g} s) of {args.params}, '
+            f'magnet {args.magnet}, '
             f'{args.excitation} {args.amplitude:g} A on {args.pattern}, coil dynamics '
             f'{"off" if args.no_coil else "on"}, sensor delay {args.delay}, noise '
             f'{args.noise:g} T, seed {args.seed}'
@@ -835,29 +842,36 @@ def _run(args: argparse.Namespace) -> int:
             'messages the recorder missed; filled: fields linearly, currents held)'
         )
     data = dataset.data
-    rows = identify(data, args.na, args.nb, args.nk, args.split)
+    result = identify(data, args.na, args.nb, args.nk, args.split, args.quiet)
     print(
         f'ARX na={args.na} nb={args.nb} nk={args.nk}, inputs {", ".join(data.input_names)}; '
-        f'{data.N} samples, Ts = {data.Ts:g} s, split {args.split:g}'
+        f'{data.N} samples, Ts = {data.Ts:g} s, split {args.split:g} '
+        f'(validation from t = {result.validation.t0:g} s)'
     )
-    print(f'{"output":<10} {"fit est. %":>11} {"fit val. %":>11}')
-    for row in rows:
-        print(
-            f'{row["output"]:<10} {row["fit_estimation"]:>11.2f} '
-            f'{row["fit_validation"]:>11.2f}  {row["note"]}'
+    print(f'{"output":<10} {"fit est. %":>11} {"fit val. %":>11}  status')
+    for row in result.rows:
+        status = '' if row.status == 'ok' else f'{row.status}: {row.reason}'
+        line = (
+            f'{row.outputs[0]:<10} {row.fit_estimation[0]:>11.2f} {row.fit_validation[0]:>11.2f}'
         )
-    rows_fitted = [
-        row for row in rows if row['model'] is not None and np.isfinite(row['fit_validation'])
-    ]
+        print(f'{line}  {status}' if status else line)
+        for note in row.notes:
+            print(f'{"":<10} note: {note}')
     if not args.no_plots:
         from maglev_ros.sysid import compare_plot
 
-        for row in rows_fitted:
+        for row in result.rows:
+            if row.validated is None:
+                continue
+            i = result.validation.output_names.index(row.outputs[0])
+            label = f'ARX {args.na} {args.nb} {args.nk}' + (
+                ' (reduced)' if row.status == 'reduced' else ''
+            )
             path = compare_plot(
-                row['validation'],
-                [row['model']],
-                out / f'compare_{row["output"]}.png',
-                labels=[f'ARX {args.na} {args.nb} {args.nk}'],
+                result.validation.select(outputs=[i]),
+                [row.validated],
+                out / f'compare_{row.outputs[0]}.png',
+                labels=[label],
                 ic='estimate',
             )
             print(f'wrote {path}')
@@ -869,24 +883,38 @@ def _run(args: argparse.Namespace) -> int:
             'base': alignment.base,
             'methods': {r.topic: r.method for r in alignment.reports},
         },
-        'models': [
-            {
-                'output': r['output'],
-                'fit_estimation': r['fit_estimation'],
-                'fit_validation': r['fit_validation'],
-                'note': r['note'],
-                'A': r['model'].polynomial('A').tolist(),
-                'B': [r['model'].polynomial('B', 0, j).tolist() for j in range(data.nu)],
-                'theta': np.asarray(r['model'].theta).tolist(),
-            }
-            if r['model'] is not None
-            else {'output': r['output'], 'note': r['note']}
-            for r in rows
-        ],
+        'data': {
+            'N': data.N,
+            'n_estimation': result.estimation.N,
+            'n_validation': result.validation.N,
+        },
+        'models': [_model_entry(row, data.nu) for row in result.rows],
+        'exit_status': result.exit_status,
     }
     (out / 'models.json').write_text(json.dumps(summary, indent=2, default=_plain))
     print(f'wrote {out / "models.json"}')
-    return 0
+    return result.exit_status
+
+
+def _model_entry(row, nu: int) -> dict:
+    """Return the ``models.json`` entry of one output's row (NaN fits as null)."""
+    entry = {
+        'output': row.outputs[0],
+        'status': row.status,
+        'note': row.reason,
+        'notes': list(row.notes),
+        'fit_estimation': _finite(row.fit_estimation[0]),
+        'fit_validation': _finite(row.fit_validation[0]),
+    }
+    if row.model is not None:
+        entry['A'] = row.model.polynomial('A').tolist()
+        entry['B'] = [row.model.polynomial('B', 0, j).tolist() for j in range(nu)]
+        entry['theta'] = np.asarray(row.model.theta).tolist()
+    return entry
+
+
+def _finite(value: float) -> float | None:
+    return float(value) if np.isfinite(value) else None
 
 
 def _plain(value):

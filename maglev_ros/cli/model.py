@@ -73,6 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
         help='solenoid radius factor of the fast model: auto, none or a number',
     )
     common.add_argument('--json', action='store_true', help='machine-readable output')
+    common.add_argument('--quiet', action='store_true', help='no progress display')
 
     parser = Parser(prog=PROG, description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest='command', required=True, parser_class=Parser)
@@ -263,7 +264,13 @@ def _simulate(args) -> int:
         raise UsageError(
             f'--currents: expected {n_s} values (x+ x- y+ y-), got {len(args.currents)}'
         )
-    x0 = rest_state(model)
+    from .progress import progress_bar, stage
+
+    with stage(f'finding the equilibrium ({args.model} field model)', args.quiet):
+        try:
+            x0 = rest_state(model)
+        except ValueError as exc:
+            raise UsageError(str(exc)) from None
     for name, value in args.perturb.items():
         x0[STATE_NAMES.index(name)] += value
     coil = CoilDynamics.from_parameters(model.params) if args.coil else None
@@ -279,7 +286,12 @@ def _simulate(args) -> int:
     inputs = np.tile(currents, (n, 1))
     sim.run(inputs[:1], x0=x0)  # compile / load the kernels outside the timing
     start = time.perf_counter()
-    result = sim.run(inputs, x0=x0)
+    with progress_bar(100, f'simulating ({args.model} field model)', '%', args.quiet) as bar:
+
+        def advance(done: int, total: int) -> None:
+            bar.update(int(100 * done / total) - bar.n)
+
+        result = sim.run(inputs, x0=x0, progress=advance)
     wall = time.perf_counter() - start
     simulated = result.t[-1]
     summary = {

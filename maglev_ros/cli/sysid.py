@@ -6,23 +6,38 @@ The lab's MATLAB workflow (``iddata``, ``detrend``, ``idfilt``, ``arx``, ``iv4``
     maglev-sysid data.mat --rows 1 4 --ts 2e-4 --detrend --arx 7 9 1 --iv 7 9 1
     maglev-sysid data.mat --rows 1 4 --ts 2e-4 --armax 5 5 3 1 --plot plots/
 
-Exit status: 0 on success, 2 on bad input (one line on stderr).
+Every requested model gets its own result (:mod:`maglev_ros.sysid.workflow`):
+a model that fails or is unstable is reported with the reason and NaN fits,
+and the others, the plots and the saved models are unaffected.
+
+Exit status: 0 when every model is usable, 1 when some model failed or is
+unstable (all results are still printed and written), 2 on bad input (one
+line on stderr).
 """
 
 from __future__ import annotations
 
 import argparse
 import json
-import sys
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ..topics import EXCITATION_TOPIC
 from .usage import Parser, UsageError, limit_blas_threads, run_command
 
+__all__ = ['build_parser', 'main', 'run']
+
 PROG = 'maglev-sysid'
-STRUCTURES = {'arx': 3, 'iv': 3, 'armax': 4, 'oe': 3, 'bj': 5}
+EPILOG = (
+    'Without --detrend the models fit the raw values, offsets included (the '
+    'polynomial models have no constant term); --detrend removes the means first, '
+    "as MATLAB's detrend(data). Exit status: 0 every model usable, 1 some model "
+    'failed or is unstable (its row says why; all results are still printed and '
+    'written), 2 bad input.'
+)
 
 
 def _int_list(text: str) -> list[int]:
@@ -39,6 +54,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog=PROG,
         description='Identify ARX/IV/ARMAX/OE/BJ models from data '
         'files, like the MATLAB System Identification Toolbox.',
+        epilog=EPILOG,
     )
     p.add_argument(
         'data',
@@ -70,7 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs='?',
         const='constant',
         choices=('constant', 'linear'),
-        help='remove means (default) or linear trends before estimation',
+        help='remove offsets before estimation (off unless given): --detrend removes '
+        'the means, --detrend linear a straight line per channel',
     )
     p.add_argument(
         '--filter',
@@ -90,6 +107,17 @@ def build_parser() -> argparse.ArgumentParser:
         action='append',
         metavar=('NA', 'NB', 'NK'),
         help='four-stage instrumental variables (iv4)',
+    )
+    p.add_argument(
+        '--instruments',
+        action='append',
+        default=[],
+        metavar='CHANNEL',
+        help='closed-loop data: external signal (the excitation) used as the '
+        'instruments of --iv, repeat for more. A bag: a channel spec like '
+        f"--input ('r={EXCITATION_TOPIC}:data[0]'); a channel matrix "
+        'with --rows: its row (counted from 1); CSV: a column name; npz/mat: a '
+        'variable of shape (N,) or (N, k)',
     )
     p.add_argument('--armax', nargs=4, type=int, action='append', metavar=('NA', 'NB', 'NC', 'NK'))
     p.add_argument('--oe', nargs=3, type=int, action='append', metavar=('NB', 'NF', 'NK'))
@@ -123,14 +151,25 @@ def build_parser() -> argparse.ArgumentParser:
         default='estimate',
         help='initial conditions for compare (default estimate, as the toolbox)',
     )
+    p.add_argument(
+        '--max-iter',
+        type=int,
+        default=None,
+        help='iteration cap of ARMAX/OE/BJ (default 50 for ARMAX, 100 for OE/BJ); '
+        'reaching it is reported',
+    )
     p.add_argument('--json', action='store_true', help='print a JSON result instead of text')
+    p.add_argument('--quiet', action='store_true', help='no progress display')
     p.add_argument('--plot', metavar='DIR', help='write compare/resid/bode PNGs into DIR')
     p.add_argument('--save', metavar='DIR', help='save each model as JSON into DIR')
     return p
 
 
-def _spec_models(path: str) -> list[tuple[str, dict[str, Any]]]:
+def _spec_models(path: str) -> list[Any]:
     import yaml
+
+    from maglev_ros.sysid.workflow import ModelSpec
+    from maglev_ros.yaml_errors import yaml_error_text
 
     spec_path = Path(path)
     if not spec_path.is_file():
@@ -138,97 +177,95 @@ def _spec_models(path: str) -> list[tuple[str, dict[str, Any]]]:
     try:
         spec = yaml.safe_load(spec_path.read_text())
     except yaml.YAMLError as exc:
-        raise UsageError(f'spec file {path!r} is not valid YAML: {exc}'.splitlines()[0]) from None
+        raise UsageError(f'spec file {path!r} is not valid YAML: {yaml_error_text(exc)}') from None
     models = spec.get('models') if isinstance(spec, dict) else None
     if not isinstance(models, list) or not models:
         raise UsageError(f'spec file {path!r} needs a non-empty "models" list')
     out = []
-    allowed = {
-        'arx': {'na', 'nb', 'nk'},
-        'iv': {'na', 'nb', 'nk'},
-        'armax': {'na', 'nb', 'nc', 'nk'},
-        'oe': {'nb', 'nf', 'nk'},
-        'bj': {'nb', 'nc', 'nd', 'nf', 'nk'},
-    }
     for k, entry in enumerate(models):
         if not isinstance(entry, dict) or 'structure' not in entry:
             raise UsageError(f'spec model {k + 1} needs a "structure" field')
         structure = str(entry['structure']).lower().replace('iv4', 'iv')
-        if structure not in allowed:
-            raise UsageError(f'spec model {k + 1}: unknown structure {entry["structure"]!r}')
         orders = {key: v for key, v in entry.items() if key != 'structure'}
-        unknown = set(orders) - allowed[structure]
-        if unknown:
-            raise UsageError(f'spec model {k + 1} ({structure}): unknown orders {sorted(unknown)}')
-        out.append((structure, orders))
+        try:
+            out.append(ModelSpec(structure, orders))
+        except ValueError as err:
+            raise UsageError(f'spec model {k + 1}: {err}') from None
     return out
 
 
-def _requested(args: argparse.Namespace) -> list[tuple[str, dict[str, Any]]]:
-    names = {
-        'arx': ('na', 'nb', 'nk'),
-        'iv': ('na', 'nb', 'nk'),
-        'armax': ('na', 'nb', 'nc', 'nk'),
-        'oe': ('nb', 'nf', 'nk'),
-        'bj': ('nb', 'nc', 'nd', 'nf', 'nk'),
-    }
+def _requested(args: argparse.Namespace) -> list[Any]:
+    from maglev_ros.sysid.workflow import ORDER_NAMES, ModelSpec
+
     out = []
-    for structure, keys in names.items():
+    for structure, keys in ORDER_NAMES.items():
         for values in getattr(args, structure) or []:
-            out.append((structure, dict(zip(keys, values, strict=True))))
+            out.append(ModelSpec(structure, dict(zip(keys, values, strict=True))))
     if args.spec:
         out += _spec_models(args.spec)
     return out
 
 
-def _fit(structure: str, orders: dict[str, Any], data: Any) -> Any:
-    from maglev_ros import sysid
-
-    nk = orders.get('nk', 1)
-    if structure == 'arx':
-        return sysid.arx(data, orders['na'], orders['nb'], nk)
-    if structure == 'iv':
-        return sysid.iv4(data, orders['na'], orders['nb'], nk)
-    if structure == 'armax':
-        return sysid.armax(data, orders['na'], orders['nb'], orders['nc'], nk)
-    if structure == 'oe':
-        return sysid.oe(data, orders['nb'], orders['nf'], nk)
-    return sysid.bj(data, orders['nb'], orders['nc'], orders['nd'], orders['nf'], nk)
-
-
-def _label(model: Any) -> str:
-    o = model.orders
-    if o.ny == 1 and o.nu == 1:
-        text = o.describe().replace('  ', ' ').replace('=', '')
-        return f'{model.structure} {text}'
-    return f'{model.structure} {o.ny}x{o.nu}'
+def _plain(value: Any) -> Any:
+    """JSON-safe copy: arrays to lists, NaN/inf to None."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    return value
 
 
-def run(args: argparse.Namespace) -> int:
-    """Execute a parsed command line; raise ``ValueError`` on bad input.
+def _percent(values: np.ndarray) -> str:
+    return ', '.join('n/a' if not np.isfinite(f) else f'{f:.2f}%' for f in values)
 
-    Parameters
-    ----------
-    args : argparse.Namespace
-        maglev-sysid's parsed arguments.
+
+def _row_text(row: Any, what: str, ic: str) -> str:
+    lines = [] if row.model is None else [str(row.model)]
+    if row.status == 'failed':
+        lines.append(f'{row.label}: {row.reason}')
+    elif row.validated is not None:
+        lines.append(
+            f'  Compare ({what}, ic={ic}): fit to estimation data '
+            f'{_percent(row.fit_estimation)}; validation data {_percent(row.fit_validation)}'
+        )
+        lines.append(f'  Validation {row.residuals.summary()}')
+    if row.status in ('reduced', 'unstable'):
+        lines.append(f'  {row.status.capitalize()}: {row.reason}')
+    lines += [f'  Note: {note}' for note in row.notes]
+    return '\n'.join(lines)
+
+
+def _summary_table(result: Any, what: str) -> str:
+    rows = result.rows
+    width = max(len('model'), *(len(r.label) for r in rows))
+    lines = [
+        f'Summary ({what}, ic={result.ic}; fits per output):',
+        f'  {"model":<{width}}  {"fit est. %":>12}  {"fit val. %":>12}  status',
+    ]
+    for r in rows:
+        est = ' '.join('n/a' if not np.isfinite(f) else f'{f:.2f}' for f in r.fit_estimation)
+        val = ' '.join('n/a' if not np.isfinite(f) else f'{f:.2f}' for f in r.fit_validation)
+        status = r.status
+        if r.status == 'reduced':
+            status += f' (validated as {" ".join(r.validated.orders.describe().split())})'
+        elif r.status == 'unstable':
+            status += f' (one-step prediction fit {_percent(r.prediction_fit)})'
+        lines.append(f'  {r.label:<{width}}  {est:>12}  {val:>12}  {status}')
+    return '\n'.join(lines)
+
+
+def _load(args: argparse.Namespace) -> tuple[Any, int]:
+    """Load the data; ``--instruments`` channels come last among the inputs.
+
+    Returns the data set and the number of instrument columns appended.
     """
     from maglev_ros import sysid
-
-    if args.ts is not None and not args.ts > 0:
-        raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
-    models_requested = _requested(args)
-    if not models_requested and not args.select:
-        raise UsageError(
-            'no model requested: give --arx, --iv, --armax, --oe, --bj, --spec or --select'
-        )
-    split_text = str(args.split)
-    try:
-        split: float | int = float(split_text) if '.' in split_text else int(split_text)
-    except ValueError:
-        raise UsageError(
-            f'--split must be a fraction such as 0.5 or a sample count such as '
-            f'12500, got {split_text!r}'
-        ) from None
     from maglev_ros.bags import is_bag_path, load_bag_dataset
 
     if is_bag_path(args.data):
@@ -240,20 +277,162 @@ def run(args: argparse.Namespace) -> int:
         data = load_bag_dataset(
             args.data,
             outputs=args.output,
-            inputs=args.input,
+            inputs=list(args.input) + list(args.instruments),
             Ts=args.ts,
             allow_gaps=args.allow_gaps,
             tolerance=args.tolerance,
         )
-    else:
-        data = sysid.load_data(
-            args.data,
-            Ts=args.ts,
-            rows=tuple(args.rows) if args.rows else None,
-            matrix=args.matrix,
-            outputs=args.outputs.split(',') if args.outputs else None,
-            inputs=args.inputs.split(',') if args.inputs else None,
+        return data, len(args.instruments)
+
+    def load(**chosen: Any) -> Any:
+        options = {
+            'rows': tuple(args.rows) if args.rows else None,
+            'outputs': args.outputs.split(',') if args.outputs else None,
+            'inputs': args.inputs.split(',') if args.inputs else None,
+        }
+        options.update(chosen)
+        return sysid.load_data(args.data, Ts=args.ts, matrix=args.matrix, **options)
+
+    return _file_with_instruments(args, load) if args.instruments else (load(), 0)
+
+
+def _file_with_instruments(args: argparse.Namespace, load: Any) -> tuple[Any, int]:
+    """Load a data file with the ``--instruments`` channels appended as the last inputs.
+
+    Returns the data set and the number of instrument columns appended.
+    """
+    path = Path(args.data)
+    specs = list(args.instruments)
+    if args.rows:
+        try:
+            rows = [int(text) for text in specs]
+        except ValueError:
+            raise UsageError(
+                f'--instruments with --rows takes rows of {args.matrix} counted from 1, '
+                f'got {specs}'
+            ) from None
+        return load(rows=(args.rows[0], list(args.rows[1]) + rows)), len(rows)
+    if path.suffix.lower() == '.csv':
+        inputs = args.inputs.split(',') if args.inputs else None
+        if inputs is None:
+            raise UsageError('--instruments with a CSV file needs --inputs (the input columns)')
+        return load(inputs=inputs + specs), len(specs)
+    data = load()
+    variables: dict[str, Any] = {}
+    if path.suffix.lower() == '.npz':
+        with np.load(path, allow_pickle=False) as npz:
+            variables = {k: npz[k] for k in npz.files if k in specs}
+    elif path.suffix.lower() == '.mat':
+        from scipy.io import loadmat
+
+        variables = loadmat(path, variable_names=specs)
+    columns = []
+    for name in specs:
+        if name not in variables:
+            raise UsageError(f'--instruments: {path.name} has no variable {name!r}')
+        value = np.asarray(variables[name], dtype=float)
+        value = value.reshape(value.shape[0], -1) if value.shape[0] == data.N else value.T
+        if value.ndim != 2 or value.shape[0] != data.N:
+            raise UsageError(
+                f'--instruments: variable {name!r} has shape {np.shape(variables[name])}, '
+                f'expected ({data.N},) or ({data.N}, k) like the data'
+            )
+        columns.append(value)
+    from maglev_ros import sysid
+
+    z = np.hstack(columns)
+    combined = sysid.IdData(
+        data.y,
+        np.hstack([data.u, z]),
+        data.Ts,
+        data.output_names,
+        list(data.input_names) + [f'instrument{k + 1}' for k in range(z.shape[1])],
+        data.output_units,
+        list(data.input_units) + [''] * z.shape[1],
+    )
+    return combined, z.shape[1]
+
+
+def _split_instruments(data: Any, count: int) -> tuple[Any, Any]:
+    """Split the last ``count`` inputs off as instruments: ``(data, z (N, count) or None)``."""
+    if not count:
+        return data, None
+    keep = data.nu - count
+    return data.select(inputs=range(keep)), data.u[:, keep:]
+
+
+def _write_plots(result: Any, directory: Path) -> list[Path]:
+    from maglev_ros import sysid
+
+    directory.mkdir(parents=True, exist_ok=True)
+    shown = [r for r in result.rows if r.validated is not None]
+    written = []
+    for index, row in enumerate(result.rows, start=1):
+        if row.residuals is not None:
+            written.append(
+                sysid.resid_plot(
+                    row.residuals,
+                    directory / f'resid_{index}_{row.structure}.png',
+                    result.validation.output_names,
+                    result.validation.input_names,
+                    model_label=row.label + (' (reduced)' if row.status == 'reduced' else ''),
+                )
+            )
+    if shown:
+        labels = [r.label + (' (reduced)' if r.status == 'reduced' else '') for r in shown]
+        models = [r.validated for r in shown]
+        written.append(
+            sysid.compare_plot(
+                result.validation,
+                models,
+                directory / 'compare.png',
+                labels,
+                result.horizon,
+                result.ic,
+            )
         )
+        written.append(sysid.bode_plot(models, directory / 'bode.png', labels))
+    return written
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute a parsed command line; raise ``ValueError`` on bad input.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments of :func:`build_parser`.
+
+    Returns
+    -------
+    int
+        Exit status: 0 every model usable, 1 some model failed or is unstable.
+    """
+    from maglev_ros import sysid
+    from maglev_ros.cli.progress import progress_bar
+    from maglev_ros.sysid.workflow import ModelSpec, identify, offset_hints
+
+    if args.ts is not None and not args.ts > 0:
+        raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
+    if args.max_iter is not None and args.max_iter < 1:
+        raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
+    specs = _requested(args)
+    if not specs and not args.select:
+        raise UsageError(
+            'no model requested: give --arx, --iv, --armax, --oe, --bj, --spec or --select'
+        )
+    split_text = str(args.split)
+    try:
+        split: float | int = float(split_text) if '.' in split_text else int(split_text)
+    except ValueError:
+        raise UsageError(
+            f'--split must be a fraction such as 0.5 or a sample count such as '
+            f'12500, got {split_text!r}'
+        ) from None
+    data, n_instruments = _load(args)
+    if n_instruments and not any(spec.structure == 'iv' for spec in specs):
+        raise UsageError('--instruments are used by --iv only: add --iv NA NB NK')
+    hints = () if args.detrend else offset_hints(_split_instruments(data, n_instruments)[0])
     if args.detrend:
         data = data.detrend(args.detrend)
     if args.filter:
@@ -261,18 +440,22 @@ def run(args: argparse.Namespace) -> int:
     if args.decimate != 1:
         data = data.decimate(args.decimate)
     est, val = data.split(split)
-    result: dict[str, Any] = {
+    est, instruments = _split_instruments(est, n_instruments)
+    val, _ = _split_instruments(val, n_instruments)
+    summary: dict[str, Any] = {
         'data': {
             'file': str(args.data),
             'N': data.N,
             'ny': data.ny,
-            'nu': data.nu,
+            'nu': est.nu,
             'Ts': data.Ts,
             'n_estimation': est.N,
             'n_validation': val.N,
             'outputs': list(data.output_names),
-            'inputs': list(data.input_names),
+            'inputs': list(est.input_names),
+            'instruments': list(data.input_names[est.nu :]),
         },
+        'hints': list(hints),
         'models': [],
     }
     if args.select:
@@ -281,82 +464,93 @@ def run(args: argparse.Namespace) -> int:
             est, val, range(1, na_max + 1), range(1, nb_max + 1), range(1, nk_max + 1)
         )
         best = sysid.selstruc(search, args.select)
-        result['selection'] = {
+        summary['selection'] = {
             'criterion': args.select,
             'na': best[0],
             'nb': best[1],
             'nk': best[2],
             'candidates': len(search.loss),
         }
-        models_requested.append(('arx', {'na': best[0], 'nb': best[1], 'nk': best[2]}))
-    models, texts = [], []
-    for structure, orders in models_requested:
-        model = _fit(structure, orders, est)
-        models.append(model)
-        fit_est = sysid.compare(model, est, args.horizon, args.ic).fit
-        fit_val = sysid.compare(model, val, args.horizon, args.ic).fit
-        analysis = sysid.resid(model, val)
-        entry = sysid.model_to_dict(model)
+        specs.append(ModelSpec('arx', {'na': best[0], 'nb': best[1], 'nk': best[2]}))
+    quiet = args.quiet or args.json
+    with progress_bar(len(specs), 'identification', 'models', quiet) as bar:
+        started = []
+
+        def step(label: str, k: int, loss: float) -> None:
+            if k == 0:  # a new model starts: the previous one is done
+                bar.update(1 if started else 0)
+                started.append(label)
+                bar.set_postfix_str(label)
+            else:
+                bar.set_postfix_str(f'{label}: iteration {k}, loss {loss:.3g}')
+
+        result = identify(
+            est, val, specs, args.horizon, args.ic, args.max_iter, step, hints, instruments
+        )
+        bar.update(1 if started else 0)
+    what = 'simulation' if args.horizon is None else f'{args.horizon}-step prediction'
+    for row in result.rows:
+        entry = {} if row.model is None else sysid.model_to_dict(row.model)
+        entry.pop('covariance', None)
         entry.update(
             {
-                'std': None if model.std is None else model.std.tolist(),
-                'fit_estimation': fit_est.tolist(),
-                'fit_validation': fit_val.tolist(),
-                'fpe': model.report.fpe,
-                'mse': model.report.mse.tolist(),
-                'residuals_white': analysis.white,
-                'residuals_independent': analysis.independent,
+                'label': row.label,
+                'structure': entry.get('structure', row.structure),
+                'status': row.status,
+                'reason': row.reason,
+                'notes': list(row.notes),
+                'std': None if row.model is None or row.model.std is None else row.model.std,
+                'fit_estimation': row.fit_estimation,
+                'fit_validation': row.fit_validation,
+                'prediction_fit': row.prediction_fit,
+                'fpe': None if row.model is None else row.model.report.fpe,
+                'mse': None if row.model is None else row.model.report.mse,
+                'residuals_white': None if row.residuals is None else row.residuals.white,
+                'residuals_independent': (
+                    None if row.residuals is None else row.residuals.independent
+                ),
             }
         )
-        entry.pop('covariance', None)
-        result['models'].append(entry)
-        what = 'simulation' if args.horizon is None else f'{args.horizon}-step prediction'
-        texts.append(
-            f'{model}\n  Compare ({what}, ic={args.ic}): fit to estimation data '
-            + ', '.join(f'{f:.2f}%' for f in fit_est)
-            + '; validation data '
-            + ', '.join(f'{f:.2f}%' for f in fit_val)
-            + f'\n  Validation {analysis.summary()}'
-        )
-        if args.plot:
-            Path(args.plot).mkdir(parents=True, exist_ok=True)
-            index = len(models)
-            sysid.resid_plot(
-                analysis,
-                Path(args.plot) / f'resid_{index}_{structure}.png',
-                val.output_names,
-                val.input_names,
-            )
-        if args.save:
-            Path(args.save).mkdir(parents=True, exist_ok=True)
-            sysid.save_model(model, Path(args.save) / f'model_{len(models)}_{structure}.json')
-    if args.plot:
-        labels = [_label(m) for m in models]
-        sysid.compare_plot(
-            val, models, Path(args.plot) / 'compare.png', labels, args.horizon, args.ic
-        )
-        sysid.bode_plot(models, Path(args.plot) / 'bode.png', labels)
+        if row.status == 'reduced':
+            entry['validated'] = sysid.model_to_dict(row.validated)
+        summary['models'].append(entry)
+    written = _write_plots(result, Path(args.plot)) if args.plot else []
+    if args.save:
+        Path(args.save).mkdir(parents=True, exist_ok=True)
+        for index, row in enumerate(result.rows, start=1):
+            if row.model is not None:
+                sysid.save_model(
+                    row.model, Path(args.save) / f'model_{index}_{row.structure}.json'
+                )
+    summary['exit_status'] = result.exit_status
     if args.json:
-        print(json.dumps(result, indent=1))
-    else:
-        header = (
-            f'{PROG}: {data.N} samples of {data.ny} output(s), {data.nu} input(s), '
-            f'Ts = {data.Ts:g} s; estimation {est.N}, validation {val.N}'
+        print(json.dumps(_plain(summary), indent=1))
+        return result.exit_status
+    header = (
+        f'{PROG}: {data.N} samples of {data.ny} output(s), {est.nu} input(s), '
+        f'Ts = {data.Ts:g} s; estimation {est.N}, validation {val.N}'
+    )
+    if 'selection' in summary:
+        s = summary['selection']
+        header += (
+            f'\nOrder search ({s["criterion"]}, {s["candidates"]} candidates): '
+            f'na={s["na"]} nb={s["nb"]} nk={s["nk"]}'
         )
-        if 'selection' in result:
-            s = result['selection']
-            header += (
-                f'\nOrder search ({s["criterion"]}, {s["candidates"]} candidates): '
-                f'na={s["na"]} nb={s["nb"]} nk={s["nk"]}'
-            )
-        print(header)
-        for text in texts:
-            print('\n' + text)
-    return 0
+    if summary['data']['instruments']:
+        header += '\nInstruments of --iv: ' + ', '.join(summary['data']['instruments'])
+    print(header)
+    for hint in hints:
+        print(f'hint: {hint}')
+    for row in result.rows:
+        print('\n' + _row_text(row, what, args.ic))
+    print('\n' + _summary_table(result, what))
+    for path in written:
+        print(f'wrote {path}')
+    return result.exit_status
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run ``maglev-sysid``; return the exit status (2 on bad input).
+    """Run ``maglev-sysid``; return the exit status.
 
     Parameters
     ----------
@@ -366,7 +560,7 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        Exit status.
+        0 every model usable, 1 some model failed or is unstable, 2 bad input.
     """
     return run_command(PROG, build_parser(), _run_quietly, argv)
 
@@ -378,4 +572,4 @@ def _run_quietly(args: argparse.Namespace) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    raise SystemExit(main())

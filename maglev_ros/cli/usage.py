@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import re
 import sys
 from collections.abc import Callable, Sequence
 
@@ -29,7 +30,15 @@ class UsageError(ValueError):
 
 
 class Parser(argparse.ArgumentParser):
-    """An ArgumentParser that raises :class:`UsageError` instead of printing usage."""
+    """An ArgumentParser that raises :class:`UsageError` instead of printing usage.
+
+    Negative numbers in exponent notation (``--ts -2e-4``) are values, not
+    options: argparse's own pattern knows only ``-2`` and ``-0.5``.
+    """
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(r'^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$')
 
     def error(self, message: str) -> None:
         """Raise :class:`UsageError` with argparse's message (no usage text, no exit).

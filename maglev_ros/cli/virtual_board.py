@@ -142,7 +142,7 @@ def load_plant(spec: str, n_sensors: int) -> Plant:
         return LinearPlant.default(n_sensors)
     module_name, sep, attr = spec.partition(':')
     if not sep or not module_name or not attr:
-        raise UsageError(f"--plant must be 'linear' or 'module:factory', got {spec!r}")
+        raise UsageError(f"--plant must be 'linear', 'physics' or 'module:factory', got {spec!r}")
     try:
         factory = getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError) as err:

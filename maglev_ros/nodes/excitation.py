@@ -9,7 +9,8 @@ band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
 
 One period of ``length`` samples is generated at start and repeated
 ``cycles`` times (0: forever); afterwards zero currents plus ``offset`` are
-sent. Triggers:
+sent. ``max_commands`` (0: no limit) stops publishing after that many
+commands: a lockstep simulation then takes exactly that many steps. Triggers:
 
 ``sample`` (default)
     one command per sample received on ``maglev/currents`` (from the
@@ -95,6 +96,8 @@ class ExcitationConfig:
         ``sample`` or ``timer``.
     sample_rate : float
         Hz (timer trigger).
+    max_commands : int
+        Commands to publish before stopping (0: no limit).
     """
 
     signal: str
@@ -107,6 +110,7 @@ class ExcitationConfig:
     cycles: int
     trigger: str
     sample_rate: float
+    max_commands: int = 0
 
 
 def _band(name: str, band: tuple[float, ...]) -> tuple[float, ...]:
@@ -150,6 +154,11 @@ PARAMETERS = ParameterTable(
         ),
         'sample_rate': Param(
             5000.0, 'timer trigger: commands per second, Hz', check=number(0, above=True)
+        ),
+        'max_commands': Param(
+            0,
+            'commands to publish, then none (0: no limit; lockstep: exact samples)',
+            check=integer(0),
         ),
     },
 )
@@ -238,8 +247,15 @@ class ExcitationNode(Node):
         """True once all cycles were sent (offset only from then on)."""
         return bool(self.config.cycles) and self.sent >= self.config.cycles * self.config.length
 
+    @property
+    def exhausted(self) -> bool:
+        """True once ``max_commands`` commands were published (nothing more is sent)."""
+        return bool(self.config.max_commands) and self.sent >= self.config.max_commands
+
     def publish_next(self) -> None:
-        """Publish the next command of the sequence."""
+        """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
+        if self.exhausted:
+            return
         if self.finished:
             data = self._rest
         else:

@@ -6,6 +6,7 @@ equilibria, linearisation and simulation; a simulation session paces the
 simulator in real time or lockstep (``session``). Specified in ``maggy-model.md``.
 """
 
+from .discretization import zoh
 from .equilibria import Equilibrium, find_equilibria, rest_state, vertical_force
 from .linearization import (
     LinearModel,
@@ -30,6 +31,7 @@ from .sheet import sheet_field
 from .simulation import (
     CoilDynamics,
     SensorEffects,
+    SensorFreeze,
     SimulationCrashedError,
     SimulationResult,
     Simulator,
@@ -63,6 +65,7 @@ __all__ = [
     'observability_rank',
     'CoilDynamics',
     'SensorEffects',
+    'SensorFreeze',
     'SimulationResult',
     'SimulationCrashedError',
     'Simulator',
@@ -70,4 +73,5 @@ __all__ = [
     'CommandError',
     'SampleBatch',
     'SimulationSession',
+    'zoh',
 ]

@@ -20,6 +20,8 @@ from typing import Any
 import numpy as np
 import yaml
 
+from ..yaml_errors import yaml_error_text
+
 __all__ = [
     'ParameterError',
     'Cylinders',
@@ -491,6 +493,8 @@ def load_parameters(spec: str | os.PathLike = 'maggy_v2') -> MaggyParameters:
         raise ParameterError(
             f'{path}: parameter file not found (presets: {", ".join(PRESETS)})'
         ) from None
-    except (OSError, yaml.YAMLError) as err:
+    except yaml.YAMLError as err:
+        raise ParameterError(f'{path}: invalid YAML, {yaml_error_text(err)}') from None
+    except OSError as err:
         raise ParameterError(f'{path}: cannot read parameter file: {err}') from None
     return parameters_from_mapping(data, str(path))

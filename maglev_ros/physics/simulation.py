@@ -24,6 +24,7 @@ from . import kernels
 __all__ = [
     'CoilDynamics',
     'SensorEffects',
+    'SensorFreeze',
     'SimulationResult',
     'SimulationCrashedError',
     'Simulator',
@@ -127,6 +128,58 @@ class SensorEffects:
             raise ValueError(f'delay_samples must be an integer >= 0, got {self.delay_samples!r}')
 
 
+@dataclass(frozen=True)
+class SensorFreeze:
+    """Sensor freezes: a sensor repeats its last reading (all three axes).
+
+    Under coil switching the TLE493D/TLV493D sometimes repeat one reading until
+    they are reset; the board's firmware resets a sensor after 20 identical
+    samples. Freezes are applied to the reading after noise and quantisation
+    and before the output delay (the sensor itself repeats).
+
+    Attributes
+    ----------
+    schedule : tuple of (int, float, float)
+        Scheduled freezes ``(sensor index, start s, duration s)``: the sensor
+        repeats the reading it gave just before ``start`` for the samples with
+        ``start <= t < start + duration`` (the firmware's reset is not modelled
+        for these: they are injected faults).
+    rate : float
+        Random freezes per second per sensor (seeded by the simulator's seed).
+    length : int
+        Samples a random freeze lasts (the firmware resets after 20 identical).
+    """
+
+    schedule: tuple = ()
+    rate: float = 0.0
+    length: int = 20
+
+    def __post_init__(self):
+        entries = []
+        for entry in self.schedule:
+            try:
+                sensor, start, duration = entry
+                entries.append((int(sensor), float(start), float(duration)))
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f'schedule entries must be (sensor, start s, duration s), got {entry!r}'
+                ) from None
+            if entries[-1][0] < 0 or not (entries[-1][2] > 0 and np.isfinite(entries[-1][1])):
+                raise ValueError(
+                    f'schedule entry needs sensor >= 0, finite start, duration > 0, got {entry!r}'
+                )
+        object.__setattr__(self, 'schedule', tuple(entries))
+        if not (np.isfinite(self.rate) and self.rate >= 0):
+            raise ValueError(f'rate must be >= 0, got {self.rate!r}')
+        if not isinstance(self.length, (int, np.integer)) or self.length < 1:
+            raise ValueError(f'length must be an integer >= 1, got {self.length!r}')
+
+    @property
+    def active(self) -> bool:
+        """True when any freeze can happen."""
+        return bool(self.schedule) or self.rate > 0
+
+
 @dataclass
 class SimulationResult:
     """A simulated run.
@@ -194,6 +247,8 @@ class Simulator:
         ``free``: the magnet moves (levitation). ``fixed``: held at ``x0``, only
         the coils evolve (identify the current-to-field path with the magnet in
         place). ``absent``: no levitating magnet at all (base and coils only).
+    freeze : SensorFreeze or None
+        Sensor freezes, scheduled or random (seeded with ``seed``).
     """
 
     def __init__(
@@ -207,6 +262,7 @@ class Simulator:
         check_crash: bool = True,
         x0=None,
         magnet: str = 'free',
+        freeze: SensorFreeze | None = None,
     ):
         if magnet not in MAGNET_MODES:
             raise ValueError(f'magnet must be one of {", ".join(MAGNET_MODES)}, got {magnet!r}')
@@ -239,8 +295,16 @@ class Simulator:
             self._electrical = np.array([coil.resistance, coil.inductance, coil.supply_voltage])
         offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float), (model.n_outputs,))
         self._offset = np.array(offset)
+        self.freeze = freeze or SensorFreeze()
+        n_sensors = model.n_outputs // 3
+        for sensor, _, _ in self.freeze.schedule:
+            if sensor >= n_sensors:
+                raise ValueError(
+                    f'freeze schedule names sensor {sensor}, the model has {n_sensors}'
+                )
         self._ideal_sensor = (
-            self.sensor.noise_rms == 0
+            not self.freeze.active
+            and self.sensor.noise_rms == 0
             and self.sensor.quantization == 0
             and not self.sensor.delay_samples
             and not np.any(self._offset)
@@ -299,6 +363,7 @@ class Simulator:
         self.crash_time: float | None = None
         self.crash_state: np.ndarray | None = None
         self._rng = np.random.default_rng(self.seed)
+        self._reset_freeze()
         self._pending = []
         self._last_input = np.zeros(n_s)
         return self._observe(self._true_output())
@@ -376,7 +441,7 @@ class Simulator:
         self._last_input = drive
         return self._observe(self._true_output() if y is None else y)
 
-    def run(self, inputs, x0=None) -> SimulationResult:
+    def run(self, inputs, x0=None, progress=None) -> SimulationResult:
         """Simulate a whole input sequence from ``x0`` (resets first).
 
         Parameters
@@ -385,6 +450,11 @@ class Simulator:
             Input per sample (ZOH).
         x0 : array_like, shape (12,), optional
             Initial state.
+        progress : callable, optional
+            ``progress(done, total)`` as the work advances (the uncompiled
+            accurate and filament models: integration steps, then sensor
+            readings, ``total = 2 N + 1``; the compiled path reports once at the
+            end).
 
         Returns
         -------
@@ -398,22 +468,28 @@ class Simulator:
         if not np.all(np.isfinite(drives)):
             raise ValueError('inputs must be finite')
         self.reset(x0)
+        total = 2 * len(drives) + 1
         if self._fast:
             states, truth, done, status, last = kernels.rk4_run(self._xe, drives, *self._step_args)
         else:
-            states, done, status, last = self._python_run(drives)
+            states, done, status, last = self._python_run(drives, progress, total)
             truth = None
         currents = (
             states[:, 12:] if self._coil_mode else np.vstack([np.zeros((1, n_s)), drives[:done]])
         )
         if truth is None:
-            truth = np.array(
-                [
+            truth = []
+            for x, i in zip(states, currents, strict=True):
+                truth.append(
                     self.model.measurement(x[:12], i, with_magnet=self.magnet != 'absent')
-                    for x, i in zip(states, currents, strict=True)
-                ]
-            )
+                )
+                if progress is not None and len(truth) % 16 == 0:
+                    progress(len(drives) + len(truth), total)
+            truth = np.array(truth)
+        if progress is not None:
+            progress(total, total)
         self._rng = np.random.default_rng(self.seed)
+        self._reset_freeze()
         self._pending = []
         outputs = self._observe_many(truth)
         self._xe = states[-1].copy()
@@ -463,9 +539,11 @@ class Simulator:
             x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
         return x
 
-    def _python_run(self, drives: np.ndarray):
+    def _python_run(self, drives: np.ndarray, progress=None, total: int = 0):
         states = [self._xe.copy()]
         for k, drive in enumerate(drives):
+            if progress is not None and k % 16 == 0:
+                progress(k, total)
             new = self._python_rk4(states[-1], drive)
             status = self._status(new)
             if status != kernels.STATUS_OK:
@@ -500,12 +578,52 @@ class Simulator:
             reading = reading + fx.noise_rms * self._rng.standard_normal(reading.shape)
         if fx.quantization > 0:
             reading = np.round(reading / fx.quantization) * fx.quantization
+        if self.freeze.active:
+            reading = self._apply_freeze(reading)
         if fx.delay_samples:
             self._pending.append(reading)
             if len(self._pending) <= fx.delay_samples:
                 return self._pending[0].copy()
             return self._pending.pop(0)
         return reading
+
+    @property
+    def frozen_sensors(self) -> tuple[int, ...]:
+        """Indices of the sensors whose last reading was frozen (repeated)."""
+        return tuple(int(k) for k in np.flatnonzero(self._frozen_now))
+
+    def _reset_freeze(self) -> None:
+        n_sensors = self.model.n_outputs // 3
+        seed = None if self.seed is None else [int(self.seed), 1]
+        self._freeze_rng = np.random.default_rng(seed)
+        self._frozen_left = np.zeros(n_sensors, dtype=np.int64)  # random freezes
+        self._frozen_now = np.zeros(n_sensors, dtype=bool)
+        self._held = None
+        self._observed = 0  # readings taken since reset (reading n is at t = n dt)
+
+    def _apply_freeze(self, reading: np.ndarray) -> np.ndarray:
+        """Replace the frozen sensors' readings by their last ones (before the delay)."""
+        t = self._observed * self.dt
+        self._observed += 1
+        frozen = self._frozen_left > 0
+        self._frozen_left[frozen] -= 1
+        if self.freeze.rate > 0:
+            starts = self._freeze_rng.random(frozen.size) < self.freeze.rate * self.dt
+            starts &= ~frozen
+            self._frozen_left[starts] = self.freeze.length - 1
+            frozen |= starts
+        eps = 1e-9 * self.dt  # sample times are n dt: keep the window's edges exact
+        for sensor, start, duration in self.freeze.schedule:
+            if start - eps <= t < start + duration - eps:
+                frozen[sensor] = True
+        if self._held is None:
+            frozen[:] = False  # the very first reading has nothing to repeat
+        out = reading.reshape(-1, 3).copy()
+        if frozen.any():
+            out[frozen] = self._held[frozen]
+        self._held = out.copy()
+        self._frozen_now = frozen
+        return out.ravel()
 
     def _observe_many(self, truth: np.ndarray) -> np.ndarray:
         """Apply the sensor effects to a whole run's true readings (as :meth:`_observe`)."""

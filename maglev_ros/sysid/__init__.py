@@ -15,10 +15,10 @@ from .datafile import DataFileError, load_data
 from .dataset import IdData, merge
 from .io import export_mat, load_model, model_from_dict, model_to_dict, save_model
 from .iv import iv4
-from .model import EstimationReport, PolyModel
+from .model import DivergenceError, EstimationReport, PolyModel
 from .oe_bj import bj, oe
 from .orders import OrderError, Orders, make_orders
-from .plots import bode_plot, compare_plot, resid_plot
+from .plots import bode_figure, bode_plot, compare_figure, compare_plot, resid_figure, resid_plot
 from .rls import RecursiveArx, RlsResult, rls_arx
 from .selection import OrderSearch, arxstruc, delayest, selstruc
 from .validation import CompareResult, ResidualAnalysis, compare, resid
@@ -26,6 +26,7 @@ from .validation import CompareResult, ResidualAnalysis, compare, resid
 __all__ = [
     'CompareResult',
     'DataFileError',
+    'DivergenceError',
     'EstimationReport',
     'IdData',
     'OrderError',
@@ -40,8 +41,10 @@ __all__ = [
     'arx',
     'arxstruc',
     'bj',
+    'bode_figure',
     'bode_plot',
     'compare',
+    'compare_figure',
     'compare_plot',
     'delayest',
     'export_mat',
@@ -58,6 +61,7 @@ __all__ = [
     'model_to_dict',
     'oe',
     'resid',
+    'resid_figure',
     'resid_plot',
     'rls_arx',
     'save_model',

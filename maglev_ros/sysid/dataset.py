@@ -58,6 +58,9 @@ class IdData:
         Channel names (default ``y1, y2, ...`` and ``u1, u2, ...``).
     output_units, input_units : sequence of str, optional
         Channel units (default empty strings).
+    t0 : float
+        Time of the first sample in seconds (default 0; a slice such as the
+        validation part of :meth:`split` keeps the record's time axis).
 
     Raises
     ------
@@ -72,6 +75,7 @@ class IdData:
     input_names: tuple[str, ...] = field(default=None)  # type: ignore[assignment]
     output_units: tuple[str, ...] = field(default=None)  # type: ignore[assignment]
     input_units: tuple[str, ...] = field(default=None)  # type: ignore[assignment]
+    t0: float = 0.0
 
     def __post_init__(self) -> None:
         y = _as_columns(self.y, 'y')
@@ -115,8 +119,8 @@ class IdData:
 
     @property
     def time(self) -> np.ndarray:
-        """Sample instants in seconds, shape (N,), starting at 0."""
-        return np.arange(self.N) * self.Ts
+        """Sample instants in seconds, shape (N,), starting at ``t0``."""
+        return self.t0 + np.arange(self.N) * self.Ts
 
     def __len__(self) -> int:
         return self.N
@@ -128,7 +132,9 @@ class IdData:
         step = 1 if index.step is None else int(index.step)
         if step <= 0:
             raise ValueError(f'slice step must be positive, got {index.step!r}')
-        return replace(self, y=self.y[index], u=self.u[index], Ts=self.Ts * step)
+        first = range(self.N)[index]
+        t0 = self.t0 + (first[0] if len(first) else 0) * self.Ts
+        return replace(self, y=self.y[index], u=self.u[index], Ts=self.Ts * step, t0=t0)
 
     def select(
         self, outputs: Sequence[int] | None = None, inputs: Sequence[int] | None = None
@@ -158,6 +164,7 @@ class IdData:
             [self.input_names[i] for i in iu],
             [self.output_units[i] for i in oy],
             [self.input_units[i] for i in iu],
+            self.t0,
         )
 
     def split(self, at: float | int = 0.5) -> tuple[IdData, IdData]:

@@ -69,6 +69,8 @@ def model_to_dict(model: PolyModel) -> dict[str, Any]:
             'fpe': r.fpe,
             'aic': r.aic,
             'iterations': r.iterations,
+            'converged': r.converged,
+            'max_iter': r.max_iter,
         }
     return out
 
@@ -101,6 +103,8 @@ def model_from_dict(d: dict[str, Any]) -> PolyModel:
                 float(r['fpe']),
                 float(r['aic']),
                 int(r.get('iterations', 0)),
+                bool(r.get('converged', True)),
+                int(r.get('max_iter', 0)),
             )
         cov = d.get('covariance')
         return PolyModel(

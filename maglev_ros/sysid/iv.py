@@ -26,6 +26,22 @@ of Soderstrom & Stoica (*System Identification*, 1989, sec. 8.2):
    ``theta = (R^T W R)^-1 R^T W r`` with ``R = Z^T Phi``, ``r = Z^T y`` and
    ``W = (Z^T Z)^-1``.
 
+``iv4(..., instruments=r)`` is IV for data taken in closed loop.  With
+feedback the noise reaches the input, so direct ARX and the IVs above (whose
+instruments are built from the measured input) are biased.  An external
+signal ``r`` that drives the loop (the excitation added to the controller's
+command) is uncorrelated with the noise, and delayed copies of it are valid
+instruments (Soderstrom & Stoica 1989, sec. 10.3; Gilson & Van den Hof,
+Automatica 41, 2005):
+
+1. weighted IV (as above) with ``m >= p`` delays of every instrument
+   channel, ``r(t - k0) .. r(t - k0 - m + 1)``, ``k0`` the row's smallest
+   input delay; ``m`` doubles from ``p`` until the delays span ``p + 2``
+   directions (a band-limited excitation needs more delays than ``p``);
+2. AR(na + nb) prefilter ``L`` of its equation error; regressors, outputs and
+   instruments are filtered by ``L`` and the weighted IV is repeated
+   (``refine`` extra passes rebuild ``L`` from the latest estimate).
+
 All products come from lagged correlations (no regression matrix).
 """
 
@@ -49,6 +65,7 @@ from .regression import check_data, equation_errors, finish_model, fir_rows
 __all__ = ['iv4']
 
 METHODS = ('toolbox', 'extended')
+SINGULAR_RCOND = 1e-12  # relative singular value cut-off of singular IV equations
 
 
 def _simulate(
@@ -119,11 +136,20 @@ def _iv_rows(
                 Pty += lag_gram(S, reg, tgt, start)[:, 0]
                 yy += float(lag_gram(S, tgt, tgt, start)[0, 0])
             M += S.shape[1] - start
-        theta = np.linalg.solve(ZtPhi, Zty)
+        try:
+            theta = np.linalg.solve(ZtPhi, Zty)
+            Minv = np.linalg.solve(ZtPhi, np.eye(p)) if covariance else None
+        except np.linalg.LinAlgError:
+            # singular IV equations: orders above the data's on noise-free data (the
+            # extra parameters are not determined). The minimum-norm solution (SVD,
+            # singular values below 1e-12 of the largest dropped) regularises them
+            # like the toolbox's ridge option; the extra poles and zeros then come in
+            # cancelling pairs (see sysid.cancellation).
+            theta = np.linalg.lstsq(ZtPhi, Zty, rcond=SINGULAR_RCOND)[0]
+            Minv = np.linalg.pinv(ZtPhi, rcond=SINGULAR_RCOND) if covariance else None
         thetas.append(theta)
         if covariance:
             sse = max(yy - 2.0 * theta @ Pty + theta @ PtP @ theta, 0.0)
-            Minv = np.linalg.solve(ZtPhi, np.eye(p))
             covs.append(sse / max(1, M - p) * Minv @ ZtZ @ Minv.T)
     return thetas, covs
 
@@ -249,6 +275,94 @@ def _noise_prefilters(
     return filters
 
 
+def _instrument_arrays(instruments: object, experiments: Sequence[IdData]) -> list[np.ndarray]:
+    """Check external instruments against the experiments; one (N_e, nz) array each."""
+    given = (
+        list(instruments)
+        if isinstance(instruments, (list, tuple)) and len(experiments) > 1
+        else [instruments]
+    )
+    if len(given) != len(experiments):
+        raise ValueError(
+            f'instruments: {len(given)} array(s) given for {len(experiments)} experiments'
+        )
+    out = []
+    for k, (z, d) in enumerate(zip(given, experiments, strict=True)):
+        z = np.asarray(z, dtype=float)
+        if z.ndim == 1:
+            z = z[:, None]
+        if z.ndim != 2 or z.shape[0] != d.N or z.shape[1] < 1:
+            raise ValueError(
+                f'instruments of experiment {k + 1} must have shape ({d.N},) or '
+                f'({d.N}, n_instruments) like its data, got {z.shape}'
+            )
+        if not np.all(np.isfinite(z)):
+            raise ValueError(f'instruments of experiment {k + 1} contain NaN or infinite values')
+        if not np.any(z):
+            raise ValueError(f'instruments of experiment {k + 1} are all zero')
+        out.append(np.ascontiguousarray(z))
+    return out
+
+
+def _instrument_lags(instruments: Sequence[np.ndarray], p: int, limit: int) -> int:
+    """Delays per instrument channel: enough for ``p + 2`` independent instruments.
+
+    A band-limited excitation (a multisine or a slow PRBS) is nearly a
+    combination of its few neighbouring delays, so ``p`` delays may span
+    fewer than ``p`` directions.  The count doubles from ``p`` until the
+    Toeplitz matrices of the channels' autocorrelations have a numerical
+    rank (singular values above 1e-9 of the largest) of ``p + 2`` together,
+    or ``limit`` is reached.
+    """
+    z = np.vstack(instruments)
+    centred = z - z.mean(axis=0)
+    size = 1 << int(2 * z.shape[0] - 1).bit_length()
+    acfs = np.fft.irfft(np.abs(np.fft.rfft(centred, size, axis=0)) ** 2, size, axis=0)
+    count = p
+    while True:
+        rank = 0
+        for acf in acfs.T:
+            s = np.linalg.eigvalsh(sla.toeplitz(acf[:count]))
+            rank += int(np.count_nonzero(s > 1e-9 * max(float(s[-1]), 1e-300)))
+        if rank >= p + 2 or count >= limit:
+            return count
+        count = min(2 * count, limit)
+
+
+def _external_iv(
+    experiments: Sequence[IdData], orders: Orders, instruments: Sequence[np.ndarray], refine: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weighted IV with delayed external signals as instruments, then prefiltered passes."""
+    ny, nu = orders.ny, orders.nu
+    nz = instruments[0].shape[1]
+    full = [signal_matrix(d, z) for d, z in zip(experiments, instruments, strict=True)]
+    sizes = orders.row_sizes()
+    shortest = min(d.N for d in experiments)
+    blocks = []
+    for i in range(ny):
+        used = [int(orders.nk[i, j]) for j in range(nu) if orders.nb[i, j]]
+        first = max(0, min(used)) if used else 1
+        count = _instrument_lags(instruments, max(1, sizes[i]), max(8, shortest // 4))
+        ins = np.array([(ny + nu + j, first, count, 1) for j in range(nz)], dtype=np.int64)
+        start = max(orders.row_start(i), first + count - 1)
+        blocks.append((ins, start))
+
+    def solve(prefilters: list[np.ndarray] | None) -> tuple[np.ndarray, np.ndarray]:
+        thetas, covs = [], []
+        for i, (ins, start) in enumerate(blocks):
+            L = np.ones(1) if prefilters is None else prefilters[i]
+            signals = full if len(L) == 1 else [fir_rows(L, S) for S in full]
+            theta, cov = _weighted_iv(signals, row_blocks(orders, i), ins, i, start + len(L) - 1)
+            thetas.append(theta)
+            covs.append(cov)
+        return np.concatenate(thetas), sla.block_diag(*covs)
+
+    theta, cov = solve(None)
+    for _ in range(1 + max(0, int(refine))):
+        theta, cov = solve(_noise_prefilters(experiments, orders, theta))
+    return theta, cov
+
+
 def iv4(
     data: IdData | Sequence[IdData],
     na: object,
@@ -256,6 +370,7 @@ def iv4(
     nk: object = 1,
     refine: int = 0,
     method: str = 'toolbox',
+    instruments: object = None,
 ) -> PolyModel:
     """Estimate an ARX model by the four-stage instrumental-variable method.
 
@@ -288,7 +403,14 @@ def iv4(
         inputs per input channel as instruments, the final stage those plus
         ``na`` lags of the simulated output; the covariance is
         ``lambda (R^T W R)^-1`` (``lambda``: variance of the prefiltered
-        equation error).
+        equation error).  Ignored with ``instruments``.
+    instruments : array_like, shape (N,) or (N, nz), optional
+        External signals uncorrelated with the noise, e.g. the excitation
+        added to a feedback controller's command (one array per experiment
+        for several experiments).  Then the instruments are ``p`` delays of
+        each of them, not signals built from the input: consistent in
+        closed loop, where direct ARX and input-based IV are biased (module
+        docstring).  ``refine`` adds prefiltered passes.
 
     Returns
     -------
@@ -302,6 +424,17 @@ def iv4(
     first = experiments[0]
     orders = make_orders(first.ny, first.nu, na=na, nb=nb, nk=nk)
     check_data(experiments, orders)
+    if instruments is not None:
+        z = _instrument_arrays(instruments, experiments)
+        theta, cov = _external_iv(experiments, orders, z, refine)
+        return finish_model(
+            'iv4',
+            orders,
+            theta,
+            cov,
+            experiments,
+            f'IV with {z[0].shape[1]} external instrument channel(s) (weighted, prefiltered)',
+        )
     if method == 'extended':
         theta, cov = _extended_iv(experiments, orders)
         return finish_model(

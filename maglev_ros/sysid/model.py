@@ -24,7 +24,28 @@ from .polynomial import (
     unpack,
 )
 
-__all__ = ['EstimationReport', 'PolyModel']
+__all__ = ['DivergenceError', 'EstimationReport', 'PolyModel']
+
+
+class DivergenceError(ValueError):
+    """A model's simulation or predictor grew beyond floating point (unstable poles)."""
+
+
+def _initial_state_fit(basis: np.ndarray, target: np.ndarray, poles: np.ndarray) -> np.ndarray:
+    """Least-squares initial state ``x0`` of ``basis @ x0 ~ target``.
+
+    Refuses non-finite systems before LAPACK sees them: ``gelsd`` would print
+    ``On entry to DLASCL parameter number 4 had an illegal value`` on stdout
+    (Fortran runtime) and fail with ``SVD did not converge``.
+    """
+    if not (np.all(np.isfinite(basis)) and np.all(np.isfinite(target))):
+        worst = float(np.max(np.abs(poles))) if len(poles) else float('nan')
+        raise DivergenceError(
+            f'the model diverges (largest pole magnitude {worst:.3g}): '
+            'no initial state can be fitted'
+        )
+    return np.linalg.lstsq(basis, target, rcond=None)[0]
+
 
 STRUCTURE_TITLES = {
     'arx': ('ARX', 'A(z)y(t) = B(z)u(t) + e(t)'),
@@ -55,6 +76,11 @@ class EstimationReport:
         Akaike's information criterion.
     iterations : int
         Iterations of an iterative method (0 for direct solutions).
+    converged : bool
+        False if an iterative method stopped at its cap ``max_iter`` while the
+        loss was still decreasing.
+    max_iter : int
+        The iteration cap (0 for direct solutions).
     """
 
     method: str
@@ -64,6 +90,8 @@ class EstimationReport:
     fpe: float
     aic: float
     iterations: int = 0
+    converged: bool = True
+    max_iter: int = 0
 
 
 def _poly_text(coeffs: np.ndarray, monic: bool, first_lag: int = 0) -> str:
@@ -248,6 +276,12 @@ class PolyModel:
         -------
         ndarray, shape (N, ny)
             Simulated outputs.
+
+        Raises
+        ------
+        DivergenceError
+            With ``ic='estimate'``, if the simulation of an unstable model
+            overflows (no initial state can be fitted).
         """
         if ic not in ('zero', 'estimate'):
             raise ValueError(f"ic must be 'zero' or 'estimate', got {ic!r}")
@@ -277,7 +311,7 @@ class PolyModel:
             raise TypeError("ic='estimate' needs IdData with measured outputs")
         y = self._outputs(data)
         basis = free_response(A, C, y.shape[0]).reshape(-1, A.shape[0])
-        x0 = np.linalg.lstsq(basis, (y - ysim).ravel(), rcond=None)[0]
+        x0 = _initial_state_fit(basis, (y - ysim).ravel(), np.linalg.eigvals(A))
         return ysim + (basis @ x0).reshape(y.shape)
 
     @property
@@ -337,7 +371,7 @@ class PolyModel:
         if A.shape[0] == 0:
             return e
         basis = free_response(A - K @ C, C, y.shape[0]).reshape(-1, A.shape[0])
-        x0 = np.linalg.lstsq(basis, e.ravel(), rcond=None)[0]
+        x0 = _initial_state_fit(basis, e.ravel(), np.linalg.eigvals(A - K @ C))
         return e - (basis @ x0).reshape(e.shape)
 
     def residuals_state_space(self, data: IdData) -> np.ndarray:
@@ -578,6 +612,11 @@ class PolyModel:
                 + (f', {r.iterations} iterations' if r.iterations else '')
                 + '.'
             )
+            if not r.converged:
+                lines.append(
+                    f'  Stopped at the iteration cap ({r.max_iter}) before converging: '
+                    'raise it (max_iter, --max-iter).'
+                )
             lines.append(f'  Fit to estimation data: {fits} (prediction focus)')
             lines.append(f'  FPE: {r.fpe:.4g}, MSE: {mses}')
         return '\n'.join(lines)

@@ -142,6 +142,8 @@ def _box_jenkins(
         experiments,
         f'{name}, prediction-error method (Levenberg-Marquardt)',
         result.iterations,
+        converged=result.converged,
+        max_iter=max_iter,
     )
 
 

@@ -35,12 +35,16 @@ class PemResult:
         ``e^T e / N`` at the minimizer.
     iterations : int
         Accepted plus rejected steps.
+    converged : bool
+        False if the iterations stopped at ``max_iter`` (the loss was still
+        decreasing by more than ``tol``).
     """
 
     theta: np.ndarray
     covariance: np.ndarray
     loss: float
     iterations: int
+    converged: bool = True
 
 
 def stabilize(poly: np.ndarray, radius: float = 0.999) -> np.ndarray:
@@ -114,6 +118,7 @@ def levenberg_marquardt(
     project: Callable[[np.ndarray], np.ndarray] | None = None,
     max_iter: int = 50,
     tol: float | None = None,
+    progress: Callable[[int, float], None] | None = None,
 ) -> PemResult:
     """Minimize ``||e(theta)||^2`` by damped Gauss-Newton steps.
 
@@ -135,6 +140,9 @@ def levenberg_marquardt(
         Gauss-Newton model) is below ``tol``.  Default ``1e-3 / N``: a step
         that changes the loss by less moves the parameters by less than about
         0.03 of their standard deviations, i.e. statistically nothing.
+    progress : callable, optional
+        Called after every step with the step count and the current loss
+        ``e^T e / N`` (for a progress display).
 
     Returns
     -------
@@ -151,8 +159,11 @@ def levenberg_marquardt(
     mu = 1e-4
     iterations = 0
     p = theta.size
+    converged = False
     while iterations < max_iter and p:
         iterations += 1
+        if progress is not None:
+            progress(iterations, V / max(e.shape[0], 1))
         diag = np.diag(H).copy()
         diag[diag <= 0] = 1.0
         try:
@@ -160,6 +171,7 @@ def levenberg_marquardt(
         except np.linalg.LinAlgError:
             step = np.linalg.lstsq(H + mu * np.diag(diag), g, rcond=None)[0]
         if float(g @ step) < tol * V:  # predicted improvement negligible: converged
+            converged = True
             break
         trial = theta + step
         if project is not None:
@@ -172,10 +184,12 @@ def levenberg_marquardt(
             H, g = normal(theta, e)
             mu = max(mu / 10.0, 1e-12)
             if decrease < tol:
+                converged = True
                 break
         else:
             mu *= 10.0
-            if mu > 1e8:
+            if mu > 1e8:  # no descent direction left: a (local) minimum
+                converged = True
                 break
     N = e.shape[0]
     lam = V / max(1, N - p)
@@ -183,4 +197,7 @@ def levenberg_marquardt(
         cov = lam * np.linalg.inv(H)
     except np.linalg.LinAlgError:
         cov = lam * np.linalg.pinv(H)
-    return PemResult(theta=theta, covariance=cov, loss=V / N, iterations=iterations)
+    converged = converged or not p or iterations < max_iter
+    return PemResult(
+        theta=theta, covariance=cov, loss=V / N, iterations=iterations, converged=converged
+    )

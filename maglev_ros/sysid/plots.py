@@ -2,22 +2,48 @@
 
 Figures are built with :class:`matplotlib.figure.Figure` and the Agg canvas,
 so no display and no global ``pyplot`` state are involved.
+
+Made to be read at a glance by a control engineer:
+
+* ``compare``: per output, the whole validation record on its own time axis
+  (the record's, not restarted at 0), a zoomed window in which single samples
+  and input steps are visible, and the error ``y - yhat`` of each model;
+  legends name every model with its fit to two decimals;
+* fields given in tesla are drawn in mT; other units get engineering
+  prefixes instead of an offset exponent;
+* ``resid``: the model's name and the verdict in a title that fits;
+* ``bode``: structurally zero paths (``nb = 0``) are labelled as such, not drawn
+  as -6000 dB.
 """
 
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.ticker import EngFormatter
 
 from .dataset import IdData
 from .model import PolyModel
 from .validation import ResidualAnalysis, compare
 
-__all__ = ['bode_plot', 'compare_plot', 'resid_plot']
+__all__ = [
+    'ZOOM_SAMPLES',
+    'bode_figure',
+    'bode_plot',
+    'compare_figure',
+    'compare_plot',
+    'display_scale',
+    'resid_figure',
+    'resid_plot',
+]
+
+ZOOM_SAMPLES = 60  # samples in the zoomed window of compare (12 ms at 5 kHz)
+MEASURED = dict(color='black', lw=1.0)
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
@@ -28,6 +54,29 @@ def _save(fig: Figure, path: str | Path) -> Path:
     return path
 
 
+def display_scale(unit: str) -> tuple[float, str]:
+    """Scale factor and unit to draw a channel in: tesla becomes mT.
+
+    Parameters
+    ----------
+    unit : str
+        The channel's unit (``'T'``, ``'A'``, ``''``, ...).
+
+    Returns
+    -------
+    tuple of (float, str)
+        Multiply values by the factor; the displayed unit.
+    """
+    return (1e3, 'mT') if unit == 'T' else (1.0, unit)
+
+
+def _axis_label(ax, name: str, unit: str) -> None:
+    """Label a y axis; without a unit scale, use engineering prefixes (no 1e-4 offsets)."""
+    ax.set_ylabel(f'{name} [{unit}]' if unit else name)
+    if unit not in ('mT', 'µT'):
+        ax.yaxis.set_major_formatter(EngFormatter(unit='', places=None, sep=''))
+
+
 def compare_plot(
     data: IdData,
     models: Sequence[PolyModel],
@@ -35,46 +84,129 @@ def compare_plot(
     labels: Sequence[str] | None = None,
     horizon: int | None = None,
     ic: str = 'zero',
+    zoom: int = ZOOM_SAMPLES,
 ) -> Path:
-    """Plot measured outputs against each model's output, fit % in the legend.
+    """Write :func:`compare_figure` to a PNG file.
 
     Parameters
     ----------
-    data : IdData
-        Validation data.
-    models : sequence of PolyModel
-        Models to compare.
+    data, models, labels, horizon, ic, zoom
+        As :func:`compare_figure`.
     path : str or Path
         PNG file to write.
-    labels : sequence of str, optional
-        Legend names of the models (default their structure).
-    horizon : int or None
-        Prediction horizon (None: simulation).
-    ic : {'zero', 'estimate'}
-        Initial conditions.
 
     Returns
     -------
     Path
         The written file.
     """
+    return _save(compare_figure(data, models, labels, horizon, ic, zoom), path)
+
+
+def compare_figure(
+    data: IdData,
+    models: Sequence[PolyModel],
+    labels: Sequence[str] | None = None,
+    horizon: int | None = None,
+    ic: str = 'zero',
+    zoom: int = ZOOM_SAMPLES,
+) -> Figure:
+    """Plot measured outputs against each model's output, with a zoom and the errors.
+
+    Per output: the whole record (the zoomed window shaded), the zoomed window
+    (measured samples as dots), the inputs' steps in that window, and the error
+    ``y - yhat`` of each model over the whole record (in µT when a field's
+    error is below 10 uT).
+
+    Parameters
+    ----------
+    data : IdData
+        Validation data (its time axis, ``data.time``, is used as is).
+    models : sequence of PolyModel
+        Models to compare.
+    labels : sequence of str, optional
+        Legend names of the models (default their structure).
+    horizon : int or None
+        Prediction horizon (None: simulation).
+    ic : {'zero', 'estimate'}
+        Initial conditions.
+    zoom : int
+        Samples in the zoomed window (taken from the middle of the record).
+
+    Returns
+    -------
+    Figure
+        Per output the axes whole record, zoom, inputs in the zoom (if any
+        input), error.
+    """
     labels = list(labels) if labels else [m.structure for m in models]
-    fig = Figure(figsize=(9, 2.8 * data.ny))
-    axes = fig.subplots(data.ny, 1, squeeze=False)[:, 0]
+    results = [compare(model, data, horizon, ic) for model in models]
     t = data.time
-    for i, ax in enumerate(axes):
-        ax.plot(t, data.y[:, i], color='0.3', lw=0.8, label='measured')
-        for model, label in zip(models, labels, strict=True):
-            result = compare(model, data, horizon, ic)
-            ax.plot(t, result.yhat[:, i], lw=0.8, label=f'{label}: {result.fit[i]:.1f}%')
-        unit = f' [{data.output_units[i]}]' if data.output_units[i] else ''
-        ax.set_ylabel(data.output_names[i] + unit)
-        ax.legend(loc='upper right', fontsize='small')
-    axes[-1].set_xlabel('time [s]')
+    n_zoom = int(min(max(zoom, 10), data.N))
+    z0 = (data.N - n_zoom) // 2
+    zs = slice(z0, z0 + n_zoom)
+    panels = 4 if data.nu else 3
+    ratios = [3, 3, 1.4, 2.2] if data.nu else [3, 3, 2.2]
+    fig = Figure(figsize=(11, 7.6 * data.ny), layout='constrained')
+    grid = fig.subplots(
+        panels * data.ny, 1, squeeze=False, gridspec_kw={'height_ratios': ratios * data.ny}
+    )[:, 0]
     what = 'simulation' if horizon is None else f'{horizon}-step prediction'
-    fig.suptitle(f'Measured vs model output ({what})')
-    fig.tight_layout()
-    return _save(fig, path)
+    for i in range(data.ny):
+        scale, unit = display_scale(data.output_units[i])
+        name = data.output_names[i]
+        axes = list(grid[panels * i : panels * (i + 1)])
+        full, close, error = axes[0], axes[1], axes[-1]
+        y = data.y[:, i] * scale
+        full.plot(t, y, label='measured', **MEASURED)
+        close.plot(t[zs], y[zs], marker='o', ms=2.5, label='measured (samples)', **MEASURED)
+        errors = []
+        for k, (result, label) in enumerate(zip(results, labels, strict=True)):
+            color = f'C{k}'
+            yhat = result.yhat[:, i] * scale
+            text = f'{label}: {result.fit[i]:.2f} %'
+            full.plot(t, yhat, color=color, lw=0.7, alpha=0.8, label=text)
+            close.plot(t[zs], yhat[zs], color=color, lw=1.2, label=text)
+            errors.append((float(np.sqrt(np.mean((y - yhat) ** 2))), k, label, y - yhat))
+        # an error far below the signal gets its own unit (mT -> µT)
+        escale, eunit = (
+            (1e3, 'µT') if unit == 'mT' and max(e[0] for e in errors) < 1e-2 else (1.0, unit)
+        )
+        # largest error first, so that the best model is drawn on top and stays visible
+        for rms, k, label, e in sorted(errors, key=lambda item: -item[0]):
+            rms_text = f'{rms * escale:.3g} {eunit}' if eunit else EngFormatter(places=3)(rms)
+            error.plot(t, e * escale, color=f'C{k}', lw=0.6, label=f'{label} (rms {rms_text})')
+        if data.nu:
+            inputs = axes[2]
+            for j in range(data.nu):
+                inputs.plot(t[zs], data.u[zs, j], color=f'C{7 + j % 3}', lw=1.0,
+                            drawstyle='steps-post', label=data.input_names[j])  # fmt: skip
+            iunit = data.input_units[0]
+            inputs.set_ylabel(f'input [{iunit}]' if iunit else 'input')
+            inputs.set_title('inputs in the zoomed window', loc='left')
+            inputs.legend(loc='upper right', fontsize='small', framealpha=0.9, ncols=data.nu)
+        for ax in axes[1:-1]:  # zoom and its inputs: the same window, one sample past
+            ax.set_xlim(t[z0] - 0.5 * data.Ts, t[z0 + n_zoom - 1] + 1.5 * data.Ts)
+        close.legend(loc='upper right', fontsize='small', framealpha=0.9)
+        full.axvspan(t[zs][0], t[zs][-1], color='0.85', zorder=0)
+        full.set_title(f'{name}: measured vs model {what} on validation data', loc='left')
+        close.set_title(
+            f'zoom: {n_zoom} samples ({n_zoom * data.Ts * 1e3:.3g} ms) from t = {t[z0]:.4g} s',
+            loc='left',
+        )
+        error.set_title(f'error: measured - model ({what})', loc='left')
+        error.axhline(0.0, color='k', lw=0.5)
+        for ax in (full, close):
+            _axis_label(ax, name, unit)
+        _axis_label(error, 'error', eunit)
+        for ax in axes:
+            ax.grid(True, lw=0.3)
+            ax.set_xlabel('time [s]')
+        full.set_xlim(t[0], t[-1])
+        error.set_xlim(t[0], t[-1])
+        full.legend(loc='upper right', fontsize='small', framealpha=0.9)
+        error.legend(loc='upper right', fontsize='small', framealpha=0.9)
+    return fig
 
 
 def resid_plot(
@@ -82,43 +214,74 @@ def resid_plot(
     path: str | Path,
     output_names: Sequence[str] | None = None,
     input_names: Sequence[str] | None = None,
+    model_label: str | None = None,
 ) -> Path:
-    """Plot residual autocorrelation and input-residual cross-correlation with 99 % bounds.
+    """Write :func:`resid_figure` to a PNG file.
 
     Parameters
     ----------
-    analysis : ResidualAnalysis
-        Result of :func:`~.validation.resid`.
+    analysis, output_names, input_names, model_label
+        As :func:`resid_figure`.
     path : str or Path
         PNG file to write.
-    output_names, input_names : sequence of str, optional
-        Channel names for the titles.
 
     Returns
     -------
     Path
         The written file.
     """
+    return _save(resid_figure(analysis, output_names, input_names, model_label), path)
+
+
+def resid_figure(
+    analysis: ResidualAnalysis,
+    output_names: Sequence[str] | None = None,
+    input_names: Sequence[str] | None = None,
+    model_label: str | None = None,
+) -> Figure:
+    """Plot residual autocorrelation and input-residual cross-correlation with 99 % bounds.
+
+    Parameters
+    ----------
+    analysis : ResidualAnalysis
+        Result of :func:`~.validation.resid`.
+    output_names, input_names : sequence of str, optional
+        Channel names for the titles.
+    model_label : str, optional
+        Name of the model, in the title.
+
+    Returns
+    -------
+    Figure
+        ``ny`` rows of ``nu + 1`` axes.
+    """
     ny, nu = analysis.crosscorr.shape[:2]
     onames = list(output_names) if output_names else [f'y{i + 1}' for i in range(ny)]
     inames = list(input_names) if input_names else [f'u{j + 1}' for j in range(nu)]
-    fig = Figure(figsize=(3.2 * (nu + 1), 2.6 * ny))
+    fig = Figure(figsize=(max(8.0, 3.4 * (nu + 1)), 1.0 + 2.8 * ny), layout='constrained')
     axes = fig.subplots(ny, nu + 1, squeeze=False)
     lags = analysis.lags
     for i in range(ny):
-        panels = [(analysis.autocorr[i], f'autocorr e({onames[i]})')]
+        # lag 0 of the autocorrelation is 1 by definition: left out, it would set the scale
+        panels = [(lags[1:], analysis.autocorr[i, 1:], f'autocorrelation of e({onames[i]})')]
         panels += [
-            (analysis.crosscorr[i, j], f'xcorr e({onames[i]}), {inames[j]}') for j in range(nu)
+            (lags, analysis.crosscorr[i, j], f'e({onames[i]}) vs input {inames[j]}')
+            for j in range(nu)
         ]
-        for ax, (values, title) in zip(axes[i], panels, strict=True):
-            ax.vlines(lags, 0, values, lw=1.5)
-            ax.axhspan(-analysis.bound, analysis.bound, color='tab:blue', alpha=0.15)
+        for ax, (x, values, title) in zip(axes[i], panels, strict=True):
+            outside = np.abs(values) > analysis.bound
+            ax.vlines(x[~outside], 0, values[~outside], lw=1.5, color='C0')
+            ax.vlines(x[outside], 0, values[outside], lw=1.5, color='C3')
+            ax.axhspan(-analysis.bound, analysis.bound, color='C0', alpha=0.15, label='99 % bound')
             ax.axhline(0, color='k', lw=0.5)
-            ax.set_title(title, fontsize='small')
+            ax.set_title(title, fontsize='medium')
             ax.set_xlabel('lag [samples]')
-    fig.suptitle(analysis.summary(), fontsize='small')
-    fig.tight_layout()
-    return _save(fig, path)
+            ax.grid(True, lw=0.3)
+    axes[0, 0].legend(loc='upper right', fontsize='small')
+    verdict = textwrap.fill(analysis.summary(), width=int(fig.get_figwidth() * 11))
+    head = f'{model_label}: ' if model_label else ''
+    fig.suptitle(f'{head}residuals on validation data\n{verdict}', fontsize='medium')
+    return fig
 
 
 def bode_plot(
@@ -127,14 +290,37 @@ def bode_plot(
     labels: Sequence[str] | None = None,
     n_points: int = 400,
 ) -> Path:
+    """Write :func:`bode_figure` to a PNG file.
+
+    Parameters
+    ----------
+    models, labels, n_points
+        As :func:`bode_figure`.
+    path : str or Path
+        PNG file to write.
+
+    Returns
+    -------
+    Path
+        The written file.
+    """
+    return _save(bode_figure(models, labels, n_points), path)
+
+
+def bode_figure(
+    models: Sequence[PolyModel],
+    labels: Sequence[str] | None = None,
+    n_points: int = 400,
+) -> Figure:
     """Bode plot (magnitude in dB, phase in degrees) of every input-output channel.
+
+    A channel without a path in any model (``nb = 0``: structurally zero) is
+    labelled "no path" instead of being drawn.
 
     Parameters
     ----------
     models : sequence of PolyModel
         Models with equal ``ny``, ``nu`` and ``Ts``.
-    path : str or Path
-        PNG file to write.
     labels : sequence of str, optional
         Legend names.
     n_points : int
@@ -142,28 +328,43 @@ def bode_plot(
 
     Returns
     -------
-    Path
-        The written file.
+    Figure
+        Magnitude and phase axes per channel (rows ``2 i``, ``2 i + 1``, column ``j``).
     """
     labels = list(labels) if labels else [m.structure for m in models]
     first = models[0]
     nyq = 0.5 / first.Ts
     f = np.logspace(np.log10(nyq) - 3, np.log10(nyq), n_points)
-    fig = Figure(figsize=(4 * first.nu, 4.5 * first.ny))
+    fig = Figure(figsize=(max(7.0, 5 * first.nu), 5.0 * first.ny), layout='constrained')
     axes = fig.subplots(2 * first.ny, first.nu, squeeze=False)
-    for model, label in zip(models, labels, strict=True):
-        H = model.freqresp(f)
-        for i in range(first.ny):
-            for j in range(first.nu):
-                mag = 20 * np.log10(np.maximum(np.abs(H[:, i, j]), 1e-300))
-                axes[2 * i, j].semilogx(f, mag, label=label)
-                axes[2 * i + 1, j].semilogx(f, np.degrees(np.unwrap(np.angle(H[:, i, j]))))
-                axes[2 * i, j].set_title(
-                    f'{first.input_names[j]} -> {first.output_names[i]}', fontsize='small'
-                )
-                axes[2 * i, j].set_ylabel('magnitude [dB]')
-                axes[2 * i + 1, j].set_ylabel('phase [deg]')
-                axes[2 * i + 1, j].set_xlabel('frequency [Hz]')
+    responses = [model.freqresp(f) for model in models]
+    for i in range(first.ny):
+        yscale, yunit = display_scale(first.output_units[i] if first.output_units else '')
+        for j in range(first.nu):
+            mag_ax, phase_ax = axes[2 * i, j], axes[2 * i + 1, j]
+            iunit = first.input_units[j] if first.input_units else ''
+            gain = f' [dB {yunit}/{iunit}]' if yunit and iunit else ' [dB]'
+            mag_ax.set_title(
+                f'{first.input_names[j]} -> {first.output_names[i]}', fontsize='medium'
+            )
+            drawn = False
+            for k, (model, H, label) in enumerate(zip(models, responses, labels, strict=True)):
+                if not model.orders.nb[i, j] or not np.any(H[:, i, j]):
+                    continue  # structurally zero: no path from this input
+                drawn = True
+                h = H[:, i, j] * yscale
+                mag_ax.semilogx(f, 20 * np.log10(np.abs(h)), color=f'C{k}', label=label)
+                phase_ax.semilogx(f, np.degrees(np.unwrap(np.angle(h))), color=f'C{k}')
+            if not drawn:
+                for ax in (mag_ax, phase_ax):
+                    ax.text(0.5, 0.5, 'no path (nb = 0)', ha='center', va='center',
+                            transform=ax.transAxes, color='0.4')  # fmt: skip
+                    ax.set_xscale('log')
+            mag_ax.set_ylabel('magnitude' + gain)
+            phase_ax.set_ylabel('phase [deg]')
+            phase_ax.set_xlabel('frequency [Hz]')
+            for ax in (mag_ax, phase_ax):
+                ax.set_xlim(f[0], f[-1])
+                ax.grid(True, which='both', lw=0.3)
     axes[0, 0].legend(fontsize='small')
-    fig.tight_layout()
-    return _save(fig, path)
+    return fig

@@ -267,6 +267,8 @@ def finish_model(
     method: str,
     iterations: int = 0,
     noise_variance: np.ndarray | None = None,
+    converged: bool = True,
+    max_iter: int = 0,
 ) -> PolyModel:
     """Wrap estimated parameters in a :class:`PolyModel` with its estimation report.
 
@@ -291,6 +293,10 @@ def finish_model(
         Iteration count of an iterative method.
     noise_variance : ndarray, shape (ny, ny), optional
         Innovations covariance (default: from the prediction errors).
+    converged : bool
+        False if the iterative method stopped at its cap.
+    max_iter : int
+        The iteration cap of an iterative method (0 for direct solutions).
 
     Returns
     -------
@@ -327,6 +333,8 @@ def finish_model(
         fpe=fpe(e, orders.n_params),
         aic=aic(e, orders.n_params),
         iterations=iterations,
+        converged=converged,
+        max_iter=max_iter,
     )
     return PolyModel(
         structure,

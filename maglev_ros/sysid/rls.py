@@ -24,7 +24,7 @@ from .model import PolyModel
 from .orders import Orders, make_orders
 from .regression import arx_regressors
 
-__all__ = ['RecursiveArx', 'RlsResult', 'rls_arx']
+__all__ = ['RecursiveArx', 'RlsResult', 'rls_arx', 'rls_step']
 
 
 def _check_forgetting(forgetting: float, p0: float) -> None:
@@ -35,28 +35,56 @@ def _check_forgetting(forgetting: float, p0: float) -> None:
 
 
 @njit(cache=True)
+def rls_step(
+    P: np.ndarray, theta: np.ndarray, phi: np.ndarray, y: float, lam: float
+) -> float:  # pragma: no cover - numba
+    """One RLS update of ``theta`` (p,) and ``P`` (p, p) in place; return the prior error.
+
+    ``P`` is updated as ``(P - Pphi Pphi^T / denom) / lam``, element by element,
+    so that it stays exactly symmetric: with ``lam < 1`` the rounding
+    asymmetry of ``P - K (P phi)^T`` grows without bound (the estimate drifts
+    from the least-squares one after a few thousand samples).
+
+    Parameters
+    ----------
+    P : ndarray, shape (p, p)
+        Covariance, updated in place.
+    theta : ndarray, shape (p,)
+        Parameters, updated in place.
+    phi : ndarray, shape (p,)
+        Regressor.
+    y : float
+        Measured output.
+    lam : float
+        Forgetting factor in (0, 1].
+    """
+    p = phi.shape[0]
+    Pphi = np.empty(p)
+    err = y
+    denom = lam
+    for a in range(p):
+        acc = 0.0
+        for b in range(p):
+            acc += P[a, b] * phi[b]
+        Pphi[a] = acc
+        denom += phi[a] * acc
+        err -= phi[a] * theta[a]
+    for a in range(p):
+        theta[a] += Pphi[a] / denom * err
+    for a in range(p):
+        for b in range(p):
+            P[a, b] = (P[a, b] - Pphi[a] * Pphi[b] / denom) / lam
+    return err
+
+
+@njit(cache=True)
 def _rls_run(
     Phi: np.ndarray, Y: np.ndarray, lam: float, P: np.ndarray, theta: np.ndarray
 ) -> np.ndarray:  # pragma: no cover - numba
     N, p = Phi.shape
     history = np.empty((N, p))
-    Pphi = np.empty(p)
     for t in range(N):
-        phi = Phi[t]
-        err = Y[t]
-        denom = lam
-        for a in range(p):
-            acc = 0.0
-            for b in range(p):
-                acc += P[a, b] * phi[b]
-            Pphi[a] = acc
-            denom += phi[a] * acc
-            err -= phi[a] * theta[a]
-        for a in range(p):
-            theta[a] += Pphi[a] / denom * err
-        for a in range(p):
-            for b in range(p):
-                P[a, b] = (P[a, b] - Pphi[a] * Pphi[b] / denom) / lam
+        rls_step(P, theta, Phi[t], Y[t], lam)
         history[t] = theta
     return history
 
@@ -205,12 +233,8 @@ class RecursiveArx:
         yh, uh = self._y[::-1], self._u[::-1]
         now = self._lag
         for i in range(o.ny):
-            phi = arx_regressors(yh, uh, o, i, now)[0]
-            P, theta = self._P[i], self._theta[i]
-            Pphi = P @ phi
-            gain = Pphi / (self.forgetting + phi @ Pphi)
-            theta += gain * (y[i] - phi @ theta)
-            self._P[i] = (P - np.outer(gain, Pphi)) / self.forgetting
+            phi = np.ascontiguousarray(arx_regressors(yh, uh, o, i, now)[0])
+            rls_step(self._P[i], self._theta[i], phi, float(y[i]), self.forgetting)
         self.n_updates += 1
         return self.theta
 

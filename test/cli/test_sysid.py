@@ -170,3 +170,96 @@ def test_bad_input_exits_2_with_one_line(lab_mat, tmp_path, capsys, args, match)
 def test_help_exits_zero(capsys):
     assert main(['--help']) == 0
     assert 'usage: maglev-sysid' in capsys.readouterr().out
+
+
+@pytest.fixture(scope='module')
+def second_order_mat(tmp_path_factory):
+    """The lab's data.mat from a lower-order board: DATA rows Bx, spare, spare, Ix."""
+    from .systems import lab_second_order
+
+    d = lab_second_order()
+    path = tmp_path_factory.mktemp('second_order') / 'data.mat'
+    zeros = np.zeros(d.N)
+    savemat(path, {'DATA': np.vstack([d.y[:, 0], zeros, zeros, d.u[:, 0]])})
+    return path
+
+
+def test_readme_siso_example_on_second_order_data_keeps_every_model(
+    second_order_mat, tmp_path, capfd
+):
+    # the README's flagship command: IV 7 9 1 is unstable on 2nd-order data (pole 1.41);
+    # it used to raise "SVD did not converge" (exit 2, ARX and ARMAX lost) with LAPACK
+    # text on fd 1
+    plots = tmp_path / 'plots' / 'x'
+    argv = [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--detrend']
+    argv += ['--arx', 7, 9, 1, '--iv', 7, 9, 1, '--armax', 5, 5, 3, 1, '--plot', plots]
+    code = main([str(a) for a in argv])
+    out, err = capfd.readouterr()
+    assert code == 0, err
+    assert 'DLASCL' not in out + err and 'illegal value' not in out + err
+    summary = out[out.index('Summary') :]
+    assert 'ARX 7 9 1' in summary and 'ARMAX 5 5 3 1' in summary
+    assert 'IV4 7 9 1' in summary and 'reduced (validated as na=' in summary
+    assert 'pole-zero pair(s) nearly cancel' in out
+    names = sorted(p.name for p in plots.iterdir())
+    assert names == [
+        'bode.png',
+        'compare.png',
+        'resid_1_arx.png',
+        'resid_2_iv.png',
+        'resid_3_armax.png',
+    ]
+
+
+def test_json_is_clean_and_holds_the_reduced_model(second_order_mat, capfd):
+    argv = [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--detrend', '--json']
+    argv += ['--arx', 2, 2, 1, '--iv', 7, 9, 1]
+    code = main([str(a) for a in argv])
+    out, err = capfd.readouterr()
+    result = json.loads(out)  # nothing but JSON on stdout
+    assert code == 0, err
+    arx_row, iv_row = result['models']
+    assert arx_row['status'] == 'ok' and arx_row['fit_validation'][0] > 99
+    assert iv_row['status'] == 'reduced' and iv_row['validated']['orders']['na'][0][0] < 7
+    assert iv_row['fit_validation'][0] > 99 and 'cancel' in iv_row['reason']
+    assert result['exit_status'] == 0 and result['hints'] == []
+
+
+def test_output_equal_to_input_is_one_line_and_no_lapack_text(second_order_mat, capfd):
+    code = main(
+        [str(second_order_mat), '--rows', '1', '1', '--ts', '2e-4', '--arx', '2', '2', '1']
+    )
+    out, err = capfd.readouterr()
+    assert code == 2 and out == ''
+    assert err.count('\n') == 1 and 'are the same signal' in err
+
+
+def test_offset_hint_without_detrend_and_help_says_detrend_is_off(second_order_mat, capsys):
+    code, out, err = run(
+        [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--arx', 2, 2, 1], capsys
+    )
+    assert code == 0, err
+    assert 'hint: y1 has an offset' in out and '--detrend' in out
+    assert main(['--help']) == 0
+    text = ' '.join(capsys.readouterr().out.split())
+    assert 'off unless given' in text and 'Without --detrend the models fit the raw values' in text
+    assert 'Exit status: 0 every model usable, 1 some model failed' in text
+
+
+def test_iteration_cap_option_is_reported(second_order_mat, capsys):
+    argv = [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--detrend']
+    code, out, err = run([*argv, '--armax', 2, 2, 2, 1, '--max-iter', 1], capsys)
+    assert code == 0, err
+    assert 'Stopped at the iteration cap (1)' in out and 'raise it with --max-iter' in out
+    code, _, err = run([*argv, '--armax', 2, 2, 2, 1, '--max-iter', 0], capsys)
+    assert code == 2 and '--max-iter must be >= 1' in err
+
+
+def test_negative_exponent_value_and_yaml_position(lab_mat, tmp_path, capsys):
+    code, _, err = run([lab_mat, '--rows', '1', '4', '--ts', '-2e-4', '--arx', 1, 1, 1], capsys)
+    assert code == 2 and '--ts must be a positive sample time' in err
+    spec = tmp_path / 'broken.yaml'
+    spec.write_text('models:\n  - structure: arx\n    na: [1, 2\n    nb: 1\n')
+    code, _, err = run([lab_mat, '--rows', '1', '4', '--ts', '1', '--spec', spec], capsys)
+    assert code == 2 and err.count('\n') == 1
+    assert 'line 4, column' in err

@@ -20,7 +20,7 @@ from maglev_ros.hardware.v2x_stream import RecordDecoder
         (['--clock-start', '-1'], 'must be in 0 .. 4294967295'),
         (['--startup-delay', 'nan'], 'must be finite and >= 0'),
         (['--plant', 'nosuchmodule_xyz:make'], "--plant 'nosuchmodule_xyz:make' cannot be loaded"),
-        (['--plant', 'linearish'], "--plant must be 'linear' or 'module:factory'"),
+        (['--plant', 'linearish'], "--plant must be 'linear', 'physics' or 'module:factory'"),
         (['--link', '/nonexistent-dir-xyz/tty'], 'link directory does not exist'),
         (['--firmware', 'v4x', '--log-period', '0'], '--log-period must be > 0'),
         (['--frobnicate'], 'unrecognized arguments: --frobnicate'),

@@ -212,3 +212,30 @@ def test_sigterm_ends_the_node_cleanly(ctx):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_max_commands_stops_a_lockstep_simulation_after_exactly_that_many_steps(ctx):
+    excite = ExcitationNode(
+        context=ctx, parameter_overrides=params(length=100, max_commands=137, seed=2)
+    )
+    sim = SimulatorNode(
+        context=ctx,
+        parameter_overrides=params(
+            mode='lockstep', magnet='fixed', start_paused=True, marker_rate=0.0, sensors=[0],
+            command_timeout=30.0,
+        ),
+    )  # fmt: skip
+    spinner = contract.Spinner(ctx, [excite, sim])
+    try:
+        wait_for(lambda: sim._current_pub.get_subscription_count() >= 1, what='discovery')
+        sim.set_paused(False)
+        wait_for(lambda: excite.exhausted, what='the last command')
+        time.sleep(0.5)  # nothing more comes: the simulator waits for a command
+        assert excite.sent == 137 and sim.counters['samples'] == 138  # + the initial sample
+    finally:
+        spinner.close()
+        excite.destroy_node()
+        sim.destroy_node()
+    with pytest.raises(ExcitationParameterError, match='max_commands must be an integer >= 0'):
+        build_config({**excite.config.__dict__, 'band': [0.0, 1.0], 'offset': [0.0] * 4,
+                      'max_commands': -1})  # fmt: skip

@@ -11,8 +11,8 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
     out = tmp_path / 'lab'
     status = lab.main(
         [
-            '--duration',
-            '0.6',
+            '--samples',
+            '3000',
             '--magnet',
             'fixed',
             '--delay',
@@ -39,6 +39,28 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
     assert summary['metadata']['maglev_simulator.sensor_delay'] == 1
     assert (out / 'compare_Bx_0.png').stat().st_size > 1000
     assert 'fit val. %' in printed and (out / 'bag' / 'metadata.yaml').is_file()
+    # lockstep: exactly the samples asked for, split in halves
+    assert summary['data'] == {'N': 3000, 'n_estimation': 1500, 'n_validation': 1500}
+    assert 'recorded 3000 samples' in printed
+    bz = next(m for m in summary['models'] if m['output'] == 'Bz_0')
+    assert bz['status'] == 'no response' and bz['fit_validation'] is None
+    assert summary['exit_status'] == 0
+
+
+def test_duration_still_gives_exact_samples(domain, tmp_path, capfd):
+    out = tmp_path / 'lab'
+    argv = ['--duration', '0.1', '--out', str(out), '--no-plots', '--quiet']
+    assert lab.main(argv) == 0, capfd.readouterr().err
+    assert json.loads((out / 'models.json').read_text())['data']['N'] == 500
+
+
+def test_unreadable_params_leave_no_output_directory(tmp_path, capfd):
+    out = tmp_path / 'lab'
+    assert lab.main(['--params', 'bad', '--out', str(out)]) == 2
+    captured = capfd.readouterr()
+    assert captured.out == '' and captured.err.count('\n') == 1
+    assert "--params 'bad'" in captured.err and 'not found' in captured.err
+    assert not out.exists()
 
 
 @pytest.mark.parametrize(

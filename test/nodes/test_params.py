@@ -123,12 +123,13 @@ def test_table_needs_a_node_parameter_error():
 
 
 @pytest.mark.parametrize(
-    'module', ['simulator', 'driver', 'excitation', 'recorder', 'player'], ids=str
+    'module', ['simulator', 'driver', 'excitation', 'recorder', 'player', 'identifier'], ids=str
 )
 def test_every_node_has_one_table_and_one_error_base(module):
     mod = importlib.import_module(f'maglev_ros.nodes.{module}')
     table = mod.PARAMETERS
-    assert isinstance(table, ParameterTable) and mod._PARAMETERS is table
+    assert isinstance(table, ParameterTable)
+    assert getattr(mod, '_PARAMETERS', table) is table  # the older name, where kept
     assert issubclass(table.error, NodeParameterError)
     for name, param in table.items():
         assert param.description, name

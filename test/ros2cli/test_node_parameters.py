@@ -24,6 +24,7 @@ NODES = {  # executable: (node name, module)
     'excitation': ('maglev_excitation', 'maglev_ros.nodes.excitation'),
     'recorder': ('maglev_recorder', 'maglev_ros.nodes.recorder'),
     'player': ('maglev_player', 'maglev_ros.nodes.player'),
+    'identifier': ('maglev_identifier', 'maglev_ros.nodes.identifier'),
 }
 
 
@@ -68,6 +69,7 @@ def _start_overrides(executable, tmp_path):
         'excitation': ['amplitude:=1', 'sample_rate:=1000'],
         'recorder': [f'path:={tmp_path / "bag"}', "metadata_node:=''", 'depth:=100'],
         'player': [f'path:={_bag(tmp_path)}', 'rate:=1', 'loop:=true', 'start_delay:=0'],
+        'identifier': ['forgetting:=1', 'initial_covariance:=10000', 'publish_rate:=2'],
     }[executable]
 
 
@@ -121,6 +123,13 @@ def test_integers_for_doubles_run_and_param_dump_is_complete(
             'driver',
             'command_timeout:=2.0',
             "command_timeout must be at most the firmware's 1 s watchdog",
+        ),
+        ('identifier', 'forgetting:=1.5', 'forgetting must be a finite number > 0 and <= 1'),
+        ('identifier', 'na:=[1,2]', 'na must have 1 or 1*1 = 1 values, got [1, 2]'),
+        (
+            'identifier',
+            "inputs:=['maglev/nowhere:data[0]']",
+            "channel topic '/maglev/nowhere' is not in the topic contract",
         ),
     ],
 )

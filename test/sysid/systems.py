@@ -105,3 +105,18 @@ def mean_error(estimate, sizes, seeds, truth):
     return np.array(
         [np.mean([np.linalg.norm(estimate(N, s) - truth) for s in seeds]) for N in sizes]
     )
+
+
+def lab_second_order(N=25000, seed=0, offset=1.2e-3, noise=1e-6):
+    """The lab's data shape: a field (T) that is a 2nd-order response to a PRBS coil input (A).
+
+    PRBS of +-0.5 A held for 5 samples, poles 0.95 +- 0.1j, about 2 mT/A of DC
+    gain, an offset and white sensor noise; a student's lower-order board. Returns
+    the raw (not detrended) data.
+    """
+    rng = np.random.default_rng(seed)
+    u = 0.5 * np.repeat(rng.integers(0, 2, N // 5 + 1) * 2.0 - 1.0, 5)[:N]
+    a = np.poly([0.95 + 0.1j, 0.95 - 0.1j]).real
+    b = np.array([0.0, 2.5e-5, 2e-5])
+    y = lfilter(b, a, u) + offset + noise * rng.standard_normal(N)
+    return IdData(y, u, TS, ['Bx'], ['Ix'], ['T'], ['A'])

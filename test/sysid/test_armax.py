@@ -85,3 +85,15 @@ def test_default_tolerance_stops_within_a_fraction_of_a_standard_deviation():
     assert default.report.iterations <= tight.report.iterations
     truth = np.concatenate([A2[1:], B2[1:], C_COLORED[1:]])
     assert np.all(np.abs(default.theta - truth) < 5 * default.std)
+
+
+def test_iteration_cap_is_reported_and_progress_called():
+    data = simulate_siso(4000, 3, C=C_ARMAX, noise=0.5)
+    steps = []
+    capped = armax(data, 2, 2, 1, 1, max_iter=1, tol=0.0, progress=lambda k, v: steps.append(k))
+    assert steps == [1]
+    assert not capped.report.converged and capped.report.max_iter == 1
+    assert 'Stopped at the iteration cap (1)' in str(capped)
+    free = armax(data, 2, 2, 1, 1)
+    assert free.report.converged and free.report.iterations < 50
+    assert 'iteration cap' not in str(free)

@@ -91,3 +91,21 @@ def test_resid_argument_errors():
         resid(model, data, max_lag=0)
     with pytest.raises(ValueError, match='too large'):
         resid(model, data, max_lag=60)
+
+
+def test_diverging_simulation_is_refused_before_lapack(capfd):
+    # pole 1.5: the simulation overflows after ~1800 samples; lstsq on inf would print
+    # "On entry to DLASCL parameter number 4" on fd 1 and raise "SVD did not converge"
+    from maglev_ros.sysid import DivergenceError, PolyModel
+    from maglev_ros.sysid.orders import make_orders
+
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((3000, 1))
+    data = IdData(rng.standard_normal((3000, 1)), u, 1.0)
+    model = PolyModel(
+        'arx', make_orders(1, 1, na=1, nb=1, nk=1), np.array([-1.5, 1.0]), 1.0, np.eye(1)
+    )
+    with pytest.raises(DivergenceError, match='largest pole magnitude 1.5'):
+        compare(model, data, ic='estimate')
+    out, err = capfd.readouterr()
+    assert out == '' and err == ''

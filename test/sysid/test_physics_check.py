@@ -1,0 +1,123 @@
+"""The physics check: sampled linearisation and frequency-response comparison."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from maglev_ros.physics import CoilDynamics, SensorEffects, Simulator, linearize, make_model
+from maglev_ros.sysid import PolyModel, make_orders
+from maglev_ros.sysid.physics_check import PhysicsCheckError, compare_response, local_plant
+
+TS = 2e-4
+
+
+def first_order(a, b_w, c, d):
+    """dx = -a x + b . i, y = c x + d . i with 4 coils (a < 0: unstable)."""
+    return SimpleNamespace(
+        A=np.array([[-a]]),
+        B=np.array([b_w]),
+        C=np.array([[c]]),
+        D=np.array([d]),
+        outputs=('Bx_0',),
+    )
+
+
+def arx_of_first_order(p, g, dd, delay):
+    """G = z^-d (g / (z - p) + dd z^-1) as ARX.
+
+    A = 1 - p q^-1, B = (g + dd) q^-(1+d) - p dd q^-(2+d).
+    """
+    orders = make_orders(1, 1, na=1, nb=2, nk=1 + delay)
+    return PolyModel('arx', orders, np.array([-p, g + dd, -p * dd]), TS, np.eye(1))
+
+
+@pytest.mark.parametrize('a', [50.0, -30.0])  # stable and unstable (as Maggy's x mode)
+@pytest.mark.parametrize('delay', [0, 1])
+def test_known_first_order_system(a, delay):
+    linear = first_order(a, [2.0, -1.0, 0.3, 0.0], 4.0, [1e-3, -2e-3, 0.0, 5.0])
+    plant = local_plant(linear, TS, 'Bx_0', 'x', delay)
+    # input u on x+, -u on x-: b = 2 + 1 = 3, d = 1e-3 + 2e-3
+    p = np.exp(-a * TS)
+    g = 4.0 * 3.0 * (1 - p) / a
+    f = np.geomspace(1.0, 2000.0, 50)
+    z = np.exp(2j * np.pi * f * TS)
+    expected = z ** (-delay) * (g / (z - p) + 3e-3 / z)
+    np.testing.assert_allclose(plant.freqresp(f), expected, rtol=1e-10)
+    exact = arx_of_first_order(p, g, 3e-3, delay)
+    same = compare_response(exact, plant, (1.0, 2000.0))
+    assert same.max_db < 1e-9 and same.max_deg < 1e-7
+    late = compare_response(arx_of_first_order(p, g, 3e-3, delay + 1), plant, (1.0, 2000.0))
+    # one sample more delay: unit gain ratio, phase -360 f Ts
+    assert late.max_db < 1e-9
+    np.testing.assert_allclose(late.phase_deg, -360.0 * late.frequencies * TS, atol=1e-7)
+    assert late.max_deg == pytest.approx(360.0 * 2000.0 * TS)
+    assert 'max 0.00 dB / 144.0 deg' in late.summary()
+
+
+def test_gain_error_in_db():
+    linear = first_order(50.0, [1.0, -1.0, 0, 0], 1.0, [0, 0, 0, 0])
+    plant = local_plant(linear, TS, 0, 'x', 1)
+    p = np.exp(-50.0 * TS)
+    g = 2.0 * (1 - p) / 50.0
+    off = compare_response(arx_of_first_order(p, 1.1 * g, 0.0, 1), plant, (1, 100), n=20)
+    np.testing.assert_allclose(off.gain_db, 20 * np.log10(1.1), rtol=1e-9)
+    assert off.rms_db == pytest.approx(20 * np.log10(1.1)) and off.max_deg < 1e-9
+    assert off.within(0.9, 1.0) and not off.within(0.8, 1.0)
+
+
+@pytest.mark.parametrize('coils', [False, True])
+def test_maggy_linearisation_matches_the_simulator(coils):
+    """The sampled linearisation's pulse response is the nonlinear simulator's (V2, x pair)."""
+    model = make_model('maggy_v2')
+    coil = CoilDynamics.from_parameters(model.params) if coils else None
+    sim = Simulator(model, 1 / TS, coil=coil, sensor=SensorEffects(delay_samples=1))
+    readings = [sim.reset()]
+    eps = 1e-3  # A: small enough to stay linear over 6 ms of the unstable mode
+    for t in range(30):
+        readings.append(sim.step([eps, -eps, 0, 0] if t == 0 else np.zeros(4)))
+    pulse = (np.array(readings)[:, 0] - readings[0][0]) / eps
+    tau = coil.inductance / coil.resistance if coils else None
+    plant = local_plant(linearize(model).reduced(), TS, 'Bx_0', 'x', 1, tau)
+    expected = plant.impulse(31)
+    assert pulse[:2].tolist() == [0.0, 0.0] and expected[:2].tolist() == [0.0, 0.0]
+    np.testing.assert_allclose(pulse, expected, atol=1e-4 * np.abs(expected).max())
+
+
+@pytest.mark.parametrize(
+    ('kwargs', 'match'),
+    [
+        ({'output': 'Bq_0'}, "unknown output 'Bq_0'"),
+        ({'output': 3}, 'out of range'),
+        ({'pair': 'z'}, "unknown pair 'z'"),
+        ({'pair': (1.0, 2.0)}, 'must have 4 values'),
+        ({'delay_samples': -1}, 'delay_samples must be an integer >= 0'),
+        ({'coil_time_constant': 0.0}, 'coil_time_constant must be positive'),
+    ],
+)
+def test_bad_arguments(kwargs, match):
+    with pytest.raises(PhysicsCheckError, match=match):
+        local_plant(first_order(1.0, [1, 0, 0, 0], 1.0, [0, 0, 0, 0]), TS, **kwargs)
+    with pytest.raises(PhysicsCheckError, match='Ts must be'):
+        local_plant(first_order(1.0, [1, 0, 0, 0], 1.0, [0, 0, 0, 0]), 0.0)
+
+
+def test_bad_band():
+    plant = local_plant(first_order(1.0, [1, -1, 0, 0], 1.0, [0, 0, 0, 0]), TS)
+    with pytest.raises(PhysicsCheckError, match='band must be'):
+        compare_response(plant, plant, (10.0, 5.0))
+
+
+def test_undamped_resonances_are_left_out():
+    """The linearised V2 magnet has undamped modes: 14.3 Hz shows in the x path, 6.6 Hz not."""
+    plant = local_plant(linearize(make_model('maggy_v2')).reduced(), TS, 'Bx_0', 'x', 1)
+    cancelled, resonance = plant.resonances()
+    assert 6.4 < cancelled < 6.8 and 14.0 < resonance < 14.6
+    near = compare_response(plant, plant, (5.0, 50.0), n=400)
+    assert near.excluded == (resonance,)
+    assert np.all(np.abs(near.frequencies - resonance) > 1.0)
+    assert 'without +-1 Hz around the undamped resonance(s) at 14.30 Hz' in near.summary()
+    kept = compare_response(plant, plant, (5.0, 50.0), n=400, resonance_width=0.0)
+    assert kept.excluded == () and kept.frequencies.size == 400
+    with pytest.raises(PhysicsCheckError, match='nothing left to compare'):
+        compare_response(plant, plant, (14.0, 14.5))
