@@ -360,6 +360,7 @@ def bode_figure(
                     ax.text(0.5, 0.5, 'no path (nb = 0)', ha='center', va='center',
                             transform=ax.transAxes, color='0.4')  # fmt: skip
                     ax.set_xscale('log')
+                    ax.set_yticks([])  # nothing to read off an empty panel
             mag_ax.set_ylabel('magnitude' + gain)
             phase_ax.set_ylabel('phase [deg]')
             phase_ax.set_xlabel('frequency [Hz]')
