@@ -34,6 +34,11 @@ class Parser(argparse.ArgumentParser):
 
     Negative numbers in exponent notation (``--ts -2e-4``) are values, not
     options: argparse's own pattern knows only ``-2`` and ``-0.5``.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        Passed to :class:`argparse.ArgumentParser`.
     """
 
     def __init__(self, *args, **kwargs) -> None:

@@ -112,7 +112,17 @@ def without_cancelling_pairs(model: PolyModel, tol: float = CANCEL_TOL) -> PolyM
 
 
 def root_text(root: complex) -> str:
-    """Short text of a pole or zero: ``0.95``, ``0.43+0.92j``."""
+    """Short text of a pole or zero: ``0.95``, ``0.43+0.92j``.
+
+    Parameters
+    ----------
+    root : complex
+        The pole or zero.
+
+    Returns
+    -------
+    str
+    """
     root = complex(root)
     if abs(root.imag) <= 1e-9 * max(1.0, abs(root)):
         return f'{root.real:.3g}'

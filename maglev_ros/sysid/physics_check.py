@@ -112,6 +112,11 @@ class LocalPlant:
     def resonances(self, max_damping: float = RESONANCE_DAMPING) -> np.ndarray:
         """Frequencies (Hz) of the oscillatory poles with damping ratio below ``max_damping``.
 
+        Parameters
+        ----------
+        max_damping : float
+            Damping ratio (dimensionless) below which a pole pair counts as a resonance.
+
         Returns
         -------
         ndarray, shape (k,)
@@ -127,7 +132,18 @@ class LocalPlant:
         return found[keep] if found.size else found
 
     def impulse(self, n: int) -> np.ndarray:
-        """First ``n`` samples of the response to a unit pulse ``u[0] = 1``, shape (n,)."""
+        """First ``n`` samples of the response to a unit pulse ``u[0] = 1``.
+
+        Parameters
+        ----------
+        n : int
+            Number of samples.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            The pulse response (output units per input unit).
+        """
         h = np.zeros(n)
         x = np.zeros(self.A.shape[0])
         for t in range(n):
@@ -270,7 +286,19 @@ class FrequencyDeviation:
     excluded: tuple[float, ...] = ()
 
     def within(self, db: float, deg: float) -> bool:
-        """Return whether the gain stays within ``db`` dB and the phase within ``deg`` degrees."""
+        """Return whether the gain stays within ``db`` dB and the phase within ``deg`` degrees.
+
+        Parameters
+        ----------
+        db : float
+            Largest allowed gain deviation, dB.
+        deg : float
+            Largest allowed phase deviation, degrees.
+
+        Returns
+        -------
+        bool
+        """
         return self.max_db <= db and self.max_deg <= deg
 
     def summary(self) -> str:
