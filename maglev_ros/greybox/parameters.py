@@ -103,7 +103,7 @@ class ParameterSpec:
 
     def display(self, value: float) -> str:
         """``value`` (SI) formatted in the display unit, e.g. ``'0.125 mm'``."""
-        unit = self.display_unit or self.unit
+        unit = self.display_unit or ('' if self.unit == '1' else self.unit)
         return f'{value * self.display_factor:.6g} {unit}'.rstrip()
 
 
@@ -324,9 +324,10 @@ class ParameterVector:
                 f'bounds of {name} must be finite with lower < upper, got [{lower:g}, {upper:g}]'
             )
         if not lower <= spec.nominal <= upper:
+            unit = '' if spec.unit == '1' else f' {spec.unit}'
             raise GreyBoxError(
-                f'bounds [{lower:g}, {upper:g}] {spec.unit} of {name} exclude its nominal '
-                f'value {spec.nominal:g} {spec.unit}'
+                f'bounds [{lower:g}, {upper:g}]{unit} of {name} exclude its nominal '
+                f'value {spec.nominal:g}{unit}'
             )
         specs = list(self.specs)
         specs[self._lookup(name)] = dataclasses.replace(spec, lower=lower, upper=upper)

@@ -1,0 +1,308 @@
+r"""``maglev-calibrate``: calibrate a board's physical model from its bags (static part).
+
+Reads bags recorded with the levitating magnet absent or held fixed (for
+example ``maglev-lab --magnet absent`` and ``--magnet fixed``), estimates the
+chosen physics parameters from the field against the coil currents, and
+writes a parameter file that loads like ``maggy_v2.yaml``::
+
+    maglev-calibrate absent/ fixed/ --params maggy_v2 \
+        --free 'coil*.gain' 'sensor*.offset_*' magnet.polarization --out myboard.yaml
+
+Names accept shell patterns; ``--list`` shows every parameter. Whether a bag
+had the magnet absent or fixed comes from its run metadata (``magnet``), or
+from ``--magnet``, or from a suffix ``BAG@absent`` / ``BAG@fixed``.
+Exit status: 0 on success, 2 on bad input (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .bag2data import add_channel_arguments
+from .usage import Parser, UsageError, positive_float, run_command
+
+__all__ = ['build_parser', 'main', 'default_channels', 'parse_bounds']
+
+PROG = 'maglev-calibrate'
+AXES = ('x', 'y', 'z')
+
+
+def default_channels(sensors: int, coils: int) -> tuple[list[str], list[str]]:
+    """Channel specs of the field (outputs) and the coil currents (inputs) of a run.
+
+    Parameters
+    ----------
+    sensors : int
+        Number of 3-axis sensors.
+    coils : int
+        Number of solenoids.
+
+    Returns
+    -------
+    outputs, inputs : list of str
+        ``B{axis}_{k}=maglev/sensor_{k}/field:magnetic_field.{axis}`` and
+        ``i{j}=maglev/currents:effort[{j}]``.
+    """
+    outputs = [
+        f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}'
+        for k in range(sensors)
+        for a in AXES
+    ]
+    inputs = [f'i{j}=maglev/currents:effort[{j}]' for j in range(coils)]
+    return outputs, inputs
+
+
+def parse_bounds(text: str) -> tuple[str, float, float]:
+    """Argparse type: ``NAME=LOWER:UPPER`` in SI units."""
+    name, sep, rest = text.partition('=')
+    lower, sep2, upper = rest.partition(':')
+    try:
+        if not (sep and sep2 and name):
+            raise ValueError
+        return name, float(lower), float(upper)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'expected NAME=LOWER:UPPER (SI units), got {text!r}'
+        ) from None
+
+
+def _split_fraction(text: str) -> float:
+    value = positive_float(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f'must be a fraction in (0, 1), got {text!r}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``maglev-calibrate``."""
+    p = Parser(
+        prog=PROG,
+        description='Calibrate the physics parameters of a board from bags recorded with '
+        'the magnet absent or held fixed (static calibration).',
+    )
+    p.add_argument(
+        'bags',
+        nargs='*',
+        metavar='BAG',
+        help='bag directories; BAG@absent or BAG@fixed says where the magnet was '
+        '(default: the bag metadata, else --magnet)',
+    )
+    p.add_argument(
+        '--params', default='maggy_v2', help='nominal parameter set: preset or YAML path'
+    )
+    p.add_argument(
+        '--free',
+        nargs='+',
+        action='extend',
+        default=[],
+        metavar='NAME',
+        help="parameters to estimate (shell patterns, e.g. 'coil*.gain' 'sensor*.offset_*')",
+    )
+    p.add_argument(
+        '--bounds',
+        type=parse_bounds,
+        action='append',
+        default=[],
+        metavar='NAME=LO:HI',
+        help='bounds of a parameter in SI units (must contain the nominal value)',
+    )
+    p.add_argument('--out', metavar='FILE.yaml', help='write the calibrated parameter file')
+    p.add_argument(
+        '--plot',
+        metavar='FILE.png',
+        help='measured vs model plot (default: next to --out; one file per bag)',
+    )
+    p.add_argument(
+        '--magnet',
+        choices=('absent', 'fixed'),
+        help='where the magnet was, for bags whose metadata does not say',
+    )
+    p.add_argument(
+        '--split',
+        type=_split_fraction,
+        default=0.5,
+        help='fraction of each bag used for estimation; the rest validates (default 0.5)',
+    )
+    p.add_argument(
+        '--delay',
+        type=int,
+        metavar='SAMPLES',
+        help='sensor delay in samples (default: estimated per bag)',
+    )
+    p.add_argument(
+        '--hold-pose',
+        action='store_true',
+        help='do not estimate where a fixed magnet is held (use the nominal equilibrium)',
+    )
+    p.add_argument('--list', action='store_true', help='list the parameters and exit')
+    p.add_argument(
+        '--ts',
+        type=positive_float,
+        metavar='SECONDS',
+        help='sample time (default: estimated from the first output stamps)',
+    )
+    add_channel_arguments(p)
+    return p
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _list(vector) -> int:
+    print(f'{"parameter":<28}{"unit":<6}{"nominal":>14}{"lower":>14}{"upper":>14}  meaning')
+    for s in vector.specs:
+        print(
+            f'{s.name:<28}{s.unit:<6}{s.nominal:>14.6g}{s.lower:>14.6g}{s.upper:>14.6g}  '
+            f'{s.description}'
+        )
+    print('pose{e}.x|y|z|alpha|beta: where fixed-magnet bag e held the magnet (estimated)')
+    return 0
+
+
+def _bag_and_magnet(text: str, default: str | None) -> tuple[str, str | None]:
+    bag, sep, mode = text.rpartition('@')
+    if sep and mode in ('absent', 'fixed', 'free'):
+        return bag, mode
+    return text, default
+
+
+def _experiment(bag: str, mode: str | None, args, vector, outputs, inputs):
+    from maglev_ros.bags import read_bag
+    from maglev_ros.greybox import StaticExperiment
+
+    _say(f'reading {bag} ...')
+    ds = read_bag(
+        bag,
+        outputs,
+        inputs,
+        Ts=args.ts,
+        allow_gaps=args.allow_gaps,
+        tolerance=args.tolerance,
+    )
+    recorded = str(ds.metadata.get('magnet', '')).strip() or None
+    magnet = mode or recorded
+    if magnet is None:
+        raise UsageError(
+            f'{bag}: the bag does not say whether the magnet was absent or fixed: '
+            f'give --magnet or {bag}@absent / {bag}@fixed'
+        )
+    if magnet not in ('absent', 'fixed'):
+        raise UsageError(
+            f'{bag}: recorded with the magnet {magnet}; static calibration needs it absent '
+            'or held fixed (the dynamic calibration from levitation data comes later)'
+        )
+    data = ds.data
+    exp = StaticExperiment(
+        u=data.u, y=data.y, magnet=magnet, name=f'{bag} (magnet {magnet})', Ts=data.Ts
+    )
+    _say(f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet {magnet}')
+    return exp
+
+
+def _header(args, cal, bags) -> list[str]:
+    now = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
+    lines = [
+        f'Calibrated by {PROG} on {now} from {args.params}',
+        f'bags: {", ".join(bags)}',
+        'static calibration (field vs coil currents); estimate +- standard deviation:',
+    ]
+    for name in cal.names:
+        spec = cal.vector[name]
+        lines.append(
+            f'  {name} = {spec.display(cal.estimate[name])} +- {spec.display(cal.std[name])}'
+            f' (nominal {spec.display(spec.nominal)})'
+        )
+    for u in cal.identifiability.unidentified:
+        lines.append(f'  {u.line()}')
+    for nom, new in zip(cal.validation_nominal, cal.validation_calibrated, strict=True):
+        lines.append(
+            f'validation RMS error {nom.experiment}: nominal {1e3 * nom.total_rms:.4g} mT, '
+            f'calibrated {1e3 * new.total_rms:.4g} mT'
+        )
+    lines.append('coil gains appear as effective turns (solenoids.turns = nominal turns x gain)')
+    return lines
+
+
+def _run(args: argparse.Namespace) -> int:
+    from maglev_ros.greybox import calibrate_static, parameter_vector, write_parameters
+    from maglev_ros.physics import load_parameters
+
+    base = load_parameters(args.params)
+    vector = parameter_vector(base)
+    if args.list:
+        return _list(vector)
+    if not args.bags:
+        raise UsageError('give at least one BAG (recorded with the magnet absent or fixed)')
+    if not args.free:
+        raise UsageError("choose parameters with --free (e.g. 'coil*.gain'); --list shows them")
+    vector = vector.with_free(args.free)
+    for name, lower, upper in args.bounds:
+        vector = vector.with_bounds(name, lower, upper)
+    if args.delay is not None and args.delay < 0:
+        raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
+    if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
+        raise UsageError(f'--out must name a .yaml file, got {args.out!r}')
+    defaults = default_channels(len(base.sensors), base.solenoids.count)
+    outputs = args.output or defaults[0]
+    inputs = args.input or defaults[1]
+    experiments, bags = [], []
+    for text in args.bags:
+        bag, mode = _bag_and_magnet(text, args.magnet)
+        experiments.append(_experiment(bag, mode, args, vector, outputs, inputs))
+        bags.append(bag)
+    delays = None if args.delay is None else [args.delay] * len(experiments)
+    cal = calibrate_static(
+        vector,
+        experiments,
+        split=args.split,
+        delays=delays,
+        fit_pose=not args.hold_pose,
+        progress=_say,
+    )
+    print()
+    for line in cal.table():
+        print(line)
+    if cal.identifiability.unidentified:
+        print('\nnot identified by these data (held at their nominal values):')
+        for u in cal.identifiability.unidentified:
+            print(f'  {u.line()}')
+    if cal.correlated:
+        print('\nstrongly correlated estimates (each is uncertain along their combination):')
+        for a, b, r in cal.correlated:
+            print(f'  {a} ~ {b}: r = {r:+.3f}')
+    print(f'\nweighted residual per degree of freedom {cal.chi2_per_dof:.3f} (1 = noise level)')
+    print('validation (data not used for estimation):')
+    for nom, new in zip(cal.validation_nominal, cal.validation_calibrated, strict=True):
+        print(
+            f'  {nom.experiment}: RMS error nominal {1e3 * nom.total_rms:.4g} mT, calibrated '
+            f'{1e3 * new.total_rms:.4g} mT; mean fit nominal {nom.mean_fit:.1f} %, '
+            f'calibrated {new.mean_fit:.1f} %'
+        )
+    if args.out:
+        params = cal.params.replace(name=Path(args.out).stem)
+        path = write_parameters(params, args.out, _header(args, cal, bags))
+        print(f'wrote     {path}')
+    plot = args.plot or (str(Path(args.out).with_suffix('.png')) if args.out else None)
+    if plot:
+        from maglev_ros.greybox.plots import calibration_plot
+
+        for i, exp in enumerate(experiments):
+            target = Path(plot)
+            if len(experiments) > 1:
+                target = target.with_name(f'{target.stem}_{i}_{exp.magnet}{target.suffix}')
+            print(f'wrote     {calibration_plot(cal, i, target, Ts=exp.Ts)}')
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``maglev-calibrate``; return the exit status (2 on bad input)."""
+    return run_command(PROG, build_parser(), _run, argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())
