@@ -29,6 +29,7 @@ from dataclasses import dataclass
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
+from ..topics import CHANNEL_UNITS, current_channel
 from .errors import BagError
 from .names import normalize_topic
 
@@ -58,15 +59,6 @@ _NUMERIC = {
     'float32',
     'float64',
 }
-# Units of the topic contract (docs/topics.md): (topic pattern, path prefix, unit).
-_UNITS = (
-    (r'/maglev/sensor_\d+/field', 'magnetic_field.', 'T'),
-    (r'/maglev/currents', 'effort[', 'A'),
-    (r'/maglev/currents/command', 'data[', 'A'),
-    (r'/maglev/state/(true|estimate)', 'pose.pose.position.', 'm'),
-    (r'/maglev/state/(true|estimate)', 'twist.twist.linear.', 'm/s'),
-    (r'/maglev/state/(true|estimate)', 'twist.twist.angular.', 'rad/s'),
-)
 
 
 def parse_field_path(text: str) -> tuple[str | int, ...]:
@@ -177,7 +169,7 @@ def parse_channel(spec: str) -> Channel:
             raise BagError(
                 f'invalid channel spec {spec!r} at {where!r}: expected '
                 f'[COEF*]TOPIC:FIELD terms joined by + or -, e.g. '
-                f'0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]'
+                f'0.5*{current_channel(0)}-0.5*{current_channel(1)}'
             )
         coef = float(match.group('coef')) if match.group('coef') else 1.0
         if match.group('sign') == '-':
@@ -268,7 +260,7 @@ def unit_of(channel: Channel) -> str:
         unit = next(
             (
                 u
-                for pattern, prefix, u in _UNITS
+                for pattern, prefix, u in CHANNEL_UNITS
                 if re.fullmatch(pattern, ref.topic) and path.startswith(prefix)
             ),
             '',

@@ -24,14 +24,13 @@ import yaml
 from rosbags.rosbag2 import Reader, ReaderError
 from rosbags.typesys.store import Typestore
 
+from ..topics import METADATA_TOPIC  # the run metadata (std_msgs/String, YAML)
 from .errors import BagError
 from .names import normalize_topic
 from .typestore import bag_typestore, cdr_deserializer
 
 __all__ = ['METADATA_TOPIC', 'BagReader', 'TopicInfo', 'decode_metadata', 'is_bag_path']
 
-#: Topic that may carry the run metadata (std_msgs/msg/String, a YAML mapping).
-METADATA_TOPIC = '/maglev/metadata'
 _STORAGE_SUFFIXES = {'.mcap': 'mcap', '.db3': 'sqlite3'}
 # rosbags' messages about metadata.yaml (rosbag2/reader.py)
 _METADATA_ERRORS = (

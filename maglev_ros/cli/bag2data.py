@@ -21,6 +21,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..topics import current_channel, field_channel
 from .usage import Parser, UsageError, positive_float, run_command
 
 __all__ = ['add_channel_arguments', 'build_parser', 'dataset_from_args', 'main', 'split_point']
@@ -64,17 +65,16 @@ def add_channel_arguments(parser: argparse.ArgumentParser) -> None:
         action='append',
         default=[],
         metavar='SPEC',
-        help='output channel [NAME=]TOPIC:FIELD, e.g. '
-        "'maglev/sensor_0/field:magnetic_field.x' (repeat for more; the "
-        "first one's topic defines the time base)",
+        help=f"output channel [NAME=]TOPIC:FIELD, e.g. '{field_channel(0, 'x')}' (repeat "
+        "for more; the first one's topic defines the time base)",
     )
     parser.add_argument(
         '--input',
         action='append',
         default=[],
         metavar='SPEC',
-        help="input channel, e.g. 'maglev/currents:effort[0]' or "
-        "'ux=0.5*maglev/currents:effort[0]-0.5*maglev/currents:effort[1]'",
+        help=f"input channel, e.g. '{current_channel(0)}' or "
+        f"'ux=0.5*{current_channel(0)}-0.5*{current_channel(1)}'",
     )
     parser.add_argument(
         '--allow-gaps',

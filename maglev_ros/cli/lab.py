@@ -27,30 +27,38 @@ finalised).
 
 from __future__ import annotations
 
+import argparse
+import json
 import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
 
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')  # small solves; see cli/sysid.py
-os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')  # keep the lab local
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import shutil  # noqa: E402
-import signal  # noqa: E402
-import subprocess  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from pathlib import Path  # noqa: E402
-
-import numpy as np  # noqa: E402
-
-from maglev_ros.cli.usage import (  # noqa: E402
+from maglev_ros.cli.usage import (
     Parser,
     UsageError,
+    limit_blas_threads,
     non_negative_float,
     positive_float,
     run_command,
 )
-from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix  # noqa: E402
+from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix
+from maglev_ros.topics import (
+    AXES,
+    CLOCK_TOPIC,
+    COMMAND_TOPIC,
+    CURRENTS_TOPIC,
+    TRUE_STATE_TOPIC,
+    command_channel,
+    current_channel,
+    field_channel,
+    field_topic,
+)
 
 __all__ = [
     'applied_channels',
@@ -66,7 +74,6 @@ __all__ = [
 ]
 
 PROG = 'maglev-lab'
-AXES = 'xyz'
 WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
 BOARD_TS = 200e-6  # s, the board's sample period (V2x and V4x)
 BOARD_READ_INTERVAL = 0.002  # s between port reads in board runs (open loop: latency is free)
@@ -175,20 +182,33 @@ def on_board(args: argparse.Namespace) -> bool:
     return bool(getattr(args, 'board', None) or getattr(args, 'virtual_board', False))
 
 
+def _input_coils(pattern: str) -> list[tuple[str, int]]:
+    """(label, coil) of each pattern signal: the first coil it drives (the ``+u`` coil)."""
+    matrix = pattern_matrix(pattern)
+    names = {0: 'x', 2: 'y', 1: 'xm', 3: 'ym'}
+    coils = []
+    for j in range(matrix.shape[1]):
+        coil = int(np.flatnonzero(matrix[:, j])[0])
+        coils.append((names[coil] if matrix.shape[1] > 1 else pattern, coil))
+    return coils
+
+
 def input_channels(pattern: str) -> list[str]:
     """Bag channel specs of the excitation inputs: one per pattern signal.
 
     Each signal is read from the first coil it drives, as commanded (the
     ``+u`` coil of an antisymmetric pair), e.g. ``u_x=maglev/currents/command:data[0]``.
+
+    Parameters
+    ----------
+    pattern : str
+        Coil pattern (:data:`maglev_ros.excitation.PATTERNS`).
+
+    Returns
+    -------
+    list of str
     """
-    matrix = pattern_matrix(pattern)
-    names = {0: 'x', 2: 'y', 1: 'xm', 3: 'ym'}
-    specs = []
-    for j in range(matrix.shape[1]):
-        coil = int(np.flatnonzero(matrix[:, j])[0])
-        label = names[coil] if matrix.shape[1] > 1 else pattern
-        specs.append(f'u_{label}=maglev/currents/command:data[{coil}]')
-    return specs
+    return [f'u_{label}={command_channel(coil)}' for label, coil in _input_coils(pattern)]
 
 
 def applied_channels(pattern: str) -> list[str]:
@@ -196,16 +216,33 @@ def applied_channels(pattern: str) -> list[str]:
 
     As :func:`input_channels`, read from the driver's ``maglev/currents`` (header
     stamps of the board's records), e.g. ``u_x=maglev/currents:effort[0]``.
+
+    Parameters
+    ----------
+    pattern : str
+        Coil pattern (:data:`maglev_ros.excitation.PATTERNS`).
+
+    Returns
+    -------
+    list of str
     """
-    return [
-        spec.split('=')[0] + '=maglev/currents:effort' + spec[spec.index('[') :]
-        for spec in input_channels(pattern)
-    ]
+    return [f'u_{label}={current_channel(coil)}' for label, coil in _input_coils(pattern)]
 
 
 def output_channels(sensors) -> list[str]:
-    """Bag channel specs of the field components of ``sensors``."""
-    return [f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}' for k in sensors for a in AXES]
+    """Bag channel specs of the field components of ``sensors``.
+
+    Parameters
+    ----------
+    sensors : sequence of int
+        Sensor indices.
+
+    Returns
+    -------
+    list of str
+        ``B<axis>_<k>=<field channel>`` for each sensor and axis.
+    """
+    return [f'B{a}_{k}={field_channel(k, a)}' for k in sensors for a in AXES]
 
 
 def load_data(bag: Path, sensors, pattern: str, board: bool = False):
@@ -357,21 +394,19 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
         On SIGINT/SIGTERM (the bag is finalised first).
     """
     import rclpy
-    from rclpy.context import Context
 
     from maglev_ros.nodes import contract
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
     from maglev_ros.nodes.simulator import SimulatorNode
 
-    topics = [contract.field_topic(k) for k in args.sensors] + [
-        contract.CURRENTS_TOPIC,
-        contract.COMMAND_TOPIC,
-        contract.TRUE_STATE_TOPIC,
-        contract.CLOCK_TOPIC,
+    topics = [field_topic(k) for k in args.sensors] + [
+        CURRENTS_TOPIC,
+        COMMAND_TOPIC,
+        TRUE_STATE_TOPIC,
+        CLOCK_TOPIC,
     ]
-    ctx = Context()
-    rclpy.init(context=ctx, args=[])
+    ctx = _lab_context()
     nodes, spinner = [], None
     try:
         sim = SimulatorNode(
@@ -436,8 +471,8 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
         published = sim.counters['samples']
         _wait(
             lambda: (
-                recorder.counts['/maglev/currents'] >= published
-                and recorder.counts['/' + contract.COMMAND_TOPIC] >= published - 1
+                recorder.counts['/' + CURRENTS_TOPIC] >= published
+                and recorder.counts['/' + COMMAND_TOPIC] >= published - 1
             ),
             ctx,
             'the recorder',
@@ -557,20 +592,18 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
         On SIGINT/SIGTERM (the bag is finalised first).
     """
     import rclpy
-    from rclpy.context import Context
 
     from maglev_ros.nodes import contract
     from maglev_ros.nodes.driver import DriverNode
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
 
-    topics = [contract.field_topic(k) for k in args.sensors] + [
-        contract.CURRENTS_TOPIC,
-        contract.COMMAND_TOPIC,
+    topics = [field_topic(k) for k in args.sensors] + [
+        CURRENTS_TOPIC,
+        COMMAND_TOPIC,
     ]
-    currents_topic = '/' + contract.CURRENTS_TOPIC
-    ctx = Context()
-    rclpy.init(context=ctx, args=[])
+    currents_topic = '/' + CURRENTS_TOPIC
+    ctx = _lab_context()
     nodes, spinner = [], None
     try:
         recorder = RecorderNode(
@@ -667,7 +700,23 @@ def _run_board(args: argparse.Namespace, bag: Path) -> dict:
         stop_child(child)
 
 
+def _lab_context():
+    """Return an initialised rclpy Context for the lab's nodes, discovery kept local.
+
+    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is set to LOCALHOST unless the
+    environment sets it: the lab's graph stays on this machine.
+    """
+    import rclpy
+    from rclpy.context import Context
+
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    ctx = Context()
+    rclpy.init(context=ctx, args=[])
+    return ctx
+
+
 def _run(args: argparse.Namespace) -> int:
+    limit_blas_threads(1)  # small solves: see limit_blas_threads
     _check(args)
     out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
     bag = out / 'bag'

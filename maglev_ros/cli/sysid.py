@@ -11,31 +11,18 @@ Exit status: 0 on success, 2 on bad input (one line on stderr).
 
 from __future__ import annotations
 
-import os
+import argparse
+import json
+import sys
+from pathlib import Path
+from typing import Any
 
-# Small least-squares problems gain nothing from threaded BLAS, and on a shared
-# machine its spinning threads can make a 2 ms solve take 400 ms.
-os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
+import numpy as np
 
-import argparse  # noqa: E402
-import json  # noqa: E402
-import sys  # noqa: E402
-from pathlib import Path  # noqa: E402
-from typing import Any  # noqa: E402
-
-import numpy as np  # noqa: E402
+from .usage import Parser, UsageError, limit_blas_threads, run_command
 
 PROG = 'maglev-sysid'
 STRUCTURES = {'arx': 3, 'iv': 3, 'armax': 4, 'oe': 3, 'bj': 5}
-
-
-class UsageError(ValueError):
-    """Bad command-line input."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # noqa: D102 - one-line usage errors
-        raise UsageError(message)
 
 
 def _int_list(text: str) -> list[int]:
@@ -48,7 +35,7 @@ def _int_list(text: str) -> list[int]:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-sysid``."""
-    p = _Parser(
+    p = Parser(
         prog=PROG,
         description='Identify ARX/IV/ARMAX/OE/BJ models from data '
         'files, like the MATLAB System Identification Toolbox.',
@@ -375,17 +362,13 @@ def main(argv: list[str] | None = None) -> int:
     int
         Exit status.
     """
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-        with np.errstate(all='ignore'):
-            return run(args)
-    except SystemExit as exc:  # --help
-        return int(exc.code or 0)
-    except (ValueError, TypeError, OSError, KeyError) as exc:
-        message = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        print(f'{PROG}: error: {message}', file=sys.stderr)
-        return 2
+    return run_command(PROG, build_parser(), _run_quietly, argv)
+
+
+def _run_quietly(args: argparse.Namespace) -> int:
+    limit_blas_threads(1)  # small solves: see limit_blas_threads
+    with np.errstate(all='ignore'):
+        return run(args)
 
 
 if __name__ == '__main__':

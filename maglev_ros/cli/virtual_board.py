@@ -25,20 +25,13 @@ from functools import partial
 from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
 from maglev_ros.hardware.scaling import CurrentScaling
-from maglev_ros.hardware.virtual_board import VirtualBoard, VirtualBoardError
+from maglev_ros.hardware.virtual_board import VirtualBoard
+
+from .usage import Parser, UsageError, run_command
 
 __all__ = ['build_parser', 'load_plant', 'main']
 
 PROG = 'maglev-virtual-board'
-
-
-class UsageError(ValueError):
-    """Invalid command-line input (exit status 2)."""
-
-
-class _Parser(argparse.ArgumentParser):
-    def error(self, message: str) -> None:  # one clear line, status 2
-        raise UsageError(message)
 
 
 def _positive_int(text: str) -> int:
@@ -83,7 +76,7 @@ def _clock(text: str) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-virtual-board``."""
-    parser = _Parser(prog=PROG, description=__doc__.split('\n\n')[0])
+    parser = Parser(prog=PROG, description=__doc__.split('\n\n')[0])
     parser.add_argument('--firmware', choices=('v2x', 'v4x'), default='v2x')
     parser.add_argument(
         '--sensors', type=_positive_int, help='number of sensors (default 1; physics: the model)'
@@ -207,18 +200,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     int
         Exit status: 0 on a signal, 2 for bad arguments.
     """
-    try:
-        args = build_parser().parse_args(argv)
-        if args.plant == 'physics':
-            plant = _physics_plant(args)
-        else:
-            args.sensors = args.sensors or 1
-            plant = load_plant(args.plant, args.sensors)
-        factory = _firmware_factory(args, plant)
-        board = VirtualBoard(factory, link=args.link)
-    except (UsageError, VirtualBoardError) as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
+    return run_command(PROG, build_parser(), _run, argv)
+
+
+def _run(args: argparse.Namespace) -> int:
+    if args.plant == 'physics':
+        plant = _physics_plant(args)
+    else:
+        args.sensors = args.sensors or 1
+        plant = load_plant(args.plant, args.sensors)
+    board = VirtualBoard(_firmware_factory(args, plant), link=args.link)
     stop = threading.Event()
     previous = {}
     for signum in (signal.SIGINT, signal.SIGTERM):

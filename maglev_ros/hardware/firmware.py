@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from .packet import PWM_FULL_SCALE, CommandParser
+from .packet import PWM_FULL_SCALE, WATCHDOG_S, CommandParser
 from .scaling import CurrentScaling
 from .v2x_stream import BURST_RECORDS, SAMPLE_PERIOD_US, pack_records
 from .v4x_telemetry import format_telemetry_line
@@ -38,7 +38,7 @@ Plant = Callable[[NDArray[np.int64], float], ArrayLike]
 """Plant signature: ``plant(pwm_counts (4,), time_s) -> field_mT (n_sensors, 3)``."""
 
 STARTUP_DELAY_US = 2_000_000  # us: the sketch waits ~2 s before its loop runs
-WATCHDOG_US = 1_000_000  # us without an accepted packet before the PWM is zeroed
+WATCHDOG_US = round(WATCHDOG_S * 1e6)  # us without an accepted packet before the PWM is zeroed
 _CLOCK_WRAP = 1 << 32  # us
 
 

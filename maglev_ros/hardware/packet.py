@@ -46,6 +46,8 @@ PAYLOAD_SIZE = 8  # bytes: four int16 LE
 PACKET_SIZE = PAYLOAD_SIZE + 2  # bytes
 PWM_FULL_SCALE = 4096  # counts of the 12-bit PWM (full duty)
 N_COILS = 4  # x+, x-, y+, y-
+#: s without an accepted packet before the board zeroes its PWM (docs/teensy-protocol.md)
+WATCHDOG_S = 1.0
 
 
 class PacketError(ValueError):

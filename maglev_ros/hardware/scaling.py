@@ -22,7 +22,17 @@ from numpy.typing import ArrayLike, NDArray
 
 from .packet import PWM_FULL_SCALE
 
-__all__ = ['CurrentScaling', 'ScalingError']
+__all__ = ['BOARD_COIL_RESISTANCE', 'BOARD_SUPPLY_VOLTAGE', 'CurrentScaling', 'ScalingError']
+
+#: V, the board's H-bridge rail: 12 V over USB-C power delivery (docs/maggy-model.md,
+#: hardware limits; 9 V if the charger cannot give 12 V).
+BOARD_SUPPLY_VOLTAGE = 12.0
+#: ohm, the driver's default coil resistance: the hardware description's "about
+#: 4 ohm", wiring and bridge included, because the PWM scaling needs the whole
+#: circuit's resistance. The physics parameter sets (config/maggy_v*.yaml) use 3 ohm
+#: as an order-of-magnitude L/R model, not a measurement; for a real board measure
+#: the current (shunt, clamp meter) and set ``coil_resistance`` or ``counts_per_ampere``.
+BOARD_COIL_RESISTANCE = 4.0
 
 
 class ScalingError(ValueError):

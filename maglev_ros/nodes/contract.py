@@ -1,7 +1,8 @@
-"""The shared node contract: topic and frame names, QoS profiles, message builders.
+"""The shared node contract's ROS side: QoS profiles, message builders, running nodes.
 
-Every node that talks on the Maggy graph (``docs/topics.md``) takes its names
-and QoS from here, so the simulator and the board driver cannot drift apart.
+Names, frames and coil order are ROS-free, in :mod:`maglev_ros.topics`
+(re-exported here). Every node that talks on the Maggy graph takes its QoS
+from here, so the simulator and the board driver cannot drift apart.
 
 QoS (as the driver's docstring states it):
 
@@ -26,7 +27,9 @@ once.
 from __future__ import annotations
 
 import math
+import os
 import struct
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
@@ -42,7 +45,21 @@ from sensor_msgs.msg import JointState, MagneticField
 
 from maglev_ros.bags.cdr_layout import cdr_layout
 from maglev_ros.bags.typestore import jazzy_typestore
+from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
+from maglev_ros.topics import (  # re-exported: the nodes' one import of the contract
+    BASE_FRAME,
+    CLOCK_TOPIC,
+    COIL_NAMES,
+    COMMAND_TOPIC,
+    CURRENTS_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    MAGNET_FRAME,
+    MARKERS_TOPIC,
+    TRUE_STATE_TOPIC,
+    field_topic,
+    sensor_frame,
+)
 
 __all__ = [
     'BASE_FRAME',
@@ -89,16 +106,6 @@ __all__ = [
     'split_stamp',
 ]
 
-COIL_NAMES = ['x+', 'x-', 'y+', 'y-']  # solenoid order everywhere
-BASE_FRAME = 'maglev_base'
-MAGNET_FRAME = 'maglev_magnet'
-CURRENTS_TOPIC = 'maglev/currents'
-COMMAND_TOPIC = 'maglev/currents/command'
-TRUE_STATE_TOPIC = 'maglev/state/true'
-MARKERS_TOPIC = 'maglev/markers'
-CLOCK_TOPIC = '/clock'
-DIAGNOSTICS_TOPIC = '/diagnostics'
-
 SENSOR_QOS = QoSProfile(
     depth=1000, reliability=ReliabilityPolicy.RELIABLE, history=HistoryPolicy.KEEP_LAST
 )
@@ -115,16 +122,6 @@ MARKERS_QOS = QoSProfile(
     durability=DurabilityPolicy.VOLATILE,
 )
 DIAGNOSTICS_QOS = QoSProfile(depth=10)
-
-
-def field_topic(k: int) -> str:
-    """Topic of sensor ``k``'s field (``maglev/sensor_<k>/field``)."""
-    return f'maglev/sensor_{k}/field'
-
-
-def sensor_frame(k: int) -> str:
-    """Frame id of sensor ``k`` (``maglev_sensor_<k>``)."""
-    return f'maglev_sensor_{k}'
 
 
 def split_stamp(t_ns: int) -> tuple[int, int]:
@@ -369,7 +366,7 @@ def declare_parameters(node, table: Mapping[str, tuple[object, str]]) -> dict[st
     return {name: node.get_parameter_or(name, Parameter(name, value=None)).value for name in table}
 
 
-def run_nodes(factories, args: list[str] | None, name: str, errors: tuple) -> int:
+def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, parameters=None) -> int:
     """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM.
 
     Parameters
@@ -377,17 +374,29 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple) -> in
     factories : sequence of callable
         Each returns a node (called after ``rclpy.init``).
     args : list of str or None
-        Command-line arguments (ROS arguments included).
+        Command-line arguments (ROS arguments included; None: ``sys.argv``).
     name : str
         Logger name for parameter errors.
     errors : tuple of exception types
         Parameter errors: logged in one line, exit status 2.
+    parameters : maglev_ros.nodes.params.ParameterTable, optional
+        The node's parameters: ``--help`` (``-h``) before ``--ros-args``
+        prints them and returns 0 without starting ROS.
 
     Returns
     -------
     int
         0, or 2 for invalid parameters.
     """
+    if parameters is not None and help_requested(args):
+        argv = sys.argv if args is None else args
+        prog = (
+            os.path.splitext(os.path.basename(argv[0]))[0]
+            if argv and not argv[0].startswith('-')
+            else None
+        )
+        print(parameters.help_text(prog), end='')
+        return 0
     rclpy.init(args=args)
     nodes = []
     executor = None

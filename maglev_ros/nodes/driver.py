@@ -62,16 +62,14 @@ from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import ParameterDescriptor, SetParametersResult
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
 from maglev_ros.hardware.board_clock import BoardClock
-from maglev_ros.hardware.packet import encode_command
-from maglev_ros.hardware.scaling import CurrentScaling
+from maglev_ros.hardware.packet import WATCHDOG_S, encode_command
+from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE, CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
 from maglev_ros.hardware.v2x_stream import (
     BURST_RECORDS,
@@ -84,13 +82,30 @@ from maglev_ros.hardware.v4x_telemetry import InfoMessage, Severity, TelemetrySt
 from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
+    DIAGNOSTICS_QOS,
     SENSOR_QOS,
     currents_layout,
     field_layout,
     run_nodes,
 )
+from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer
+from maglev_ros.topics import (
+    COMMAND_TOPIC,
+    CURRENTS_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    ENABLE_SERVICE,
+    field_topic,
+    sensor_frame,
+)
 
-__all__ = ['DriverConfig', 'DriverNode', 'DriverParameterError', 'main']
+__all__ = [
+    'PARAMETERS',
+    'DriverConfig',
+    'DriverNode',
+    'DriverParameterError',
+    'build_config',
+    'main',
+]
 
 NODE_NAME = 'maglev_driver'
 DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
@@ -101,7 +116,7 @@ MAX_HELD_RECORDS = 25_000  # 5 s at 5 kHz: a link that never looks caught up pub
 _ZERO = np.zeros(4)
 
 
-class DriverParameterError(ValueError):
+class DriverParameterError(NodeParameterError):
     """A driver parameter has an invalid value."""
 
 
@@ -158,18 +173,135 @@ class DriverConfig:
 
 
 def _positive(name: str, value: float) -> float:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+    if not (math.isfinite(value) and value > 0):
         raise DriverParameterError(f'{name} must be a positive finite number, got {value!r}')
-    return float(value)
+    return value
+
+
+def _positive_or_zero(name: str, value: float) -> float:
+    return value if value == 0 else _positive(name, value)
+
+
+def _firmware(name: str, value: str) -> str:
+    if value not in DEFAULT_BAUD:
+        raise DriverParameterError(f"{name} must be 'v2x' or 'v4x', got {value!r}")
+    return value
+
+
+def _port(name: str, value: str) -> str:
+    if not value:
+        raise DriverParameterError(f'{name} must be a device path, got an empty string')
+    return value
+
+
+def _baudrate(name: str, value: int) -> int:
+    if value < 0:
+        raise DriverParameterError(f'{name} must be > 0 (0: default), got {value}')
+    return value
+
+
+def _command_timeout(name: str, value: float) -> float:
+    _positive(name, value)
+    if value > WATCHDOG_S:
+        raise DriverParameterError(
+            f"{name} must be at most the firmware's {WATCHDOG_S:g} s watchdog (the board "
+            f'zeroes its PWM after that long without a packet), got {value!r}'
+        )
+    return value
+
+
+def _read_interval(name: str, value: float) -> float:
+    if not 0.0 <= value <= MAX_READ_INTERVAL_S:
+        raise DriverParameterError(
+            f'{name} must be in 0 .. {MAX_READ_INTERVAL_S} s, got {value!r}'
+        )
+    return value
+
+
+def _frames(name: str, value: tuple[str, ...]) -> tuple[str, ...]:
+    return tuple(f for f in value if f)  # empty strings: the default frame
+
+
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    DriverParameterError,
+    {
+        'port': Param('/dev/ttyACM0', 'serial device path (a udev symlink is best)', check=_port),
+        'firmware': Param(
+            'v2x', "board firmware family: 'v2x' (binary) or 'v4x' (text)", check=_firmware
+        ),
+        'baudrate': Param(0, 'baud rate; 0: 9600 for v2x, 115200 for v4x', check=_baudrate),
+        'n_sensors': Param(
+            1, 'number of sensors per record (not announced by the board)', check=integer(1, 64)
+        ),
+        'sensor_frames': Param(
+            [],
+            f'frame id per sensor; empty: {sensor_frame("<k>")}',
+            kind='string_array',
+            check=_frames,
+        ),
+        'supply_voltage': Param(
+            BOARD_SUPPLY_VOLTAGE, 'H-bridge supply voltage in V (V2x scaling)', check=_positive
+        ),
+        'coil_resistance': Param(
+            BOARD_COIL_RESISTANCE,
+            'coil resistance in ohm, wiring included (V2x scaling)',
+            check=_positive,
+        ),
+        'counts_per_ampere': Param(
+            0.0, 'PWM counts per A; > 0 overrides voltage/resistance', check=_positive_or_zero
+        ),
+        'current_limit': Param(
+            0.0,
+            'largest commanded |current| in A; 0: full duty (V/R)',
+            check=_positive_or_zero,
+            mutable=True,
+        ),
+        'command_timeout': Param(
+            0.1,
+            f"s without a valid command before zero currents (at most the firmware's "
+            f'{WATCHDOG_S:g} s watchdog)',
+            check=_command_timeout,
+            mutable=True,
+        ),
+        'start_enabled': Param(False, 'enable state at start-up (disabled: zero currents)'),
+        'reconnect_min_delay': Param(
+            0.2, 's, first delay before reopening the port', check=_positive
+        ),
+        'reconnect_max_delay': Param(
+            5.0, 's, longest delay between reopen attempts', check=_positive
+        ),
+        'diagnostics_period': Param(
+            1.0, f's between {DIAGNOSTICS_TOPIC} messages', check=_positive
+        ),
+        'confirm_records': Param(
+            True,
+            'V2x: hold the newest record until the next confirms it (a cut record is then '
+            'dropped, not published corrupted; up to 1 ms more latency for the last record '
+            'of each burst); false: publish at once',
+        ),
+        'read_interval': Param(
+            0.0,
+            's, shortest time between reads of the port (0: every burst as it arrives; '
+            '0.002: two 1 ms bursts per read, less CPU, up to 2 ms more latency)',
+            check=_read_interval,
+        ),
+    },
+)
+_PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
 
 def build_config(values: dict) -> DriverConfig:
     """Validate raw parameter values and build a ``DriverConfig``.
 
+    The same rules apply at start-up and to run-time changes of the mutable
+    parameters (``current_limit``, ``command_timeout``).
+
     Parameters
     ----------
     values : dict
-        Parameter name to value, as declared by ``DriverNode``.
+        Parameter name to value, as declared by ``DriverNode`` (a missing
+        name takes its default).
 
     Returns
     -------
@@ -181,97 +313,38 @@ def build_config(values: dict) -> DriverConfig:
     DriverParameterError
         Naming the first invalid parameter and its value.
     """
-    firmware = values['firmware']
-    if firmware not in DEFAULT_BAUD:
-        raise DriverParameterError(f"firmware must be 'v2x' or 'v4x', got {firmware!r}")
-    port = values['port']
-    if not port:
-        raise DriverParameterError('port must be a device path, got an empty string')
-    baudrate = values['baudrate'] or DEFAULT_BAUD[firmware]
-    if baudrate < 0:
-        raise DriverParameterError(f'baudrate must be > 0 (0: default), got {baudrate}')
-    n_sensors = values['n_sensors']
-    if not 1 <= n_sensors <= 64:
-        raise DriverParameterError(f'n_sensors must be in 1 .. 64, got {n_sensors}')
-    frames = tuple(values['sensor_frames'])
-    if not frames:
-        frames = tuple(f'maglev_sensor_{k}' for k in range(n_sensors))
+    v = PARAMETERS.validate(values)
+    n_sensors = v['n_sensors']
+    frames = v['sensor_frames'] or tuple(sensor_frame(k) for k in range(n_sensors))
     if len(frames) != n_sensors:
         raise DriverParameterError(
             f'sensor_frames must name {n_sensors} frames (n_sensors), got {list(frames)}'
         )
-    cpa = values['counts_per_ampere']
-    if cpa:
-        scaling = CurrentScaling(_positive('counts_per_ampere', cpa))
+    if v['counts_per_ampere']:
+        scaling = CurrentScaling(v['counts_per_ampere'])
     else:
-        scaling = CurrentScaling.from_supply(
-            _positive('supply_voltage', values['supply_voltage']),
-            _positive('coil_resistance', values['coil_resistance']),
-        )
-    limit = values['current_limit']
-    limit = scaling.max_current if limit == 0 else _positive('current_limit', limit)
-    min_delay = _positive('reconnect_min_delay', values['reconnect_min_delay'])
-    max_delay = _positive('reconnect_max_delay', values['reconnect_max_delay'])
+        scaling = CurrentScaling.from_supply(v['supply_voltage'], v['coil_resistance'])
+    min_delay, max_delay = v['reconnect_min_delay'], v['reconnect_max_delay']
     if max_delay < min_delay:
         raise DriverParameterError(
             f'reconnect_max_delay must be >= reconnect_min_delay ({min_delay}), got {max_delay}'
         )
     return DriverConfig(
-        port=port,
-        firmware=firmware,
-        baudrate=baudrate,
+        port=v['port'],
+        firmware=v['firmware'],
+        baudrate=v['baudrate'] or DEFAULT_BAUD[v['firmware']],
         n_sensors=n_sensors,
         sensor_frames=frames,
         scaling=scaling,
-        current_limit=limit,
-        command_timeout=_positive('command_timeout', values['command_timeout']),
-        start_enabled=bool(values['start_enabled']),
+        current_limit=v['current_limit'] or scaling.max_current,
+        command_timeout=v['command_timeout'],
+        start_enabled=v['start_enabled'],
         reconnect_min_delay=min_delay,
         reconnect_max_delay=max_delay,
-        diagnostics_period=_positive('diagnostics_period', values['diagnostics_period']),
-        confirm_records=bool(values.get('confirm_records', True)),
-        read_interval=_read_interval(values.get('read_interval', 0.0)),
+        diagnostics_period=v['diagnostics_period'],
+        confirm_records=v['confirm_records'],
+        read_interval=v['read_interval'],
     )
-
-
-def _read_interval(value: float) -> float:
-    if not (isinstance(value, (int, float)) and 0.0 <= value <= MAX_READ_INTERVAL_S):
-        raise DriverParameterError(
-            f'read_interval must be in 0 .. {MAX_READ_INTERVAL_S} s, got {value!r}'
-        )
-    return float(value)
-
-
-# name: (default, description); read-only ones need a restart to change
-_PARAMETERS = {
-    'port': ('/dev/ttyACM0', 'serial device path (a udev symlink is best)', True),
-    'firmware': ('v2x', "board firmware family: 'v2x' (binary) or 'v4x' (text)", True),
-    'baudrate': (0, 'baud rate; 0: 9600 for v2x, 115200 for v4x', True),
-    'n_sensors': (1, 'number of sensors per record (not announced by the board)', True),
-    'sensor_frames': ([], 'frame id per sensor; empty: maglev_sensor_<k>', True),
-    'supply_voltage': (12.0, 'H-bridge supply voltage in V (V2x scaling)', True),
-    'coil_resistance': (4.0, 'coil resistance in ohm, wiring included (V2x scaling)', True),
-    'counts_per_ampere': (0.0, 'PWM counts per A; > 0 overrides voltage/resistance', True),
-    'current_limit': (0.0, 'largest commanded |current| in A; 0: full duty (V/R)', False),
-    'command_timeout': (0.1, 's without a valid command before zero currents', False),
-    'start_enabled': (False, 'enable state at start-up (disabled: zero currents)', True),
-    'reconnect_min_delay': (0.2, 's, first delay before reopening the port', True),
-    'reconnect_max_delay': (5.0, 's, longest delay between reopen attempts', True),
-    'diagnostics_period': (1.0, 's between /diagnostics messages', True),
-    'confirm_records': (
-        True,
-        'V2x: hold the newest record until the next confirms it (a cut record is then '
-        'dropped, not published corrupted; up to 1 ms more latency for the last record '
-        'of each burst); false: publish at once',
-        True,
-    ),
-    'read_interval': (
-        0.0,
-        's, shortest time between reads of the port (0: every burst as it arrives; '
-        '0.002: two 1 ms bursts per read, less CPU, up to 2 ms more latency)',
-        True,
-    ),
-}
 
 
 class DriverNode(Node):
@@ -291,16 +364,8 @@ class DriverNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        for name, (default, text, read_only) in _PARAMETERS.items():
-            descriptor = ParameterDescriptor(description=text, read_only=read_only)
-            if name == 'sensor_frames':  # [''] declares the type; empty strings are dropped
-                self.declare_parameter(name, [''], descriptor)
-            else:
-                self.declare_parameter(name, default, descriptor)
-        values = {name: self.get_parameter(name).value for name in _PARAMETERS}
-        values['sensor_frames'] = [f for f in values['sensor_frames'] if f]
-        self.config = build_config(values)
-        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.config = build_config(PARAMETERS.declare(self))
+        self.add_on_set_parameters_callback(PARAMETERS.on_set(self, build_config))
         cfg = self.config
         self._v2x = cfg.firmware == 'v2x'
         self._link = SerialLink(cfg.port, cfg.baudrate)
@@ -343,10 +408,10 @@ class DriverNode(Node):
         self._rate_mark = (time.monotonic(), 0, 0)
         self.last_info = ''
         self._field_pubs = [
-            self.create_publisher(MagneticField, f'maglev/sensor_{k}/field', SENSOR_QOS)
+            self.create_publisher(MagneticField, field_topic(k), SENSOR_QOS)
             for k in range(cfg.n_sensors)
         ]
-        self._current_pub = self.create_publisher(JointState, 'maglev/currents', SENSOR_QOS)
+        self._current_pub = self.create_publisher(JointState, CURRENTS_TOPIC, SENSOR_QOS)
         self._serialiser = SampleSerialiser(
             [RawMessageBatch(field_layout(frame)) for frame in cfg.sensor_frames]
             + [RawMessageBatch(currents_layout())]
@@ -354,11 +419,9 @@ class DriverNode(Node):
         # per sample: the field of each sensor, then the currents (SampleSerialiser order)
         self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]
         self._publish_calls: dict[int, list] = {}  # per burst length: bound publish_raw calls
-        self._diag_pub = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
-        self.create_subscription(
-            Float64MultiArray, 'maglev/currents/command', self._on_command, COMMAND_QOS
-        )
-        self.create_service(SetBool, 'maglev/enable', self._on_enable)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, COMMAND_QOS)
+        self.create_service(SetBool, ENABLE_SERVICE, self._on_enable)
         self.create_timer(min(0.02, cfg.command_timeout / 4), self._check_timeout)
         self.create_timer(cfg.diagnostics_period, self._publish_diagnostics)
         kind = 'raw sensor fields' if self._v2x else 'fields after on-board baseline removal'
@@ -387,33 +450,6 @@ class DriverNode(Node):
             pack_records(stamps, np.zeros((stamps.size, n, 3)), np.zeros((stamps.size, 4)))
         )
         self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, 3 * n + 4)))
-
-    # -- parameters -------------------------------------------------------------
-
-    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        updates = {}
-        for param in params:
-            if param.name == 'current_limit':
-                value = param.value
-                if value == 0:
-                    value = self.config.scaling.max_current
-                elif not (isinstance(value, float) and math.isfinite(value) and value > 0):
-                    return SetParametersResult(
-                        successful=False,
-                        reason=f'current_limit must be a positive finite number, got {value!r}',
-                    )
-                updates['current_limit'] = value
-            elif param.name == 'command_timeout':
-                value = param.value
-                if not (isinstance(value, float) and math.isfinite(value) and value > 0):
-                    return SetParametersResult(
-                        successful=False,
-                        reason=f'command_timeout must be a positive finite number, got {value!r}',
-                    )
-                updates['command_timeout'] = value
-        if updates:
-            self.config = DriverConfig(**{**self.config.__dict__, **updates})
-        return SetParametersResult(successful=True)
 
     # -- commands ---------------------------------------------------------------
 
@@ -714,7 +750,7 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    return run_nodes([DriverNode], args, NODE_NAME, (DriverParameterError,))
+    return run_nodes([DriverNode], args, NODE_NAME, (DriverParameterError,), PARAMETERS)
 
 
 if __name__ == '__main__':

@@ -40,8 +40,17 @@ from maglev_ros.excitation import (
     pattern_signals,
 )
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.params import (
+    NodeParameterError,
+    Param,
+    ParameterTable,
+    choice,
+    integer,
+    number,
+)
 
 __all__ = [
+    'PARAMETERS',
     'ExcitationConfig',
     'ExcitationNode',
     'ExcitationParameterError',
@@ -54,7 +63,7 @@ NODE_NAME = 'maglev_excitation'
 TRIGGERS = ('sample', 'timer')
 
 
-class ExcitationParameterError(ValueError):
+class ExcitationParameterError(NodeParameterError):
     """An excitation parameter has an invalid value."""
 
 
@@ -98,18 +107,51 @@ class ExcitationConfig:
     sample_rate: float
 
 
-_PARAMETERS = {
-    'signal': ('prbs', 'prbs, random_binary, multisine or chirp'),
-    'amplitude': (0.5, 'peak of each signal, A'),
-    'band': ([0.0, 1.0], 'pass band (low, high) as fractions of Nyquist'),
-    'pattern': ('pairs', 'coil pattern: pairs, x_pair, y_pair, independent or common'),
-    'offset': ([0.0, 0.0, 0.0, 0.0], 'currents added to every command, A (x+ x- y+ y-)'),
-    'seed': (0, 'seed of the signals'),
-    'length': (8191, 'samples per period'),
-    'cycles': (0, 'periods to send (0: forever); then offset only'),
-    'trigger': ('sample', 'sample: one command per maglev/currents message; timer: wall clock'),
-    'sample_rate': (5000.0, 'timer trigger: commands per second, Hz'),
-}
+def _band(name: str, band: tuple[float, ...]) -> tuple[float, ...]:
+    if len(band) != 2 or not (0.0 <= band[0] < band[1] <= 1.0):
+        raise ExcitationParameterError(
+            f'{name} must be [low, high] with 0 <= low < high <= 1, got {list(band)}'
+        )
+    return band
+
+
+def _offset(name: str, offset: tuple[float, ...]) -> tuple[float, ...]:
+    if len(offset) != 4 or not all(math.isfinite(v) for v in offset):
+        raise ExcitationParameterError(f'{name} must be 4 finite currents, got {list(offset)}')
+    return offset
+
+
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    ExcitationParameterError,
+    {
+        'signal': Param('prbs', 'prbs, random_binary, multisine or chirp', check=choice(*SIGNALS)),
+        'amplitude': Param(0.5, 'peak of each signal, A', check=number(0)),
+        'band': Param([0.0, 1.0], 'pass band (low, high) as fractions of Nyquist', check=_band),
+        'pattern': Param(
+            'pairs',
+            'coil pattern: pairs, x_pair, y_pair, independent or common',
+            check=choice(*PATTERNS),
+        ),
+        'offset': Param(
+            [0.0, 0.0, 0.0, 0.0],
+            f'currents added to every command, A ({" ".join(contract.COIL_NAMES)})',
+            check=_offset,
+        ),
+        'seed': Param(0, 'seed of the signals', check=integer(0)),
+        'length': Param(8191, 'samples per period', check=integer(1)),
+        'cycles': Param(0, 'periods to send (0: forever); then offset only', check=integer(0)),
+        'trigger': Param(
+            'sample',
+            f'sample: one command per {contract.CURRENTS_TOPIC} message; timer: wall clock',
+            check=choice(*TRIGGERS),
+        ),
+        'sample_rate': Param(
+            5000.0, 'timer trigger: commands per second, Hz', check=number(0, above=True)
+        ),
+    },
+)
+_PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
 
 def build_config(values: dict) -> ExcitationConfig:
@@ -118,7 +160,7 @@ def build_config(values: dict) -> ExcitationConfig:
     Parameters
     ----------
     values : dict
-        Parameter name to value.
+        Parameter name to value (a missing name takes its default).
 
     Returns
     -------
@@ -129,48 +171,7 @@ def build_config(values: dict) -> ExcitationConfig:
     ExcitationParameterError
         Naming the first invalid parameter and its value.
     """
-
-    def choice(name, allowed):
-        if values[name] not in allowed:
-            raise ExcitationParameterError(
-                f'{name} must be one of {", ".join(allowed)}, got {values[name]!r}'
-            )
-        return values[name]
-
-    def integer(name, low):
-        value = values[name]
-        if not isinstance(value, int) or value < low:
-            raise ExcitationParameterError(f'{name} must be an integer >= {low}, got {value!r}')
-        return value
-
-    amplitude = values['amplitude']
-    if not (isinstance(amplitude, float) and math.isfinite(amplitude) and amplitude >= 0):
-        raise ExcitationParameterError(
-            f'amplitude must be a finite number >= 0, got {amplitude!r}'
-        )
-    band = tuple(float(b) for b in values['band'])
-    if len(band) != 2 or not (0.0 <= band[0] < band[1] <= 1.0):
-        raise ExcitationParameterError(
-            f'band must be [low, high] with 0 <= low < high <= 1, got {list(band)}'
-        )
-    offset = tuple(float(v) for v in values['offset'])
-    if len(offset) != 4 or not all(math.isfinite(v) for v in offset):
-        raise ExcitationParameterError(f'offset must be 4 finite currents, got {list(offset)}')
-    rate = values['sample_rate']
-    if not (isinstance(rate, float) and math.isfinite(rate) and rate > 0):
-        raise ExcitationParameterError(f'sample_rate must be a finite number > 0, got {rate!r}')
-    return ExcitationConfig(
-        signal=choice('signal', SIGNALS),
-        amplitude=amplitude,
-        band=band,
-        pattern=choice('pattern', PATTERNS),
-        offset=offset,
-        seed=integer('seed', 0),
-        length=integer('length', 1),
-        cycles=integer('cycles', 0),
-        trigger=choice('trigger', TRIGGERS),
-        sample_rate=rate,
-    )
+    return ExcitationConfig(**PARAMETERS.validate(values))
 
 
 def commands_of(cfg: ExcitationConfig) -> np.ndarray:
@@ -206,7 +207,7 @@ class ExcitationNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
+        self.config = cfg = build_config(PARAMETERS.declare(self))
         self.commands = commands_of(cfg)
         self._rest = [float(v) for v in cfg.offset]
         self._rows = self.commands.tolist()
@@ -259,7 +260,9 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    return contract.run_nodes([ExcitationNode], args, NODE_NAME, (ExcitationParameterError,))
+    return contract.run_nodes(
+        [ExcitationNode], args, NODE_NAME, (ExcitationParameterError,), PARAMETERS
+    )
 
 
 if __name__ == '__main__':

@@ -12,7 +12,6 @@ then played like any other. QoS: RELIABLE, KEEP_LAST 1000 for every topic
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from pathlib import Path
@@ -22,25 +21,45 @@ from rosbags.rosbag2 import Reader
 from rosgraph_msgs.msg import Clock
 
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, number
 from maglev_ros.nodes.recorder import message_class
 
-__all__ = ['PlayerNode', 'PlayerParameterError', 'main']
+__all__ = ['PARAMETERS', 'PlayerNode', 'PlayerParameterError', 'main']
 
 NODE_NAME = 'maglev_player'
 
 
-class PlayerParameterError(ValueError):
+class PlayerParameterError(NodeParameterError):
     """A player parameter has an invalid value."""
 
 
-_PARAMETERS = {
-    'path': ('', 'bag directory to play'),
-    'rate': (1.0, 'playback speed, x real time (0: as fast as possible)'),
-    'loop': (False, 'start again at the end'),
-    'topics': (['*'], "topics to play ('*': all)"),
-    'clock_period': (0.01, 's of bag time between /clock messages (bags without /clock)'),
-    'start_delay': (0.5, 's to wait before playing (lets subscribers connect)'),
-}
+def _existing(name: str, path: str) -> str:
+    if not path or not Path(path).exists():
+        raise PlayerParameterError(f'{name} must be an existing bag, got {path!r}')
+    return path
+
+
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    PlayerParameterError,
+    {
+        'path': Param('', 'bag directory to play', check=_existing),
+        'rate': Param(
+            1.0, 'playback speed, x real time (0: as fast as possible)', check=number(0)
+        ),
+        'loop': Param(False, 'start again at the end'),
+        'topics': Param(['*'], "topics to play ('*': all)"),
+        'clock_period': Param(
+            0.01,
+            f's of bag time between {contract.CLOCK_TOPIC} messages (bags without one)',
+            check=number(0),
+        ),
+        'start_delay': Param(
+            0.5, 's to wait before playing (lets subscribers connect)', check=number(0)
+        ),
+    },
+)
+_PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
 
 class PlayerNode(Node):
@@ -59,12 +78,7 @@ class PlayerNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        v = contract.declare_parameters(self, _PARAMETERS)
-        if not v['path'] or not Path(v['path']).exists():
-            raise PlayerParameterError(f'path must be an existing bag, got {v["path"]!r}')
-        for name in ('rate', 'clock_period', 'start_delay'):
-            if not (math.isfinite(v[name]) and v[name] >= 0):
-                raise PlayerParameterError(f'{name} must be a finite number >= 0, got {v[name]!r}')
+        v = PARAMETERS.validate(PARAMETERS.declare(self))
         self.rate = v['rate']
         self.loop = v['loop']
         self.clock_period_ns = int(v['clock_period'] * 1e9)
@@ -161,7 +175,7 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    return contract.run_nodes([PlayerNode], args, NODE_NAME, (PlayerParameterError,))
+    return contract.run_nodes([PlayerNode], args, NODE_NAME, (PlayerParameterError,), PARAMETERS)
 
 
 if __name__ == '__main__':

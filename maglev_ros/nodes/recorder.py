@@ -36,8 +36,10 @@ from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from maglev_ros.bags import BagError, BagWriter
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, integer
 
 __all__ = [
+    'PARAMETERS',
     'DEFAULT_TOPICS',
     'RecorderConfig',
     'RecorderNode',
@@ -49,9 +51,7 @@ __all__ = [
 
 NODE_NAME = 'maglev_recorder'
 DEFAULT_TOPICS = [
-    'maglev/sensor_0/field',
-    'maglev/sensor_1/field',
-    'maglev/sensor_2/field',
+    *(contract.field_topic(k) for k in range(3)),
     contract.CURRENTS_TOPIC,
     contract.COMMAND_TOPIC,
     contract.TRUE_STATE_TOPIC,
@@ -60,7 +60,7 @@ DEFAULT_TOPICS = [
 _CLOCK = struct.Struct('<iI')  # rosgraph_msgs/Clock after the 4-byte CDR header
 
 
-class RecorderParameterError(ValueError):
+class RecorderParameterError(NodeParameterError):
     """A recorder parameter has an invalid value."""
 
 
@@ -92,14 +92,32 @@ class RecorderConfig:
     metadata_node: str
 
 
-_PARAMETERS = {
-    'path': ('', "bag directory to create; '' : maglev_<date>_<time> in the working directory"),
-    'storage': ('mcap', 'bag storage: mcap or sqlite3'),
-    'topics': (DEFAULT_TOPICS, 'topics to record'),
-    'depth': (10000, 'subscription queue depth (messages)'),
-    'log_clock': ('ros', 'log time: ros (node clock) or topic (newest /clock received)'),
-    'metadata_node': ('maglev_simulator', "node whose parameters are stored ('' : none)"),
-}
+def _topics(name: str, topics: tuple[str, ...]) -> tuple[str, ...]:
+    absolute = tuple(dict.fromkeys(_absolute(t) for t in topics if t))
+    if not absolute:
+        raise RecorderParameterError(f'{name} must name at least one topic, got {list(topics)}')
+    return absolute
+
+
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    RecorderParameterError,
+    {
+        'path': Param(
+            '', "bag directory to create; '' : maglev_<date>_<time> in the working directory"
+        ),
+        'storage': Param('mcap', 'bag storage: mcap or sqlite3', check=choice('mcap', 'sqlite3')),
+        'topics': Param(DEFAULT_TOPICS, 'topics to record', check=_topics),
+        'depth': Param(10000, 'subscription queue depth (messages)', check=integer(1)),
+        'log_clock': Param(
+            'ros',
+            f'log time: ros (node clock) or topic (newest {contract.CLOCK_TOPIC} received)',
+            check=choice('ros', 'topic'),
+        ),
+        'metadata_node': Param('maglev_simulator', "node whose parameters are stored ('' : none)"),
+    },
+)
+_PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
 
 def _absolute(topic: str) -> str:
@@ -112,7 +130,7 @@ def build_config(values: dict) -> RecorderConfig:
     Parameters
     ----------
     values : dict
-        Parameter name to value.
+        Parameter name to value (a missing name takes its default).
 
     Returns
     -------
@@ -123,37 +141,15 @@ def build_config(values: dict) -> RecorderConfig:
     RecorderParameterError
         Naming the first invalid parameter and its value.
     """
-    if values['storage'] not in ('mcap', 'sqlite3'):
+    v = PARAMETERS.validate(values)
+    if v['log_clock'] == 'topic' and contract.CLOCK_TOPIC not in v['topics']:
         raise RecorderParameterError(
-            f'storage must be one of mcap, sqlite3, got {values["storage"]!r}'
+            f'log_clock topic needs {contract.CLOCK_TOPIC} among topics, got {list(v["topics"])}'
         )
-    topics = tuple(dict.fromkeys(_absolute(t) for t in values['topics'] if t))
-    if not topics:
-        raise RecorderParameterError(
-            f'topics must name at least one topic, got {list(values["topics"])}'
-        )
-    depth = values['depth']
-    if not isinstance(depth, int) or depth < 1:
-        raise RecorderParameterError(f'depth must be an integer >= 1, got {depth!r}')
-    if values['log_clock'] not in ('ros', 'topic'):
-        raise RecorderParameterError(
-            f'log_clock must be one of ros, topic, got {values["log_clock"]!r}'
-        )
-    if values['log_clock'] == 'topic' and contract.CLOCK_TOPIC not in topics:
-        raise RecorderParameterError(
-            f'log_clock topic needs /clock among topics, got {list(topics)}'
-        )
-    path = values['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
+    path = v['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
     if Path(path).exists():
         raise RecorderParameterError(f'path must be a new directory, got {path!r} (exists)')
-    return RecorderConfig(
-        path=path,
-        storage=values['storage'],
-        topics=topics,
-        depth=depth,
-        log_clock=values['log_clock'],
-        metadata_node=values['metadata_node'],
-    )
+    return RecorderConfig(**(v | {'path': path}))
 
 
 def message_class(msgtype: str):
@@ -208,7 +204,7 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
+        self.config = cfg = build_config(PARAMETERS.declare(self))
         meta = {
             'maglev_ros.version': package_version(),
             'recorder.storage': cfg.storage,
@@ -386,7 +382,9 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    return contract.run_nodes([RecorderNode], args, NODE_NAME, (RecorderParameterError,))
+    return contract.run_nodes(
+        [RecorderNode], args, NODE_NAME, (RecorderParameterError,), PARAMETERS
+    )
 
 
 if __name__ == '__main__':

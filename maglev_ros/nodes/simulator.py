@@ -70,7 +70,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Pose
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import ColorRGBA, Float64MultiArray
@@ -79,6 +78,14 @@ from visualization_msgs.msg import Marker, MarkerArray
 
 from maglev_ros.nodes import contract
 from maglev_ros.nodes.cdr_batch import RawMessageBatch, SampleSerialiser
+from maglev_ros.nodes.params import (
+    NodeParameterError,
+    Param,
+    ParameterTable,
+    choice,
+    integer,
+    number,
+)
 from maglev_ros.physics import (
     FIELD_MODELS,
     KINEMATICS,
@@ -90,11 +97,13 @@ from maglev_ros.physics import (
     make_model,
 )
 from maglev_ros.physics.simulation import MAGNET_MODES
+from maglev_ros.topics import SIMULATOR_PAUSE_SERVICE, SIMULATOR_RESET_SERVICE
 
 __all__ = [
     'MODES',
     'SimulatorConfig',
     'SimulatorNode',
+    'PARAMETERS',
     'SimulatorParameterError',
     'base_markers',
     'build_config',
@@ -109,7 +118,7 @@ MAX_BACKLOG_S = 0.1  # s of wall time the real-time loop may catch up at most
 _ZERO = np.zeros(4)
 
 
-class SimulatorParameterError(ValueError):
+class SimulatorParameterError(NodeParameterError):
     """A simulator parameter has an invalid value."""
 
 
@@ -184,60 +193,108 @@ class SimulatorConfig:
     diagnostics_period: float
 
 
-# name: (default, description); a parameter type instead of a default means
-# "typed, no default" (initial_state, sensors: empty means the default).
-_PARAMETERS = {
-    'params': ('maggy_v2', 'parameter set: maggy_v2, maggy_v4 or a YAML path'),
-    'field_model': ('fast', 'field model: fast, accurate or filament'),
-    'torque': ('true', 'torque model: true or published'),
-    'kinematics': ('rigid', 'kinematics: rigid or published'),
-    'sample_rate': (5000.0, 'samples per second, Hz (the board: 5000)'),
-    'substeps': (1, 'RK4 steps per sample'),
-    'magnet': ('free', 'levitating magnet: free, fixed (held at the initial state) or absent'),
-    'initial_state': (
-        Parameter.Type.DOUBLE_ARRAY,
-        '12 numbers x y z alpha beta gamma vx vy vz wx wy wz; '
-        'unset: resting at the first equilibrium',
-    ),
-    'coil_dynamics': (True, 'coil L/R electrics, voltage R i_cmd clipped at the supply'),
-    'sensor_noise': (0.0, 'white sensor noise per axis, T rms'),
-    'sensor_quantization': (0.0, 'sensor resolution, T per LSB (0: none)'),
-    'sensor_delay': (1, 'sensor delay in samples (the board has 1)'),
-    'seed': (0, 'seed of the sensor noise'),
-    'mode': ('realtime', 'timing: realtime (wall clock) or lockstep (one command per sample)'),
-    'command_timeout': (1.0, 'lockstep: s to wait for a command before holding the last one'),
-    'pace_period': (0.001, 'realtime: s of wall time per burst of samples (0: every sample)'),
-    'start_paused': (False, 'start paused (resume with maglev/simulator/pause false)'),
-    'start_subscribers': (0, 'lockstep: subscribers of maglev/currents to wait for at start'),
-    'sensors': (Parameter.Type.INTEGER_ARRAY, 'indices of the sensors to publish; unset: all'),
-    'publish_state': (True, 'publish the true state on maglev/state/true'),
-    'publish_clock': (True, 'publish the simulated time on /clock'),
-    'marker_rate': (10.0, 'RViz markers per second of wall time (0: none)'),
-    'diagnostics_period': (1.0, 's between /diagnostics messages'),
-}
+def _initial_state(name: str, state: tuple[float, ...]) -> tuple[float, ...] | None:
+    if not state:
+        return None
+    if len(state) != 12 or not all(math.isfinite(v) for v in state):
+        raise SimulatorParameterError(
+            f'{name} must be 12 finite numbers (x y z alpha beta gamma vx vy vz '
+            f'wx wy wz), got {list(state)}'
+        )
+    return state
 
 
-def _choice(values: dict, name: str, allowed: tuple[str, ...]) -> str:
-    value = values[name]
-    if value not in allowed:
-        raise SimulatorParameterError(f'{name} must be one of {", ".join(allowed)}, got {value!r}')
+def _sensor_indices(name: str, sensors: tuple[int, ...]) -> tuple[int, ...]:
+    if any(k < 0 for k in sensors) or len(set(sensors)) != len(sensors):
+        raise SimulatorParameterError(
+            f'{name} must be distinct sensor indices >= 0, got {list(sensors)}'
+        )
+    return sensors
+
+
+def _parameter_set(name: str, value: str) -> str:
+    if not value:
+        raise SimulatorParameterError(f'{name} must name a parameter set, got an empty string')
     return value
 
 
-def _positive(values: dict, name: str, allow_zero: bool = False) -> float:
-    value = values[name]
-    ok = isinstance(value, (int, float)) and math.isfinite(value)
-    if not ok or value < 0 or (value == 0 and not allow_zero):
-        bound = '>= 0' if allow_zero else '> 0'
-        raise SimulatorParameterError(f'{name} must be a finite number {bound}, got {value!r}')
-    return float(value)
-
-
-def _count(values: dict, name: str, low: int) -> int:
-    value = values[name]
-    if not isinstance(value, int) or value < low:
-        raise SimulatorParameterError(f'{name} must be an integer >= {low}, got {value!r}')
-    return value
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    SimulatorParameterError,
+    {
+        'params': Param(
+            'maggy_v2', 'parameter set: maggy_v2, maggy_v4 or a YAML path', check=_parameter_set
+        ),
+        'field_model': Param(
+            'fast', 'field model: fast, accurate or filament', check=choice(*FIELD_MODELS)
+        ),
+        'torque': Param('true', 'torque model: true or published', check=choice(*TORQUE_MODES)),
+        'kinematics': Param('rigid', 'kinematics: rigid or published', check=choice(*KINEMATICS)),
+        'sample_rate': Param(
+            5000.0, 'samples per second, Hz (the board: 5000)', check=number(0, above=True)
+        ),
+        'substeps': Param(1, 'RK4 steps per sample', check=integer(1)),
+        'magnet': Param(
+            'free',
+            'levitating magnet: free, fixed (held at the initial state) or absent',
+            check=choice(*MAGNET_MODES),
+        ),
+        'initial_state': Param(
+            [],
+            '12 numbers x y z alpha beta gamma vx vy vz wx wy wz (m, rad, m/s, rad/s); '
+            'empty: resting at the first equilibrium',
+            kind='double_array',
+            check=_initial_state,
+        ),
+        'coil_dynamics': Param(True, 'coil L/R electrics, voltage R i_cmd clipped at the supply'),
+        'sensor_noise': Param(0.0, 'white sensor noise per axis, T rms', check=number(0)),
+        'sensor_quantization': Param(
+            0.0, 'sensor resolution, T per LSB (0: none)', check=number(0)
+        ),
+        'sensor_delay': Param(1, 'sensor delay in samples (the board has 1)', check=integer(0)),
+        'seed': Param(0, 'seed of the sensor noise', check=integer(0)),
+        'mode': Param(
+            'realtime',
+            'timing: realtime (wall clock) or lockstep (one command per sample)',
+            check=choice(*MODES),
+        ),
+        'command_timeout': Param(
+            1.0,
+            'lockstep: s to wait for a command before holding the last one',
+            check=number(0, above=True),
+        ),
+        'pace_period': Param(
+            0.001,
+            'realtime: s of wall time per burst of samples (0: every sample)',
+            check=number(0),
+        ),
+        'start_paused': Param(
+            False, f'start paused (resume with {SIMULATOR_PAUSE_SERVICE} false)'
+        ),
+        'start_subscribers': Param(
+            0,
+            f'lockstep: subscribers of {contract.CURRENTS_TOPIC} to wait for at start',
+            check=integer(0),
+        ),
+        'sensors': Param(
+            [],
+            'indices of the sensors to publish; empty: all',
+            kind='integer_array',
+            check=_sensor_indices,
+        ),
+        'publish_state': Param(True, f'publish the true state on {contract.TRUE_STATE_TOPIC}'),
+        'publish_clock': Param(True, f'publish the simulated time on {contract.CLOCK_TOPIC}'),
+        'marker_rate': Param(
+            10.0, 'RViz markers per second of wall time (0: none)', check=number(0)
+        ),
+        'diagnostics_period': Param(
+            1.0,
+            f's between {contract.DIAGNOSTICS_TOPIC} messages',
+            check=number(0, above=True),
+        ),
+    },
+)
+_PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
 
 def build_config(values: dict) -> SimulatorConfig:
@@ -246,8 +303,9 @@ def build_config(values: dict) -> SimulatorConfig:
     Parameters
     ----------
     values : dict
-        Parameter name to value, as declared by ``SimulatorNode`` (None for
-        unset typed parameters).
+        Parameter name to value, as declared by ``SimulatorNode`` (None or
+        empty for ``initial_state`` and ``sensors``: the default); a missing
+        name takes its default.
 
     Returns
     -------
@@ -258,51 +316,7 @@ def build_config(values: dict) -> SimulatorConfig:
     SimulatorParameterError
         Naming the first invalid parameter and its value.
     """
-    if not values['params']:
-        raise SimulatorParameterError('params must name a parameter set, got an empty string')
-    state = values['initial_state']
-    if state is not None and len(state) == 0:
-        state = None
-    if state is not None:
-        state = tuple(float(v) for v in state)
-        if len(state) != 12 or not all(math.isfinite(v) for v in state):
-            raise SimulatorParameterError(
-                f'initial_state must be 12 finite numbers (x y z alpha beta gamma vx vy vz '
-                f'wx wy wz), got {list(state)}'
-            )
-    sensors = tuple(int(k) for k in (values['sensors'] or ()))
-    if any(k < 0 for k in sensors) or len(set(sensors)) != len(sensors):
-        raise SimulatorParameterError(
-            f'sensors must be distinct sensor indices >= 0, got {list(sensors)}'
-        )
-    seed = values['seed']
-    if not isinstance(seed, int) or seed < 0:
-        raise SimulatorParameterError(f'seed must be an integer >= 0, got {seed!r}')
-    return SimulatorConfig(
-        params=values['params'],
-        field_model=_choice(values, 'field_model', FIELD_MODELS),
-        torque=_choice(values, 'torque', TORQUE_MODES),
-        kinematics=_choice(values, 'kinematics', KINEMATICS),
-        sample_rate=_positive(values, 'sample_rate'),
-        substeps=_count(values, 'substeps', 1),
-        magnet=_choice(values, 'magnet', MAGNET_MODES),
-        initial_state=state,
-        coil_dynamics=bool(values['coil_dynamics']),
-        sensor_noise=_positive(values, 'sensor_noise', allow_zero=True),
-        sensor_quantization=_positive(values, 'sensor_quantization', allow_zero=True),
-        sensor_delay=_count(values, 'sensor_delay', 0),
-        seed=seed,
-        mode=_choice(values, 'mode', MODES),
-        command_timeout=_positive(values, 'command_timeout'),
-        pace_period=_positive(values, 'pace_period', allow_zero=True),
-        start_paused=bool(values['start_paused']),
-        start_subscribers=_count(values, 'start_subscribers', 0),
-        sensors=sensors,
-        publish_state=bool(values['publish_state']),
-        publish_clock=bool(values['publish_clock']),
-        marker_rate=_positive(values, 'marker_rate', allow_zero=True),
-        diagnostics_period=_positive(values, 'diagnostics_period'),
-    )
+    return SimulatorConfig(**PARAMETERS.validate(values))
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
@@ -387,7 +401,7 @@ class SimulatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.config = cfg = build_config(contract.declare_parameters(self, _PARAMETERS))
+        self.config = cfg = build_config(PARAMETERS.declare(self))
         self.sim = make_simulator(cfg)
         n_all = len(self.sim.model.params.sensors)
         self.sensors = cfg.sensors or tuple(range(n_all))
@@ -452,8 +466,8 @@ class SimulatorNode(Node):
         self.create_subscription(
             Float64MultiArray, contract.COMMAND_TOPIC, self._on_command, command_qos
         )
-        self.create_service(Trigger, 'maglev/simulator/reset', self._on_reset)
-        self.create_service(SetBool, 'maglev/simulator/pause', self._on_pause)
+        self.create_service(Trigger, SIMULATOR_RESET_SERVICE, self._on_reset)
+        self.create_service(SetBool, SIMULATOR_PAUSE_SERVICE, self._on_pause)
         self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
         if cfg.marker_rate > 0:
             self._marker_pub = self.create_publisher(
@@ -705,7 +719,7 @@ class SimulatorNode(Node):
         state = ' '.join(f'{v:.4g}' for v in sim.crash_state[:6])
         self.get_logger().error(
             f'magnet crashed at t = {sim.crash_time:.4f} s ({sim.reason}); pose {state}; '
-            'integration stopped: call maglev/simulator/reset'
+            f'integration stopped: call {SIMULATOR_RESET_SERVICE}'
         )
         self.publish_diagnostics()
 
@@ -871,7 +885,9 @@ def main(args: list[str] | None = None) -> int:
     # the transport (measured: real-time factor 0.9 -> 1.0 at 5 kHz with a
     # recorder in another process, benchmarks/lab.py). Override in the environment.
     os.environ.setdefault('RMW_FASTRTPS_PUBLICATION_MODE', 'ASYNCHRONOUS')
-    return contract.run_nodes([SimulatorNode], args, NODE_NAME, (SimulatorParameterError,))
+    return contract.run_nodes(
+        [SimulatorNode], args, NODE_NAME, (SimulatorParameterError,), PARAMETERS
+    )
 
 
 if __name__ == '__main__':

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import matrix_balance
 
+from ..topics import COIL_NAMES
 from .model import STATE_NAMES
 
 __all__ = [
@@ -31,8 +32,7 @@ REDUCED_STATES = tuple(i for i, name in enumerate(STATE_NAMES) if name not in ('
 
 def input_names(n_inputs: int) -> tuple[str, ...]:
     """Solenoid names in the package's order (x+, x-, y+, y-, then s4, s5, ...)."""
-    base = ('x+', 'x-', 'y+', 'y-')
-    return tuple(base[j] if j < 4 else f's{j}' for j in range(n_inputs))
+    return tuple(COIL_NAMES[j] if j < 4 else f's{j}' for j in range(n_inputs))
 
 
 def output_names(n_sensors: int) -> tuple[str, ...]:

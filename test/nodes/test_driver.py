@@ -141,7 +141,7 @@ def test_published_fields_equal_the_model_in_tesla(make_harness, n_sensors):
             listen=True,
             counts_per_ampere=1000.0,
             start_enabled=True,
-            command_timeout=30.0,
+            command_timeout=1.0,
         )
         h.command_until([0.5, -0.25, 1.5, -4.0], board, (500, -250, 1500, -4000))
         wait_for(lambda: sum(any(c.effort) for c in list(h.currents)) > 200, what='samples')
@@ -174,7 +174,7 @@ def test_current_sweep_reaches_the_board_as_scaled_pwm(make_harness):
             supply_voltage=12.0,
             coil_resistance=3.0,
             start_enabled=True,
-            command_timeout=30.0,
+            command_timeout=1.0,
         )
         scaling = h.driver.config.scaling
         h.command_until([0.0, 0.0, 0.0, 0.01], board, (0, 0, 0, 10))  # 1024 counts/A
@@ -204,7 +204,7 @@ def test_bad_commands_never_reach_the_wire(make_harness):
             counts_per_ampere=1000.0,
             current_limit=2.0,
             start_enabled=True,
-            command_timeout=30.0,
+            command_timeout=1.0,
         )
         h.command_until([0.1, 0.1, 0.1, 0.1], board, (100, 100, 100, 100))
         with board.lock:
@@ -228,7 +228,7 @@ def test_bad_commands_never_reach_the_wire(make_harness):
 def test_disabled_means_zero_currents(make_harness):
     board, _ = v2x_board()
     with board:
-        h = make_harness(board.path, counts_per_ampere=1000.0, command_timeout=30.0)
+        h = make_harness(board.path, counts_per_ampere=1000.0, command_timeout=1.0)
         assert not h.driver.enabled
 
         def accepted():
@@ -269,7 +269,7 @@ def test_board_watchdog_zeroes_the_coils(make_harness):
     board, _ = v2x_board(watchdog=0.3)
     with board:
         h = make_harness(
-            board.path, counts_per_ampere=1000.0, start_enabled=True, command_timeout=60.0
+            board.path, counts_per_ampere=1000.0, start_enabled=True, command_timeout=1.0
         )
         h.command_until([0.7, 0.7, 0.7, 0.7], board, (700, 700, 700, 700))
         assert board.wait_until(lambda b: b.firmware.watchdog_trips == 1, TIMEOUT)
@@ -467,7 +467,7 @@ def test_shutdown_by_signal_sends_zeros(ctx, domain, signum):
             board.path,
             domain,
             'start_enabled:=true',
-            'command_timeout:=30.0',
+            'command_timeout:=1.0',
             'counts_per_ampere:=1000.0',
         )
         try:
@@ -537,7 +537,7 @@ def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypa
     board, _ = v2x_board()
     with board:
         h = make_harness(
-            board.path, counts_per_ampere=1000.0, start_enabled=True, command_timeout=60.0
+            board.path, counts_per_ampere=1000.0, start_enabled=True, command_timeout=1.0
         )
         h.command_until([0.9, 0.9, 0.9, 0.9], board, (900, 900, 900, 900))
         from maglev_ros.hardware.v2x_stream import RecordDecoder
@@ -572,7 +572,7 @@ def test_published_fields_equal_the_physics_model_in_tesla(make_harness):
             listen=True,
             counts_per_ampere=1000.0,
             start_enabled=True,
-            command_timeout=30.0,
+            command_timeout=1.0,
         )
         h.command_until([0.5, -0.5, 1.0, -1.0], board, (500, -500, 1000, -1000))
         wait_for(lambda: sum(any(c.effort) for c in list(h.currents)) > 100, what='samples')
