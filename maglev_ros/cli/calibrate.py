@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from .bag2data import add_channel_arguments
-from .usage import Parser, UsageError, positive_float, run_command
+from .usage import Parser, UsageError, limit_blas_threads, positive_float, run_command
 
 __all__ = ['build_parser', 'main', 'default_channels', 'parse_bounds']
 
@@ -232,6 +232,7 @@ def _run(args: argparse.Namespace) -> int:
     from maglev_ros.greybox import calibrate_static, parameter_vector, write_parameters
     from maglev_ros.physics import load_parameters
 
+    limit_blas_threads(1)  # small solves: see limit_blas_threads
     base = load_parameters(args.params)
     vector = parameter_vector(base)
     if args.list:
