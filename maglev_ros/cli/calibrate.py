@@ -31,13 +31,13 @@ PROG = 'maglev-calibrate'
 AXES = ('x', 'y', 'z')
 
 
-def default_channels(sensors: int, coils: int) -> tuple[list[str], list[str]]:
-    """Channel specs of the field (outputs) and the coil currents (inputs) of a run.
+def default_channels(sensors: Sequence[int], coils: int) -> tuple[list[str], list[str]]:
+    """Return the channel specs of the field (outputs) and the coil currents (inputs) of a run.
 
     Parameters
     ----------
-    sensors : int
-        Number of 3-axis sensors.
+    sensors : sequence of int
+        The 3-axis sensors recorded.
     coils : int
         Number of solenoids.
 
@@ -48,9 +48,7 @@ def default_channels(sensors: int, coils: int) -> tuple[list[str], list[str]]:
         ``i{j}=maglev/currents:effort[{j}]``.
     """
     outputs = [
-        f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}'
-        for k in range(sensors)
-        for a in AXES
+        f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}' for k in sensors for a in AXES
     ]
     inputs = [f'i{j}=maglev/currents:effort[{j}]' for j in range(coils)]
     return outputs, inputs
@@ -117,6 +115,13 @@ def build_parser() -> argparse.ArgumentParser:
         help='measured vs model plot (default: next to --out; one file per bag)',
     )
     p.add_argument(
+        '--sensors',
+        type=int,
+        nargs='+',
+        metavar='K',
+        help='sensors recorded (default: those of the parameter set that the first bag has)',
+    )
+    p.add_argument(
         '--magnet',
         choices=('absent', 'fixed'),
         help='where the magnet was, for bags whose metadata does not say',
@@ -171,7 +176,32 @@ def _bag_and_magnet(text: str, default: str | None) -> tuple[str, str | None]:
     return text, default
 
 
-def _experiment(bag: str, mode: str | None, args, vector, outputs, inputs):
+def _recorded_magnet(metadata: dict) -> str | None:
+    """Where the magnet was, from run metadata (``magnet`` or ``<node>.magnet``)."""
+    for key, value in metadata.items():
+        if key == 'magnet' or key.endswith('.magnet'):
+            text = str(value).strip()
+            if text:
+                return text
+    return None
+
+
+def _bag_sensors(bag: str, count: int) -> list[int]:
+    """Sensors of the parameter set whose field topic the bag has."""
+    from maglev_ros.bags import BagReader
+
+    with BagReader(bag) as reader:
+        topics = reader.topics
+    found = [k for k in range(count) if f'/maglev/sensor_{k}/field' in topics]
+    if not found:
+        raise UsageError(
+            f'{bag}: no field topic /maglev/sensor_K/field (K < {count}); its topics: '
+            f'{", ".join(sorted(topics))}'
+        )
+    return found
+
+
+def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
     from maglev_ros.bags import read_bag
     from maglev_ros.greybox import StaticExperiment
 
@@ -184,8 +214,7 @@ def _experiment(bag: str, mode: str | None, args, vector, outputs, inputs):
         allow_gaps=args.allow_gaps,
         tolerance=args.tolerance,
     )
-    recorded = str(ds.metadata.get('magnet', '')).strip() or None
-    magnet = mode or recorded
+    magnet = mode or _recorded_magnet(ds.metadata)
     if magnet is None:
         raise UsageError(
             f'{bag}: the bag does not say whether the magnet was absent or fixed: '
@@ -198,9 +227,17 @@ def _experiment(bag: str, mode: str | None, args, vector, outputs, inputs):
         )
     data = ds.data
     exp = StaticExperiment(
-        u=data.u, y=data.y, magnet=magnet, name=f'{bag} (magnet {magnet})', Ts=data.Ts
+        u=data.u,
+        y=data.y,
+        magnet=magnet,
+        name=f'{bag} (magnet {magnet})',
+        Ts=data.Ts,
+        sensors=tuple(sensors),
     )
-    _say(f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet {magnet}')
+    _say(
+        f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet {magnet}, '
+        f'sensors {", ".join(map(str, sensors))}'
+    )
     return exp
 
 
@@ -248,13 +285,23 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
     if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
         raise UsageError(f'--out must name a .yaml file, got {args.out!r}')
-    defaults = default_channels(len(base.sensors), base.solenoids.count)
+    count = len(base.sensors)
+    parsed = [_bag_and_magnet(text, args.magnet) for text in args.bags]
+    sensors = args.sensors
+    if sensors is None:
+        if args.output:
+            sensors = list(range(len(args.output) // 3))
+        else:
+            sensors = _bag_sensors(parsed[0][0], count)
+    bad = [k for k in sensors if not 0 <= k < count]
+    if bad:
+        raise UsageError(f'--sensors {bad}: {base.name} has sensors 0 to {count - 1}')
+    defaults = default_channels(sensors, base.solenoids.count)
     outputs = args.output or defaults[0]
     inputs = args.input or defaults[1]
     experiments, bags = [], []
-    for text in args.bags:
-        bag, mode = _bag_and_magnet(text, args.magnet)
-        experiments.append(_experiment(bag, mode, args, vector, outputs, inputs))
+    for bag, mode in parsed:
+        experiments.append(_experiment(bag, mode, args, sensors, outputs, inputs))
         bags.append(bag)
     delays = None if args.delay is None else [args.delay] * len(experiments)
     cal = calibrate_static(

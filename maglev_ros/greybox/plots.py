@@ -57,6 +57,7 @@ def calibration_plot(
     fit_cal = cal.validation_calibrated[index]
     n = min(window, measured.shape[0])
     t = np.arange(n) * Ts
+    exp_sensors = cal.sensors[index]
     sensors = measured.shape[1] // 3
     fig = Figure(figsize=(13, 2.6 * sensors + 1.0))
     axes = fig.subplots(sensors, 3, sharex=True, squeeze=False)
@@ -80,7 +81,7 @@ def calibration_plot(
                 ls='--',
                 label=f'calibrated (rms {1e3 * fit_cal.rms[ch]:.3g} mT)',
             )
-            ax.set_title(f'sensor {k}  B{_AXES[a]}', fontsize=10)
+            ax.set_title(f'sensor {exp_sensors[k]}  B{_AXES[a]}', fontsize=10)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7, loc='upper right')
             if a == 0:

@@ -72,6 +72,8 @@ class StaticExperiment:
     pose : tuple of float or None
         Fixed magnet: a guess of where it is held, (x, y, z, alpha, beta), m
         and rad (None: the nominal set's equilibrium).
+    sensors : tuple of int or None
+        Which of the parameter set's sensors ``y`` holds, in order (None: all).
     """
 
     u: np.ndarray
@@ -80,6 +82,7 @@ class StaticExperiment:
     name: str = 'experiment'
     Ts: float = 2e-4
     pose: tuple[float, ...] | None = None
+    sensors: tuple[int, ...] | None = None
 
     def __post_init__(self):
         u = np.asarray(self.u, dtype=float)
@@ -98,6 +101,18 @@ class StaticExperiment:
             raise GreyBoxError(f'{self.name}: currents and fields must be finite')
         object.__setattr__(self, 'u', u)
         object.__setattr__(self, 'y', y)
+        if self.sensors is not None:
+            object.__setattr__(self, 'sensors', tuple(int(k) for k in self.sensors))
+            if y.shape[1] != 3 * len(self.sensors):
+                raise GreyBoxError(
+                    f'{self.name}: {len(self.sensors)} sensors need {3 * len(self.sensors)} '
+                    f'field channels, got {y.shape[1]}'
+                )
+
+    def channels(self, sensor_count: int) -> np.ndarray:
+        """Return the indices of y's columns in the model's output vector (3 per sensor)."""
+        chosen = range(sensor_count) if self.sensors is None else self.sensors
+        return np.array([3 * k + a for k in chosen for a in range(3)], dtype=int)
 
     @property
     def samples(self) -> int:
@@ -109,7 +124,9 @@ class StaticExperiment:
         n = int(round(self.samples * fraction))
         cut = [slice(0, n), slice(n, None)]
         return tuple(
-            StaticExperiment(self.u[s], self.y[s], self.magnet, self.name, self.Ts, self.pose)
+            StaticExperiment(
+                self.u[s], self.y[s], self.magnet, self.name, self.Ts, self.pose, self.sensors
+            )
             for s in cut
         )
 
@@ -278,6 +295,8 @@ class StaticProblem:
             fixed = [i for i, e in enumerate(self.experiments) if e.magnet == 'fixed']
             poses = [fixed.index(i) if i in fixed else None for i in range(len(experiments))]
         self.poses = tuple(poses)
+        count = len(vector.base.sensors)
+        self._channels = [e.channels(count) for e in self.experiments]
         self.evaluations = 0
 
     # ------------------------------------------------------------------ model
@@ -302,7 +321,7 @@ class StaticProblem:
                 x, present = _ABSENT_STATE, False
             rows = np.array([model.measurement(x, u, with_magnet=present) for u in self._units])
             rows[1:] -= rows[0]
-            out.append(rows)
+            out.append(rows[:, self._channels[i]])
         return out
 
     def predict(self, values: dict[str, float], exp: StaticExperiment, index: int, delay: int):
@@ -389,6 +408,8 @@ class StaticCalibration:
         Sensor delay per experiment, samples.
     validation_nominal, validation_calibrated : tuple of ValidationFit
         Fits on each experiment's validation part.
+    sensors : tuple of tuple of int
+        Sensors recorded in each experiment (the channels of ``noise`` and the fits).
     noise : tuple of ndarray
         Noise level per experiment and channel, T rms.
     chi2_per_dof : float
@@ -413,6 +434,7 @@ class StaticCalibration:
     delays: tuple[int, ...]
     validation_nominal: tuple[ValidationFit, ...]
     validation_calibrated: tuple[ValidationFit, ...]
+    sensors: tuple
     noise: tuple
     chi2_per_dof: float
     evaluations: int
@@ -491,12 +513,18 @@ def calibrate_static(
     if not 0.0 < split <= 1.0:
         raise GreyBoxError(f'split must be in (0, 1], got {split!r}')
     n_s = vector.base.solenoids.count
-    n_y = 3 * len(vector.base.sensors)
+    count = len(vector.base.sensors)
     for e in experiments:
+        n_y = 3 * (count if e.sensors is None else len(e.sensors))
+        if e.sensors is not None and not all(0 <= k < count for k in e.sensors):
+            raise GreyBoxError(
+                f'{e.name}: sensors {list(e.sensors)} out of range: {vector.base.name} has '
+                f'{count} sensors (0 to {count - 1})'
+            )
         if e.u.shape[1] != n_s or e.y.shape[1] != n_y:
             raise GreyBoxError(
-                f'{e.name}: {vector.base.name} has {n_s} coils and {len(vector.base.sensors)} '
-                f'sensors ({n_y} field channels); the data have {e.u.shape[1]} currents and '
+                f'{e.name}: {vector.base.name} has {n_s} coils and {n_y // 3} sensors '
+                f'({n_y} field channels) here; the data have {e.u.shape[1]} currents and '
                 f'{e.y.shape[1]} field channels'
             )
     fixed = [i for i, e in enumerate(experiments) if e.magnet == 'fixed']
@@ -599,6 +627,9 @@ def calibrate_static(
         delays=delays,
         validation_nominal=tuple(fits_nom),
         validation_calibrated=tuple(fits_cal),
+        sensors=tuple(
+            tuple(range(count)) if e.sensors is None else e.sensors for e in experiments
+        ),
         noise=tuple(s.sigma for s in problem.stats),
         chi2_per_dof=s2,
         evaluations=problem.evaluations,

@@ -77,8 +77,14 @@ def experiment(magnet: str, n: int = 12_500, seed: int = 1) -> StaticExperiment:
     return StaticExperiment(u, y, magnet, f'plant, magnet {magnet}', TS)
 
 
-def write_bag(path: Path, magnet: str | None, n: int = 6_000, seed: int = 1) -> Path:
-    """Write a simulated run as a bag: three sensor topics and the currents, lockstep stamps."""
+def write_bag(
+    path: Path, magnet: str | None, n: int = 6_000, seed: int = 1, key: str = 'magnet'
+) -> Path:
+    """Write a simulated run as a bag: three sensor topics and the currents, lockstep stamps.
+
+    ``magnet`` None leaves where the magnet was out of the metadata; ``key`` is
+    its metadata key.
+    """
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState, MagneticField
 
@@ -87,7 +93,7 @@ def write_bag(path: Path, magnet: str | None, n: int = 6_000, seed: int = 1) -> 
     u, y = simulate(magnet or 'absent', n, seed)
     metadata = {'params': 'maggy_v2', 'seed': seed}
     if magnet is not None:
-        metadata['magnet'] = magnet
+        metadata[key] = magnet
     with BagWriter(path, storage='mcap', metadata=metadata) as bag:
         sensors = [
             bag.add_topic(f'/maglev/sensor_{k}/field', 'sensor_msgs/msg/MagneticField')

@@ -92,9 +92,28 @@ def test_a_bag_without_the_topics(tmp_path, capsys):
         for k in range(10):
             bag.write(chatter, 1_000_000 * (k + 1), serialize_message(String(data='hi')))
     assert main([str(tmp_path / 'other'), '--free', 'coil0.gain']) == 2
-    assert "has no topic '/maglev/sensor_0/field'" in _error(capsys)
+    assert 'no field topic /maglev/sensor_K/field' in _error(capsys)
 
 
 def test_list(capsys):
     assert main(['--list']) == 0
     assert 'sensor2.offset_z' in capsys.readouterr().out
+
+
+def test_a_subset_of_the_sensors(bags, capsys):
+    status = main(
+        [str(bags['absent']), '--sensors', '1', '2', '--free', 'coil0.gain', 'sensor0.x']
+    )
+    out = capsys.readouterr().out
+    assert status == 0
+    assert 'sensors 1, 2' in out
+    assert 'sensor0.x: not identifiable, these data do not depend on it' in out
+    assert main([str(bags['absent']), '--sensors', '3', '--free', 'coil0.gain']) == 2
+    assert 'has sensors 0 to 2' in _error(capsys)
+
+
+def test_magnet_from_the_recorder_metadata(tmp_path, capsys):
+    # the recorder stores the simulator's parameters as '<node>.<parameter>'
+    bag = write_bag(tmp_path / 'lab', 'absent', 1500, key='maglev_simulator.magnet')
+    assert main([str(bag), '--free', 'coil0.gain']) == 0
+    assert 'magnet absent' in capsys.readouterr().out
