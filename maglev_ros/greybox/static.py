@@ -248,8 +248,8 @@ class ValidationFit:
 
     @property
     def mean_fit(self) -> float:
-        """Mean fit over the channels, percent."""
-        return float(np.mean(self.fit))
+        """Mean fit over the channels, percent (channels without spread left out)."""
+        return float(np.nanmean(self.fit))
 
     @property
     def total_rms(self) -> float:
@@ -444,14 +444,16 @@ class StaticCalibration:
 
     def table(self) -> list[str]:
         """Return the estimates as text lines (name, nominal, estimate, std, change/std)."""
-        lines = [f'{"parameter":<28}{"nominal":>16}{"estimate":>16}{"std":>14}{"change/std":>12}']
+        lines = [
+            f'{"parameter":<28}{"nominal":>16} {"estimate":>16} {"std":>16} {"change/std":>11}'
+        ]
         for name in self.names:
             spec = self.vector[name]
             est, sd = self.estimate[name], self.std[name]
             ratio = (est - spec.nominal) / sd if sd > 0 else np.inf
             lines.append(
-                f'{name:<28}{spec.display(spec.nominal):>16}{spec.display(est):>16}'
-                f'{spec.display(sd):>14}{ratio:>12.1f}'
+                f'{name:<28}{spec.display(spec.nominal):>16} {spec.display(est):>16} '
+                f'{spec.display(sd):>16} {ratio:>11.1f}'
             )
         return lines
 
