@@ -94,7 +94,6 @@ __all__ = [
     'make_executor',
     'Spinner',
     'run_nodes',
-    'declare_parameters',
     'spin',
     'field_topic',
     'odometry_layout',
@@ -340,32 +339,6 @@ class Spinner:
         self.executor.shutdown()
 
 
-def declare_parameters(node, table: Mapping[str, tuple[object, str]]) -> dict[str, object]:
-    """Declare a node's read-only parameters and return their values.
-
-    Parameters
-    ----------
-    node : rclpy.node.Node
-        The node.
-    table : mapping
-        ``name -> (default, description)``; the default fixes the type (None
-        declares an untyped parameter that may stay unset).
-
-    Returns
-    -------
-    dict
-        ``name -> value`` (None for an unset parameter), for the node's validator.
-    """
-    from rcl_interfaces.msg import ParameterDescriptor
-    from rclpy.parameter import Parameter
-
-    for name, (default, text) in table.items():
-        node.declare_parameter(
-            name, default, ParameterDescriptor(description=text, read_only=True)
-        )
-    return {name: node.get_parameter_or(name, Parameter(name, value=None)).value for name in table}
-
-
 def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, parameters=None) -> int:
     """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM.
 
@@ -386,7 +359,7 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
     Returns
     -------
     int
-        0, or 2 for invalid parameters.
+        0, or 2 for invalid parameters or ROS arguments.
     """
     if parameters is not None and help_requested(args):
         argv = sys.argv if args is None else args
@@ -397,7 +370,12 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         )
         print(parameters.help_text(prog), end='')
         return 0
-    rclpy.init(args=args)
+    try:
+        rclpy.init(args=args)
+    except Exception as err:  # noqa: BLE001 - rcl refuses the command line (RCLError)
+        text = str(err).strip().splitlines()
+        print(f'{name}: error: {text[0] if text else type(err).__name__}', file=sys.stderr)
+        return 2
     nodes = []
     executor = None
     try:
