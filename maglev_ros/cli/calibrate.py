@@ -139,6 +139,14 @@ def build_parser() -> argparse.ArgumentParser:
         help='sensor delay in samples (default: estimated per bag)',
     )
     p.add_argument(
+        '--frozen-run',
+        type=int,
+        default=3,
+        metavar='N',
+        help='leave out a sensor frozen for N or more identical readings while the '
+        'currents change (default 3; 0 keeps every reading)',
+    )
+    p.add_argument(
         '--hold-pose',
         action='store_true',
         help='do not estimate where a fixed magnet is held (use the nominal equilibrium)',
@@ -281,6 +289,8 @@ def _run(args: argparse.Namespace) -> int:
     vector = vector.with_free(args.free)
     for name, lower, upper in args.bounds:
         vector = vector.with_bounds(name, lower, upper)
+    if args.frozen_run < 0:
+        raise UsageError(f'--frozen-run must be >= 0, got {args.frozen_run}')
     if args.delay is not None and args.delay < 0:
         raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
     if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
@@ -311,6 +321,7 @@ def _run(args: argparse.Namespace) -> int:
         delays=delays,
         fit_pose=not args.hold_pose,
         progress=_say,
+        frozen_run=args.frozen_run,
     )
     print()
     for line in cal.table():

@@ -23,6 +23,7 @@ its noise level, estimated from the affine fit's residuals.
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -74,6 +75,8 @@ class StaticExperiment:
         and rad (None: the nominal set's equilibrium).
     sensors : tuple of int or None
         Which of the parameter set's sensors ``y`` holds, in order (None: all).
+    valid : ndarray of bool, shape (N,), or None
+        Readings to use (False: left out, e.g. a frozen sensor); None: all.
     """
 
     u: np.ndarray
@@ -83,6 +86,7 @@ class StaticExperiment:
     Ts: float = 2e-4
     pose: tuple[float, ...] | None = None
     sensors: tuple[int, ...] | None = None
+    valid: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self):
         u = np.asarray(self.u, dtype=float)
@@ -101,6 +105,14 @@ class StaticExperiment:
             raise GreyBoxError(f'{self.name}: currents and fields must be finite')
         object.__setattr__(self, 'u', u)
         object.__setattr__(self, 'y', y)
+        if self.valid is not None:
+            valid = np.asarray(self.valid, dtype=bool)
+            if valid.shape != (u.shape[0],):
+                raise GreyBoxError(
+                    f'{self.name}: valid must have one flag per sample ({u.shape[0]}), '
+                    f'got shape {valid.shape}'
+                )
+            object.__setattr__(self, 'valid', valid)
         if self.sensors is not None:
             object.__setattr__(self, 'sensors', tuple(int(k) for k in self.sensors))
             if y.shape[1] != 3 * len(self.sensors):
@@ -125,10 +137,46 @@ class StaticExperiment:
         cut = [slice(0, n), slice(n, None)]
         return tuple(
             StaticExperiment(
-                self.u[s], self.y[s], self.magnet, self.name, self.Ts, self.pose, self.sensors
+                self.u[s],
+                self.y[s],
+                self.magnet,
+                self.name,
+                self.Ts,
+                self.pose,
+                self.sensors,
+                None if self.valid is None else self.valid[s],
             )
             for s in cut
         )
+
+    def frozen(self, min_run: int = 3, delay: int = 0) -> np.ndarray:
+        """Return the readings of a frozen sensor, bool (N,).
+
+        Under coil switching the Hall sensors sometimes repeat one reading
+        until reset (the firmware resets after 20). A reading is marked when
+        it belongs to a run of at least ``min_run`` identical readings of a
+        sensor (all three axes exactly equal) during which the currents the
+        readings should reflect (``delay`` samples earlier) change: every
+        repeat of such a run is marked, the run's first reading is genuine
+        and kept. Shorter runs are left alone (quantised noise repeats now and
+        then), and so are repeats under unchanged currents (no sign of a freeze).
+        """
+        n = self.samples
+        out = np.zeros(n, dtype=bool)
+        for k in range(self.y.shape[1] // 3):
+            block = self.y[:, 3 * k : 3 * k + 3]
+            same = np.zeros(n, dtype=bool)
+            same[1:] = np.all(block[1:] == block[:-1], axis=1)
+            edges = np.diff(np.concatenate([[0], same.astype(np.int8), [0]]))
+            starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+            for a, b in zip(starts, ends, strict=True):
+                if b - a < min_run - 1:
+                    continue
+                first = self.u[max(a - 1 - delay, 0)]
+                cause = self.u[np.maximum(np.arange(a, b) - delay, 0)]
+                if np.any(cause != first):
+                    out[a:b] = True  # a freeze: all its repeats go (correlated errors)
+        return out
 
 
 def _regressors(u: np.ndarray) -> np.ndarray:
@@ -136,9 +184,13 @@ def _regressors(u: np.ndarray) -> np.ndarray:
 
 
 def _shifted(exp: StaticExperiment, delay: int) -> tuple[np.ndarray, np.ndarray]:
-    """Currents and readings paired with ``delay`` samples of sensor delay."""
+    """Currents and (valid) readings paired with ``delay`` samples of sensor delay."""
     n = exp.samples - delay
-    return exp.u[:n], exp.y[delay:]
+    u, y = exp.u[:n], exp.y[delay:]
+    if exp.valid is None:
+        return u, y
+    keep = exp.valid[delay:]
+    return u[keep], y[keep]
 
 
 @dataclass(frozen=True)
@@ -477,6 +529,7 @@ def calibrate_static(
     fit_pose: bool = True,
     progress: Callable[[str], None] | None = None,
     jacobian: str = 'features',
+    frozen_run: int = 3,
 ) -> StaticCalibration:
     """Estimate the free parameters of ``vector`` from static experiments.
 
@@ -498,6 +551,9 @@ def calibrate_static(
     jacobian : {'features', '2-point'}
         ``features``: central differences of the affine features (default);
         ``2-point``: scipy's own finite differences of the residual (for comparison).
+    frozen_run : int
+        Leave out the readings of a frozen sensor: runs of at least this many
+        identical readings (:meth:`StaticExperiment.frozen`); 0 keeps every reading.
 
     Returns
     -------
@@ -536,14 +592,24 @@ def calibrate_static(
             vector = vector.with_pose(count, pose, free=fit_pose)
     if not vector.free_names:
         raise GreyBoxError('no free parameter: choose some with --free')
-    parts = [e.split(split) if split < 1.0 else (e, e) for e in experiments]
-    estimation = [p[0] for p in parts]
-    validation = [p[1] for p in parts]
     if delays is None:
-        delays = [best_delay(e) for e in estimation]
+        delays = [best_delay(e) for e in experiments]
         for e, d in zip(experiments, delays, strict=True):
             say(f'{e.name}: sensor delay {d} sample(s) (best affine fit)')
     delays = tuple(int(d) for d in delays)
+    if frozen_run:
+        checked = []
+        for e, d in zip(experiments, delays, strict=True):
+            frozen = e.frozen(frozen_run, d)
+            if frozen.any():
+                say(f'{e.name}: {int(frozen.sum())} readings of a frozen sensor left out')
+                keep = ~frozen if e.valid is None else e.valid & ~frozen
+                e = dataclasses.replace(e, valid=keep)
+            checked.append(e)
+        experiments = checked
+    parts = [e.split(split) if split < 1.0 else (e, e) for e in experiments]
+    estimation = [p[0] for p in parts]
+    validation = [p[1] for p in parts]
 
     start = time.perf_counter()
     problem = StaticProblem(vector, estimation, delays)

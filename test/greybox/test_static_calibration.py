@@ -110,3 +110,37 @@ def test_bad_input_is_named():
         exp = experiment('absent')
         same = type(exp)(np.repeat(exp.u[:, :1], 4, axis=1), exp.y, 'absent', 'same currents')
         calibrate_static(vector.with_free(['coil0.gain']), [same])
+
+
+def _freeze(exp, seed=4, runs=150, length=20):
+    """The plant's readings with sensors frozen now and then (one reading held ``length``)."""
+    rng = np.random.default_rng(seed)
+    y = exp.y.copy()
+    free_from = [1, 1, 1]  # a frozen sensor cannot freeze again before its reset
+    for start in np.sort(rng.integers(1, exp.samples - length, runs)):
+        k = int(rng.integers(0, 3))
+        if start >= free_from[k]:
+            y[start : start + length, 3 * k : 3 * k + 3] = y[start - 1, 3 * k : 3 * k + 3]
+            free_from[k] = start + length + 1
+    return type(exp)(exp.u, y, exp.magnet, 'frozen sensors', exp.Ts)
+
+
+def test_frozen_sensor_readings_are_left_out():
+    clean = experiment('absent')
+    frozen = _freeze(clean)
+    marked = frozen.frozen()
+    assert marked.sum() > 1000 and not clean.frozen().any()
+    # noise-free readings under held currents repeat exactly: that is no freeze
+    exact = clean.u @ np.random.default_rng(0).normal(size=(4, 9))
+    assert not type(clean)(clean.u, exact, 'absent').frozen().any()
+    vector = nominal_vector().with_free(FREE[:-2])  # the magnet does not matter here
+    lines = []
+    cal = calibrate_static(vector, [frozen], progress=lines.append)
+    assert any('readings of a frozen sensor left out' in line for line in lines)
+    assert 0.9 < cal.chi2_per_dof < 1.1
+    for name in cal.names:
+        assert abs(cal.estimate[name] - _true_value(name)) <= 3 * cal.std[name], name
+    assert np.all(np.abs(cal.noise[0] / NOISE - 1) < 0.05)  # the sensor noise, nothing more
+    # kept, the frozen readings fit no static model: they look like extra noise
+    kept = calibrate_static(vector, [frozen], frozen_run=0)
+    assert np.mean(kept.noise[0]) > 1.3 * NOISE
