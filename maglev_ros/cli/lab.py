@@ -395,9 +395,9 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
     """
     import rclpy
 
-    from maglev_ros.nodes import contract
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.runtime import Spinner
     from maglev_ros.nodes.simulator import SimulatorNode
 
     topics = [field_topic(k) for k in args.sensors] + [
@@ -447,7 +447,7 @@ def run_experiment(args: argparse.Namespace, bag: Path) -> dict:
             ),
         )
         nodes.insert(0, recorder)  # destroyed last: finalises the bag
-        spinner = contract.Spinner(ctx, nodes)
+        spinner = Spinner(ctx, nodes)
         _wait(
             lambda: (
                 len(recorder.subscribed) == len(topics)
@@ -593,10 +593,10 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
     """
     import rclpy
 
-    from maglev_ros.nodes import contract
     from maglev_ros.nodes.driver import DriverNode
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.runtime import Spinner
 
     topics = [field_topic(k) for k in args.sensors] + [
         CURRENTS_TOPIC,
@@ -626,7 +626,7 @@ def run_board_experiment(args: argparse.Namespace, bag: Path, port: str, n_senso
             ),
         )
         nodes.append(driver)
-        spinner = contract.Spinner(ctx, nodes)
+        spinner = Spinner(ctx, nodes)
         _wait(
             lambda: (
                 len(recorder.subscribed) == len(topics) - 1

@@ -39,7 +39,6 @@ from maglev_ros.excitation import (
     excitation,
     pattern_signals,
 )
-from maglev_ros.nodes import contract
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -48,6 +47,9 @@ from maglev_ros.nodes.params import (
     integer,
     number,
 )
+from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
+from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.topics import COIL_NAMES, COMMAND_TOPIC, CURRENTS_TOPIC
 
 __all__ = [
     'PARAMETERS',
@@ -135,7 +137,7 @@ PARAMETERS = ParameterTable(
         ),
         'offset': Param(
             [0.0, 0.0, 0.0, 0.0],
-            f'currents added to every command, A ({" ".join(contract.COIL_NAMES)})',
+            f'currents added to every command, A ({" ".join(COIL_NAMES)})',
             check=_offset,
         ),
         'seed': Param(0, 'seed of the signals', check=integer(0)),
@@ -143,7 +145,7 @@ PARAMETERS = ParameterTable(
         'cycles': Param(0, 'periods to send (0: forever); then offset only', check=integer(0)),
         'trigger': Param(
             'sample',
-            f'sample: one command per {contract.CURRENTS_TOPIC} message; timer: wall clock',
+            f'sample: one command per {CURRENTS_TOPIC} message; timer: wall clock',
             check=choice(*TRIGGERS),
         ),
         'sample_rate': Param(
@@ -213,12 +215,10 @@ class ExcitationNode(Node):
         self._rows = self.commands.tolist()
         self.sent = 0
         self._msg = Float64MultiArray()
-        self._pub = self.create_publisher(
-            Float64MultiArray, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS
-        )
+        self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         if cfg.trigger == 'sample':
             self.create_subscription(
-                JointState, contract.CURRENTS_TOPIC, self._on_sample, contract.SENSOR_QOS, raw=True
+                JointState, CURRENTS_TOPIC, self._on_sample, SENSOR_QOS, raw=True
             )
         else:
             self.create_timer(1.0 / cfg.sample_rate, self.publish_next)
@@ -260,9 +260,7 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    return contract.run_nodes(
-        [ExcitationNode], args, NODE_NAME, (ExcitationParameterError,), PARAMETERS
-    )
+    return run_nodes([ExcitationNode], args, NODE_NAME, (ExcitationParameterError,), PARAMETERS)
 
 
 if __name__ == '__main__':

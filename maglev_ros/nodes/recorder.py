@@ -35,8 +35,15 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from maglev_ros.bags import BagError, BagWriter
-from maglev_ros.nodes import contract
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, integer
+from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.topics import (
+    CLOCK_TOPIC,
+    COMMAND_TOPIC,
+    CURRENTS_TOPIC,
+    TRUE_STATE_TOPIC,
+    field_topic,
+)
 
 __all__ = [
     'PARAMETERS',
@@ -51,11 +58,11 @@ __all__ = [
 
 NODE_NAME = 'maglev_recorder'
 DEFAULT_TOPICS = [
-    *(contract.field_topic(k) for k in range(3)),
-    contract.CURRENTS_TOPIC,
-    contract.COMMAND_TOPIC,
-    contract.TRUE_STATE_TOPIC,
-    contract.CLOCK_TOPIC,
+    *(field_topic(k) for k in range(3)),
+    CURRENTS_TOPIC,
+    COMMAND_TOPIC,
+    TRUE_STATE_TOPIC,
+    CLOCK_TOPIC,
 ]
 _CLOCK = struct.Struct('<iI')  # rosgraph_msgs/Clock after the 4-byte CDR header
 
@@ -111,7 +118,7 @@ PARAMETERS = ParameterTable(
         'depth': Param(10000, 'subscription queue depth (messages)', check=integer(1)),
         'log_clock': Param(
             'ros',
-            f'log time: ros (node clock) or topic (newest {contract.CLOCK_TOPIC} received)',
+            f'log time: ros (node clock) or topic (newest {CLOCK_TOPIC} received)',
             check=choice('ros', 'topic'),
         ),
         'metadata_node': Param('maglev_simulator', "node whose parameters are stored ('' : none)"),
@@ -142,9 +149,9 @@ def build_config(values: dict) -> RecorderConfig:
         Naming the first invalid parameter and its value.
     """
     v = PARAMETERS.validate(values)
-    if v['log_clock'] == 'topic' and contract.CLOCK_TOPIC not in v['topics']:
+    if v['log_clock'] == 'topic' and CLOCK_TOPIC not in v['topics']:
         raise RecorderParameterError(
-            f'log_clock topic needs {contract.CLOCK_TOPIC} among topics, got {list(v["topics"])}'
+            f'log_clock topic needs {CLOCK_TOPIC} among topics, got {list(v["topics"])}'
         )
     path = v['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
     if Path(path).exists():
@@ -268,7 +275,7 @@ class RecorderNode(Node):
                 self._handles[topic] = None
                 continue
             self._handles[topic] = handle
-            is_clock = topic == contract.CLOCK_TOPIC
+            is_clock = topic == CLOCK_TOPIC
             self.create_subscription(
                 cls, topic, self._writer_for(handle, topic, is_clock), qos, raw=True
             )
@@ -382,9 +389,7 @@ def main(args: list[str] | None = None) -> int:
     int
         Exit status: 0, or 2 for invalid parameters.
     """
-    return contract.run_nodes(
-        [RecorderNode], args, NODE_NAME, (RecorderParameterError,), PARAMETERS
-    )
+    return run_nodes([RecorderNode], args, NODE_NAME, (RecorderParameterError,), PARAMETERS)
 
 
 if __name__ == '__main__':

@@ -67,7 +67,7 @@ from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Pose
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
@@ -96,6 +96,7 @@ from maglev_ros.physics import (
     Simulator,
     make_model,
 )
+from maglev_ros.physics.kernels import odometry_values
 from maglev_ros.physics.simulation import MAGNET_MODES
 from maglev_ros.topics import SIMULATOR_PAUSE_SERVICE, SIMULATOR_RESET_SERVICE
 
@@ -458,7 +459,7 @@ class SimulatorNode(Node):
             1 if cfg.mode == 'lockstep' else max(1, int(round(cfg.pace_period * cfg.sample_rate)))
         )
         self._diag_pub = self.create_publisher(
-            contract.DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
+            DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
         )
         command_qos = (
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
@@ -539,7 +540,7 @@ class SimulatorNode(Node):
         if self._state_pub is not None:
             key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
             if key != self._odom_state:
-                self._odom_cache = contract.odometry_values(state).tolist()
+                self._odom_cache = odometry_values(state).tolist()
                 self._odom_state = key
             self._state_handle.publish_raw(self._state_raw.serialise(t_ns, self._odom_cache))
         self._last_state = state
@@ -561,7 +562,7 @@ class SimulatorNode(Node):
                 color=_color(0.85, 0.1, 0.1) if not self.sim.crashed else _color(0.3, 0.3, 0.3),
             )
             magnet.header.frame_id = contract.BASE_FRAME
-            v = contract.odometry_values(self._last_state)
+            v = odometry_values(self._last_state)
             magnet.pose = Pose()
             magnet.pose.position.x, magnet.pose.position.y, magnet.pose.position.z = v[0:3]
             o = magnet.pose.orientation
@@ -700,7 +701,7 @@ class SimulatorNode(Node):
             for i, state in enumerate(states):
                 key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
                 if key != self._odom_state:
-                    self._odom_cache = contract.odometry_values(state).tolist()
+                    self._odom_cache = odometry_values(state).tolist()
                     self._odom_state = key
                 odometry[i] = self._odom_cache
             values.append(odometry)

@@ -36,6 +36,9 @@ from numba import njit
 from .loop import FASTMATH, LOOP_WORK_ROWS, loop_batch
 
 __all__ = [
+    'euler_to_quaternion',
+    'odometry_values',
+    'rotation_matrix',
     'WORK_ROWS',
     'TORQUE_TRUE',
     'TORQUE_PUBLISHED',
@@ -96,6 +99,44 @@ def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
     r[2, 1] = cb * sa
     r[2, 2] = cb * ca
     return r
+
+
+def euler_to_quaternion(alpha: float, beta: float, gamma: float) -> tuple[float, ...]:
+    """Quaternion (x, y, z, w) of ``R = Rz(gamma) Ry(beta) Rx(alpha)`` (angles in rad)."""
+    ca, sa = math.cos(alpha / 2), math.sin(alpha / 2)
+    cb, sb = math.cos(beta / 2), math.sin(beta / 2)
+    cg, sg = math.cos(gamma / 2), math.sin(gamma / 2)
+    return (
+        sa * cb * cg - ca * sb * sg,
+        ca * sb * cg + sa * cb * sg,
+        ca * cb * sg - sa * sb * cg,
+        ca * cb * cg + sa * sb * sg,
+    )
+
+
+def odometry_values(x: np.ndarray) -> np.ndarray:
+    """Return the 13 varying numbers of the true-state Odometry of state ``x``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position (m), ZYX Euler angles (rad), world velocity (m/s),
+        body rates (rad/s).
+
+    Returns
+    -------
+    ndarray, shape (13,)
+        Position (3), quaternion x y z w (4), linear velocity in the magnet
+        frame (3, nav_msgs puts the twist in the child frame), body rates (3).
+    """
+    alpha, beta, gamma = float(x[3]), float(x[4]), float(x[5])
+    rot = rotation_matrix(alpha, beta, gamma)
+    out = np.empty(13)
+    out[0:3] = x[0:3]
+    out[3:7] = euler_to_quaternion(alpha, beta, gamma)
+    out[7:10] = rot.T @ np.asarray(x[6:9], dtype=float)
+    out[10:13] = x[9:12]
+    return out
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')

@@ -1,0 +1,154 @@
+"""Running nodes: the executor, the spin loop, a background spinner, a node's ``main``."""
+
+from __future__ import annotations
+
+import os
+import sys
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+
+from maglev_ros.nodes.params import help_requested
+from maglev_ros.nodes.scheduling import relax_event_threads
+
+__all__ = ['Spinner', 'make_executor', 'run_nodes', 'spin']
+
+
+def make_executor(context=None):
+    """Return the fastest executor available: EventsExecutor, else SingleThreadedExecutor."""
+    try:
+        from rclpy.experimental import EventsExecutor
+    except ImportError:  # older rclpy
+        from rclpy.executors import SingleThreadedExecutor
+
+        return SingleThreadedExecutor(context=context)
+    return EventsExecutor(context=context)
+
+
+def spin(executor, context=None, stop=None) -> None:
+    """Spin ``executor`` until its context shuts down or ``stop`` is set.
+
+    Runs ``spin_once`` in a loop: the Jazzy EventsExecutor's own ``spin()``
+    does not fire timers in the PyPI build, ``spin_once`` does.
+
+    Parameters
+    ----------
+    executor : rclpy executor
+        The executor (nodes added).
+    context : rclpy.context.Context, optional
+        Its context (default: the default context).
+    stop : threading.Event, optional
+        Set it to end the loop from another thread.
+    """
+    context = context or rclpy.get_default_context()
+    while context.ok() and not (stop is not None and stop.is_set()):
+        try:
+            executor.spin_once(timeout_sec=0.1)
+        except ExternalShutdownException:
+            break
+        except Exception:  # noqa: BLE001 - re-raised unless the context is gone
+            if context.ok():
+                raise
+            break  # a callback raced the shutdown (SIGINT/SIGTERM): nothing left to do
+
+
+class Spinner:
+    """Spin nodes on one executor in a background thread (tests, ``maglev-lab``).
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        The nodes' context.
+    nodes : sequence of Node
+        Nodes to spin.
+    """
+
+    def __init__(self, context, nodes) -> None:
+        import threading
+
+        self.context = context
+        relax_event_threads()
+        self.executor = make_executor(context)
+        for node in nodes:
+            self.executor.add_node(node)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(
+            target=spin,
+            args=(self.executor, context, self._stop),
+            name='maglev-spinner',
+            daemon=True,
+        )
+        self._thread.start()
+
+    def add_node(self, node) -> None:
+        """Add a node to the executor."""
+        self.executor.add_node(node)
+
+    def close(self) -> None:
+        """Stop spinning and shut the executor down (idempotent)."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        self._thread.join(timeout=10.0)
+        self.executor.shutdown()
+
+
+def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, parameters=None) -> int:
+    """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM.
+
+    Parameters
+    ----------
+    factories : sequence of callable
+        Each returns a node (called after ``rclpy.init``).
+    args : list of str or None
+        Command-line arguments (ROS arguments included; None: ``sys.argv``).
+    name : str
+        Logger name for parameter errors.
+    errors : tuple of exception types
+        Parameter errors: logged in one line, exit status 2.
+    parameters : maglev_ros.nodes.params.ParameterTable, optional
+        The node's parameters: ``--help`` (``-h``) before ``--ros-args``
+        prints them and returns 0 without starting ROS.
+
+    Returns
+    -------
+    int
+        0, or 2 for invalid parameters or ROS arguments.
+    """
+    if parameters is not None and help_requested(args):
+        argv = sys.argv if args is None else args
+        prog = (
+            os.path.splitext(os.path.basename(argv[0]))[0]
+            if argv and not argv[0].startswith('-')
+            else None
+        )
+        print(parameters.help_text(prog), end='')
+        return 0
+    try:
+        rclpy.init(args=args)
+    except Exception as err:  # noqa: BLE001 - rcl refuses the command line (RCLError)
+        text = str(err).strip().splitlines()
+        print(f'{name}: error: {text[0] if text else type(err).__name__}', file=sys.stderr)
+        return 2
+    nodes = []
+    executor = None
+    try:
+        for factory in factories:
+            nodes.append(factory())
+        relax_event_threads()  # DDS timer wake-ups must not preempt the publishers
+        executor = make_executor()
+        for node in nodes:
+            executor.add_node(node)
+        spin(executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except errors as err:
+        rclpy.logging.get_logger(name).error(str(err))
+        return 2
+    finally:
+        if executor is not None:
+            executor.shutdown()
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
