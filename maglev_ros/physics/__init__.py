@@ -5,6 +5,7 @@ the levitating magnet; the 12-state dynamics f(x, u) and sensor model h(x, u);
 equilibria, linearisation and simulation. Specified in ``maggy-model.md``.
 """
 
+from .discretization import zoh
 from .equilibria import Equilibrium, find_equilibria, solenoid_radius_correction, vertical_force
 from .linearization import (
     LinearModel,
@@ -27,6 +28,7 @@ from .sheet import sheet_field
 from .simulation import (
     CoilDynamics,
     SensorEffects,
+    SensorFreeze,
     SimulationCrashedError,
     SimulationResult,
     Simulator,
@@ -59,8 +61,10 @@ __all__ = [
     'observability_rank',
     'CoilDynamics',
     'SensorEffects',
+    'SensorFreeze',
     'SimulationResult',
     'SimulationCrashedError',
     'Simulator',
     'simulate_reference',
+    'zoh',
 ]

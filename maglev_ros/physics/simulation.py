@@ -24,6 +24,7 @@ from . import kernels
 __all__ = [
     'CoilDynamics',
     'SensorEffects',
+    'SensorFreeze',
     'SimulationResult',
     'SimulationCrashedError',
     'Simulator',
@@ -119,6 +120,58 @@ class SensorEffects:
             raise ValueError(f'delay_samples must be an integer >= 0, got {self.delay_samples!r}')
 
 
+@dataclass(frozen=True)
+class SensorFreeze:
+    """Sensor freezes: a sensor repeats its last reading (all three axes).
+
+    Under coil switching the TLE493D/TLV493D sometimes repeat one reading until
+    they are reset; the board's firmware resets a sensor after 20 identical
+    samples. Freezes are applied to the reading after noise and quantisation
+    and before the output delay (the sensor itself repeats).
+
+    Attributes
+    ----------
+    schedule : tuple of (int, float, float)
+        Scheduled freezes ``(sensor index, start s, duration s)``: the sensor
+        repeats the reading it gave just before ``start`` for the samples with
+        ``start <= t < start + duration`` (the firmware's reset is not modelled
+        for these: they are injected faults).
+    rate : float
+        Random freezes per second per sensor (seeded by the simulator's seed).
+    length : int
+        Samples a random freeze lasts (the firmware resets after 20 identical).
+    """
+
+    schedule: tuple = ()
+    rate: float = 0.0
+    length: int = 20
+
+    def __post_init__(self):
+        entries = []
+        for entry in self.schedule:
+            try:
+                sensor, start, duration = entry
+                entries.append((int(sensor), float(start), float(duration)))
+            except (TypeError, ValueError):
+                raise ValueError(
+                    f'schedule entries must be (sensor, start s, duration s), got {entry!r}'
+                ) from None
+            if entries[-1][0] < 0 or not (entries[-1][2] > 0 and np.isfinite(entries[-1][1])):
+                raise ValueError(
+                    f'schedule entry needs sensor >= 0, finite start, duration > 0, got {entry!r}'
+                )
+        object.__setattr__(self, 'schedule', tuple(entries))
+        if not (np.isfinite(self.rate) and self.rate >= 0):
+            raise ValueError(f'rate must be >= 0, got {self.rate!r}')
+        if not isinstance(self.length, (int, np.integer)) or self.length < 1:
+            raise ValueError(f'length must be an integer >= 1, got {self.length!r}')
+
+    @property
+    def active(self) -> bool:
+        """True when any freeze can happen."""
+        return bool(self.schedule) or self.rate > 0
+
+
 @dataclass
 class SimulationResult:
     """A simulated run.
@@ -186,6 +239,8 @@ class Simulator:
         ``free``: the magnet moves (levitation). ``fixed``: held at ``x0``, only
         the coils evolve (identify the current-to-field path with the magnet in
         place). ``absent``: no levitating magnet at all (base and coils only).
+    freeze : SensorFreeze or None
+        Sensor freezes, scheduled or random (seeded with ``seed``).
     """
 
     def __init__(
@@ -199,6 +254,7 @@ class Simulator:
         check_crash: bool = True,
         x0=None,
         magnet: str = 'free',
+        freeze: SensorFreeze | None = None,
     ):
         if magnet not in MAGNET_MODES:
             raise ValueError(f'magnet must be one of {", ".join(MAGNET_MODES)}, got {magnet!r}')
@@ -231,8 +287,16 @@ class Simulator:
             self._electrical = np.array([coil.resistance, coil.inductance, coil.supply_voltage])
         offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float), (model.n_outputs,))
         self._offset = np.array(offset)
+        self.freeze = freeze or SensorFreeze()
+        n_sensors = model.n_outputs // 3
+        for sensor, _, _ in self.freeze.schedule:
+            if sensor >= n_sensors:
+                raise ValueError(
+                    f'freeze schedule names sensor {sensor}, the model has {n_sensors}'
+                )
         self._ideal_sensor = (
-            self.sensor.noise_rms == 0
+            not self.freeze.active
+            and self.sensor.noise_rms == 0
             and self.sensor.quantization == 0
             and not self.sensor.delay_samples
             and not np.any(self._offset)
@@ -286,6 +350,7 @@ class Simulator:
         self.crash_time: float | None = None
         self.crash_state: np.ndarray | None = None
         self._rng = np.random.default_rng(self.seed)
+        self._reset_freeze()
         self._pending = []
         self._last_input = np.zeros(n_s)
         return self._observe(self._true_output())
@@ -401,6 +466,7 @@ class Simulator:
                 ]
             )
         self._rng = np.random.default_rng(self.seed)
+        self._reset_freeze()
         self._pending = []
         outputs = self._observe_many(truth)
         self._xe = states[-1].copy()
@@ -487,12 +553,52 @@ class Simulator:
             reading = reading + fx.noise_rms * self._rng.standard_normal(reading.shape)
         if fx.quantization > 0:
             reading = np.round(reading / fx.quantization) * fx.quantization
+        if self.freeze.active:
+            reading = self._apply_freeze(reading)
         if fx.delay_samples:
             self._pending.append(reading)
             if len(self._pending) <= fx.delay_samples:
                 return self._pending[0].copy()
             return self._pending.pop(0)
         return reading
+
+    @property
+    def frozen_sensors(self) -> tuple[int, ...]:
+        """Indices of the sensors whose last reading was frozen (repeated)."""
+        return tuple(int(k) for k in np.flatnonzero(self._frozen_now))
+
+    def _reset_freeze(self) -> None:
+        n_sensors = self.model.n_outputs // 3
+        seed = None if self.seed is None else [int(self.seed), 1]
+        self._freeze_rng = np.random.default_rng(seed)
+        self._frozen_left = np.zeros(n_sensors, dtype=np.int64)  # random freezes
+        self._frozen_now = np.zeros(n_sensors, dtype=bool)
+        self._held = None
+        self._observed = 0  # readings taken since reset (reading n is at t = n dt)
+
+    def _apply_freeze(self, reading: np.ndarray) -> np.ndarray:
+        """Replace the frozen sensors' readings by their last ones (before the delay)."""
+        t = self._observed * self.dt
+        self._observed += 1
+        frozen = self._frozen_left > 0
+        self._frozen_left[frozen] -= 1
+        if self.freeze.rate > 0:
+            starts = self._freeze_rng.random(frozen.size) < self.freeze.rate * self.dt
+            starts &= ~frozen
+            self._frozen_left[starts] = self.freeze.length - 1
+            frozen |= starts
+        eps = 1e-9 * self.dt  # sample times are n dt: keep the window's edges exact
+        for sensor, start, duration in self.freeze.schedule:
+            if start - eps <= t < start + duration - eps:
+                frozen[sensor] = True
+        if self._held is None:
+            frozen[:] = False  # the very first reading has nothing to repeat
+        out = reading.reshape(-1, 3).copy()
+        if frozen.any():
+            out[frozen] = self._held[frozen]
+        self._held = out.copy()
+        self._frozen_now = frozen
+        return out.ravel()
 
     def _observe_many(self, truth: np.ndarray) -> np.ndarray:
         """Apply the sensor effects to a whole run's true readings (as :meth:`_observe`)."""

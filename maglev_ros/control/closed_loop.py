@@ -1,0 +1,378 @@
+"""The closed loop without ROS: simulator -> estimator -> controller, sample by sample.
+
+The very objects the nodes use (:class:`~maglev_ros.physics.Simulator`, an
+:class:`~maglev_ros.estimation.Estimator`, an :class:`LqrController` or
+:class:`PdController`) are stepped in the order of the lockstep graph: the
+simulator's sample k (readings, one sample old on the board, and the coil
+currents) goes to the estimator, its estimate to the controller, and the
+command drives the coils from sample k + ``command_delay``.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..estimation.base import nis_band
+from .pd import PdController
+
+__all__ = ['ClosedLoop', 'LoopResult', 'make_closed_loop', 'moving_rms']
+
+
+def moving_rms(values: np.ndarray, window: int) -> np.ndarray:
+    """Trailing moving RMS over ``window`` samples, shape like ``values`` (first ones partial)."""
+    v = np.asarray(values, dtype=float)
+    sq = np.concatenate([np.zeros((1,) + v.shape[1:]), np.cumsum(v**2, axis=0)])
+    idx = np.arange(1, v.shape[0] + 1)
+    lo = np.maximum(idx - window, 0)
+    counts = (idx - lo).reshape((-1,) + (1,) * (v.ndim - 1))
+    return np.sqrt(np.maximum(sq[idx] - sq[lo], 0.0) / counts)
+
+
+@dataclass(frozen=True)
+class LoopResult:
+    """A closed-loop run (arrays per sample, N samples).
+
+    Attributes
+    ----------
+    t : ndarray, shape (N,)
+        s.
+    x : ndarray, shape (N, 12)
+        True state at each sample.
+    estimate : ndarray, shape (N, 12)
+        Estimate published at each sample (NaN while the estimator's input is cut).
+    std : ndarray, shape (N, 10)
+        Its standard deviations (reduced states).
+    nis, dof : ndarray, shape (N,)
+        NIS of the accepted readings and its degrees of freedom.
+    command : ndarray, shape (N, n_s)
+        Controller output at each sample, A.
+    currents : ndarray, shape (N, n_s)
+        Coil currents at each sample, A.
+    reference : ndarray, shape (N, 3)
+        Set-point, m.
+    level : ndarray of str, shape (N,)
+        Controller status level per sample.
+    frozen : ndarray of bool, shape (N, k)
+        Sensors the estimator held frozen at each sample.
+    z_eq : float
+        Equilibrium height of the *plant*, m (the hold metrics use it).
+    crashed : bool
+    reason : str
+    messages : tuple of str
+        Distinct ERROR/WARN messages of the controller, and the frozen
+        sensors' names as the estimator's diagnostics gave them, in order.
+    wall_time : float
+        s spent in the loop.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    estimate: np.ndarray
+    std: np.ndarray
+    nis: np.ndarray
+    dof: np.ndarray
+    command: np.ndarray
+    currents: np.ndarray
+    reference: np.ndarray
+    level: np.ndarray
+    frozen: np.ndarray
+    z_eq: float
+    crashed: bool
+    reason: str
+    messages: tuple = field(default=())
+    wall_time: float = 0.0
+
+    @property
+    def dt(self) -> float:
+        """Sample period, s."""
+        return float(self.t[1] - self.t[0]) if self.t.size > 1 else 0.0
+
+    def position_error(self, against_reference: bool = False) -> np.ndarray:
+        """x, y, z - z_eq (or minus the reference), m, shape (N, 3)."""
+        if against_reference:
+            return self.x[:, :3] - self.reference
+        err = self.x[:, :3].copy()
+        err[:, 2] -= self.z_eq
+        return err
+
+    def settle_time(self, threshold: float = 1e-4, window: float = 0.1) -> float:
+        """Return the first time every axis' ``window``-s moving RMS is below ``threshold``.
+
+        Returns inf when it never is.
+        """
+        n = max(1, int(round(window / self.dt)))
+        rms = moving_rms(self.position_error(), n)
+        ok = np.all(rms < threshold, axis=1)
+        ok[: n - 1] = False  # a full window first
+        hits = np.flatnonzero(ok)
+        return float(self.t[hits[0]]) if hits.size else float('inf')
+
+    def hold(self, start: float) -> tuple[np.ndarray, np.ndarray]:
+        """RMS and largest excursion per axis from ``start`` (s) on, m, shapes (3,), (3,)."""
+        err = self.position_error()[self.t >= start]
+        return np.sqrt(np.mean(err**2, axis=0)), np.max(np.abs(err), axis=0)
+
+    def consistency(self, start: float) -> np.ndarray:
+        """Fraction of samples from ``start`` with |estimate - true| <= 3 sigma, for x, y, z."""
+        sel = (self.t >= start) & np.all(np.isfinite(self.estimate), axis=1)
+        err = np.abs(self.estimate[sel, :3] - self.x[sel, :3])
+        return np.mean(err <= 3.0 * self.std[sel, :3], axis=0)
+
+    def nis_windows(self, start: float, window: int = 500) -> tuple[np.ndarray, np.ndarray]:
+        """Windowed NIS sums from ``start`` and whether each lies in its 99 % band.
+
+        Returns
+        -------
+        sums : ndarray, shape (W,)
+        inside : ndarray of bool, shape (W,)
+        """
+        sel = np.flatnonzero(self.t >= start)
+        w = len(sel) // window
+        nis = self.nis[sel[: w * window]].reshape(w, window).sum(axis=1)
+        dof = self.dof[sel[: w * window]].reshape(w, window).sum(axis=1)
+        inside = np.empty(w, dtype=bool)
+        cache: dict[int, tuple[float, float]] = {}
+        for j in range(w):
+            d = int(dof[j])
+            if d not in cache:
+                cache[d] = nis_band(d) if d else (0.0, 0.0)
+            inside[j] = cache[d][0] <= nis[j] <= cache[d][1]
+        return nis, inside
+
+    def nis_average(self, start: float) -> tuple[float, tuple[float, float]]:
+        """NIS summed from ``start`` on and its 99 % band (the time-averaged NIS test)."""
+        sel = self.t >= start
+        total = float(self.nis[sel].sum())
+        return total, nis_band(int(self.dof[sel].sum()))
+
+
+class ClosedLoop:
+    """Simulator -> estimator -> controller, stepped as in the lockstep graph.
+
+    Parameters
+    ----------
+    simulator : Simulator
+        The plant (its own model: it may differ from the estimator's).
+    estimator : Estimator or None
+        None with a PD controller (it reads the raw field).
+    controller : LqrController or PdController
+    command_delay : int, optional
+        Samples before a command drives the coils (default: the controller's
+        ``command_delay``; 1 is the board: the command computed from sample k
+        is applied from k+1).
+    """
+
+    def __init__(self, simulator, estimator, controller, command_delay: int | None = None):
+        self.simulator = simulator
+        self.estimator = estimator
+        self.controller = controller
+        self.pd = isinstance(controller, PdController)
+        if estimator is None and not self.pd:
+            raise ValueError('the LQR needs an estimator')
+        delay = controller.config.command_delay if command_delay is None else command_delay
+        if delay not in (0, 1):
+            raise ValueError(f'command_delay must be 0 or 1, got {delay!r}')
+        self.command_delay = delay
+        from ..physics.equilibria import find_equilibria
+
+        found = find_equilibria(simulator.model)
+        self.z_eq = found[0].z if found else float('nan')
+
+    def run(
+        self,
+        duration: float,
+        x0=None,
+        reference=None,
+        cut: tuple[float, float] | None = None,
+        progress=None,
+    ) -> LoopResult:
+        """Run for ``duration`` s of simulated time from ``x0`` (stops at a crash).
+
+        Parameters
+        ----------
+        duration : float
+            s.
+        x0 : array_like, shape (12,), optional
+            Initial true state (default: the plant's equilibrium). The
+            estimator starts at its own equilibrium.
+        reference : callable or None
+            ``reference(t) -> position (3,) m or None``, evaluated each sample;
+            a change calls the controller's ``set_reference``.
+        cut : (start, length) in s, optional
+            The estimator's input (the sample) is cut over this interval: no
+            estimate reaches the controller (PD: no sample).
+        progress : callable, optional
+            ``progress(t)`` called about every simulated second.
+        """
+        sim, est, ctrl = self.simulator, self.estimator, self.controller
+        dt = sim.dt
+        n = int(round(duration / dt))
+        n_s = sim.model.n_inputs
+        k_sensors = sim.model.n_outputs // 3
+        t_arr = np.arange(n) * dt
+        xs = np.full((n, 12), np.nan)
+        est_arr = np.full((n, 12), np.nan)
+        std_arr = np.full((n, 10), np.nan)
+        nis = np.zeros(n)
+        dof = np.zeros(n, dtype=np.int64)
+        cmd_arr = np.zeros((n, n_s))
+        cur_arr = np.zeros((n, n_s))
+        ref_arr = np.zeros((n, 3))
+        level = np.empty(n, dtype=object)
+        frozen = np.zeros((n, k_sensors), dtype=bool)
+        messages: list[str] = []
+        y = sim.reset(x0)
+        if est is not None:
+            est.reset()
+        ctrl.reset()
+        pending = np.zeros(n_s)
+        current_ref = None
+        cut_start, cut_end = (cut[0], cut[0] + cut[1]) if cut else (np.inf, -np.inf)
+        done = n
+        reason = ''
+        wall = time.perf_counter()
+        last_level = 'OK'
+        for k in range(n):
+            t = t_arr[k]
+            if reference is not None:
+                ref = reference(t)
+                if ref is not None and (current_ref is None or np.any(ref != current_ref)):
+                    current_ref = np.array(ref, dtype=float)
+                    ctrl.set_reference(current_ref)
+            currents = sim.currents
+            xs[k] = sim.state
+            cur_arr[k] = currents
+            ref_arr[k] = ctrl.reference if not self.pd else np.nan
+            is_cut = cut_start <= t < cut_end
+            if self.pd:
+                command = ctrl.command(t, None if is_cut else y, currents)
+            else:
+                if is_cut:
+                    command = ctrl.command(t)
+                else:
+                    x_hat = est.step(y, currents)
+                    est_arr[k] = x_hat
+                    std_arr[k] = est.state_std()
+                    nis[k] = est.last_nis
+                    dof[k] = est.last_dof
+                    frozen[k] = est.freeze.frozen
+                    if est.freeze.frozen.any():
+                        names = est.status().frozen_names()
+                        text = f'estimator: frozen {", ".join(names)} at t = {t:.4f} s'
+                        if not messages or not messages[-1].startswith(
+                            f'estimator: frozen {", ".join(names)}'
+                        ):
+                            messages.append(text)
+                    command = ctrl.command(t, x_hat, currents)
+            cmd_arr[k] = command
+            if not ctrl.active or last_level != 'OK':
+                status = ctrl.status()
+                level[k] = status.level
+                if status.level != 'OK' and (not messages or messages[-1] != status.message):
+                    if status.level == 'ERROR' or k > 0:
+                        messages.append(f'controller {status.level}: {status.message}')
+                last_level = status.level
+            else:
+                level[k] = 'OK'
+            if self.command_delay:
+                applied, pending = pending, command
+            else:
+                applied = command
+            y = sim.step(applied)
+            if sim.crashed:
+                done = k + 1
+                reason = f'{sim.reason} at t = {sim.crash_time:.4f} s'
+                break
+            if progress is not None and k % int(round(1.0 / dt)) == 0 and k:
+                progress(t)
+        wall = time.perf_counter() - wall
+        return LoopResult(
+            t=t_arr[:done],
+            x=xs[:done],
+            estimate=est_arr[:done],
+            std=std_arr[:done],
+            nis=nis[:done],
+            dof=dof[:done],
+            command=cmd_arr[:done],
+            currents=cur_arr[:done],
+            reference=ref_arr[:done],
+            level=level[:done],
+            frozen=frozen[:done],
+            z_eq=self.z_eq,
+            crashed=sim.crashed,
+            reason=reason,
+            messages=tuple(messages),
+            wall_time=wall,
+        )
+
+
+def make_closed_loop(
+    params='maggy_v2',
+    estimator=None,
+    controller=None,
+    plant=None,
+    noise: float = 1.0e-4,
+    quantization: float = 0.098e-3,
+    sensor_delay: int = 1,
+    coil_dynamics: bool = True,
+    freeze=None,
+    seed: int | None = 0,
+    linear=None,
+) -> ClosedLoop:
+    """Build the issue's simulated set-up: noisy, delayed sensors, coil electrics.
+
+    Parameters
+    ----------
+    params : str, MaggyParameters or MaggyModel
+        What the estimator and the controller believe (fast field, true
+        torque, rigid kinematics unless a model is given).
+    estimator : EstimatorConfig, optional
+        Default: the KF.
+    controller : ControllerConfig, optional
+        Default: the LQR (``mode='pd'`` needs no estimator).
+    plant : MaggyParameters or MaggyModel, optional
+        The simulated plant when it differs from ``params`` (model mismatch).
+    noise, quantization : float
+        Sensor noise (T rms per axis) and resolution (T per LSB).
+    sensor_delay : int
+        Samples of sensor delay.
+    coil_dynamics : bool
+        Coil electrics (L / R, supply) on.
+    freeze : SensorFreeze, optional
+        Sensor freezes to inject.
+    seed : int or None
+        Noise (and random freeze) seed.
+    linear : LinearModel, optional
+        Linearisation of the believed model, to share.
+    """
+    from ..estimation import EstimatorConfig, make_estimator
+    from ..physics import CoilDynamics, MaggyModel, SensorEffects, Simulator, linearize, make_model
+    from . import ControllerConfig, make_controller
+
+    model = params if isinstance(params, MaggyModel) else make_model(params)
+    if plant is None:
+        plant_model = model.with_options()
+    elif isinstance(plant, MaggyModel):
+        plant_model = plant
+    else:
+        plant_model = make_model(plant)
+    controller = controller or ControllerConfig()
+    lin = linear if linear is not None else linearize(model)
+    rate = controller.sample_rate
+    sim = Simulator(
+        plant_model,
+        rate,
+        coil=CoilDynamics.from_parameters(plant_model.params) if coil_dynamics else None,
+        sensor=SensorEffects(noise, quantization, 0.0, sensor_delay),
+        seed=seed,
+        freeze=freeze,
+    )
+    est = None
+    if controller.mode == 'lqr':
+        config = estimator or EstimatorConfig(sample_rate=rate, sensor_delay=sensor_delay)
+        est = make_estimator(model, config, linear=lin)
+    ctrl = make_controller(model, controller, linear=lin)
+    return ClosedLoop(sim, est, ctrl)

@@ -1,0 +1,214 @@
+"""Settings of the levitation controller (a frozen dataclass built from YAML or ROS parameters)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from pathlib import Path
+
+__all__ = ['MODES', 'ControllerConfig', 'ControllerConfigError', 'load_controller_config']
+
+#: ``lqr``: state feedback on the estimate; ``pd``: the firmware's PD on the raw field.
+MODES = ('lqr', 'pd')
+
+
+class ControllerConfigError(ValueError):
+    """A controller setting is unknown or out of range."""
+
+
+@dataclass(frozen=True)
+class ControllerConfig:
+    """Controller settings, SI units. Defaults: ``config/controller.yaml`` documents them.
+
+    LQR weights follow Bryson's rule: each ``*_scale`` is the deviation that
+    costs as much as ``current_scale`` of coil current, so the weight of a
+    state is ``1 / scale^2``.
+
+    Attributes
+    ----------
+    mode : {'lqr', 'pd'}
+    sample_rate : float
+        Control rate, Hz (one command per sample).
+    command_delay : int
+        Samples before a command takes effect (0 or 1): 1 on the board and in
+        real time (the command computed from sample k drives the coils from
+        k+1); the LQR design includes it as a state (the pending command).
+    sensor_delay : int
+        Samples of reading delay (0 or 1): the PD removes the coils' direct
+        field with the currents of the reading's instant. (The LQR gets an
+        estimate the estimator already predicted to the sample.)
+    coil_dynamics : bool
+        Model the coil current's first-order lag (L / R of the parameter set)
+        in the LQR design (the coil currents become states).
+    current_limit : float
+        Largest command per coil, A (default 1.0: the drivers limit each
+        solenoid to about 1.1 A and V4 senses about +-1.1 A).
+    position_scale, angle_scale, velocity_scale, rate_scale : float
+        Bryson scales of x, y, z (m), alpha, beta (rad), vx, vy, vz (m/s),
+        wx, wy (rad/s).
+    current_scale : float
+        Bryson scale of the commands, A.
+    integral : bool
+        Integral action on x, y, z (for model mismatch), with anti-windup
+        (the integrators hold while any coil is at the limit).
+    integral_scale : float
+        Bryson scale of the integrated position error, m s.
+    input_timeout : float
+        No estimate (LQR) or sample (PD) for this long: zero currents and an
+        ERROR status, s.
+    rearm_samples : int
+        After a timeout the controller re-arms by itself once this many fresh
+        inputs arrived in a row (integrators and pending command cleared).
+    pd_kp : float
+        PD proportional gain, A per T of horizontal field.
+    pd_kd : float
+        PD derivative gain, A per (T/s).
+    pd_cutoff : float
+        Cut-off of the first-order filter on the field and its derivative, Hz.
+    pd_sensor : int
+        Sensor whose Bx, By the PD uses (0: the one under the magnet).
+    pd_feedthrough : bool
+        Remove the coils' direct field (the model's D times the measured
+        currents) from the reading before the PD, as the board does.
+    magnet_threshold : float
+        PD active only while that sensor's |Bz - Bz without magnet| exceeds
+        this, T (the firmware's magnet-present test).
+    """
+
+    mode: str = 'lqr'
+    sample_rate: float = 5000.0
+    command_delay: int = 1
+    sensor_delay: int = 1
+    coil_dynamics: bool = True
+    current_limit: float = 1.0
+    position_scale: float = 1.0e-4
+    angle_scale: float = 0.01
+    velocity_scale: float = 0.02
+    rate_scale: float = 2.0
+    current_scale: float = 1.0
+    integral: bool = False
+    integral_scale: float = 2.0e-5
+    input_timeout: float = 0.005
+    rearm_samples: int = 10
+    pd_kp: float = 15000.0
+    pd_kd: float = 250.0
+    pd_cutoff: float = 30.0
+    pd_sensor: int = 0
+    pd_feedthrough: bool = True
+    magnet_threshold: float = 2.0e-3
+
+    def __post_init__(self):
+        if self.mode not in MODES:
+            raise ControllerConfigError(
+                f'mode must be one of {", ".join(MODES)}, got {self.mode!r}'
+            )
+        for name in ('command_delay', 'sensor_delay'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or value not in (0, 1):
+                raise ControllerConfigError(f'{name} must be 0 or 1, got {value!r}')
+        for name in ('coil_dynamics', 'integral', 'pd_feedthrough'):
+            if not isinstance(getattr(self, name), bool):
+                raise ControllerConfigError(
+                    f'{name} must be true or false, got {getattr(self, name)!r}'
+                )
+        for name in ('rearm_samples', 'pd_sensor'):
+            value = getattr(self, name)
+            low = 1 if name == 'rearm_samples' else 0
+            if isinstance(value, bool) or not isinstance(value, int) or value < low:
+                raise ControllerConfigError(f'{name} must be an integer >= {low}, got {value!r}')
+        positive = (
+            'sample_rate',
+            'current_limit',
+            'position_scale',
+            'angle_scale',
+            'velocity_scale',
+            'rate_scale',
+            'current_scale',
+            'integral_scale',
+            'input_timeout',
+            'pd_cutoff',
+        )
+        non_negative = ('pd_kp', 'pd_kd', 'magnet_threshold')
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            ok = ok and math.isfinite(value) and (value > 0 if name in positive else value >= 0)
+            if not ok:
+                need = 'positive' if name in positive else '>= 0'
+                raise ControllerConfigError(
+                    f'{name} must be a finite number {need}, got {value!r}'
+                )
+        if self.pd_cutoff >= self.sample_rate / 2:
+            raise ControllerConfigError(
+                f'pd_cutoff must be below the Nyquist frequency {self.sample_rate / 2} Hz, '
+                f'got {self.pd_cutoff!r}'
+            )
+
+    @property
+    def dt(self) -> float:
+        """Control period, s."""
+        return 1.0 / self.sample_rate
+
+    @classmethod
+    def from_mapping(cls, values: dict) -> ControllerConfig:
+        """Build from a mapping (YAML or ROS parameters), naming unknown keys.
+
+        Integers are accepted where floats are expected (YAML ``1`` for 1.0).
+
+        Raises
+        ------
+        ControllerConfigError
+            On an unknown key or a bad value.
+        """
+        known = {f.name: f for f in fields(cls)}
+        unknown = sorted(set(values) - set(known))
+        if unknown:
+            raise ControllerConfigError(
+                f'unknown controller setting(s) {", ".join(unknown)}; '
+                f'known: {", ".join(sorted(known))}'
+            )
+        converted = {}
+        for key, value in values.items():
+            default = known[key].default
+            if (
+                isinstance(default, float)
+                and isinstance(value, int)
+                and not isinstance(value, bool)
+            ):
+                value = float(value)
+            converted[key] = value
+        return cls(**converted)
+
+
+def load_controller_config(path: str | Path, **overrides) -> ControllerConfig:
+    """Read a controller YAML file (a flat mapping, or under ``controller:``).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+    **overrides
+        Settings that replace the file's.
+
+    Raises
+    ------
+    ControllerConfigError
+        When the file is missing, not a mapping, or has a bad setting (the
+        message names the file).
+    """
+    import yaml
+
+    p = Path(path)
+    try:
+        data = yaml.safe_load(p.read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise ControllerConfigError(f'{p}: cannot read controller settings: {exc}') from None
+    if isinstance(data, dict) and 'controller' in data:
+        data = data['controller']
+    if not isinstance(data, dict):
+        raise ControllerConfigError(f'{p}: expected a mapping of controller settings')
+    data = {**data, **overrides}
+    try:
+        return ControllerConfig.from_mapping(data)
+    except ControllerConfigError as exc:
+        raise ControllerConfigError(f'{p}: {exc}') from None

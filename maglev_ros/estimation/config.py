@@ -1,0 +1,155 @@
+"""Settings of the magnet's state estimator (a frozen dataclass a node builds from parameters)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+
+__all__ = ['FILTERS', 'EstimatorConfig', 'EstimatorConfigError']
+
+#: Filter kinds: linear KF about the equilibrium, EKF and UKF on the nonlinear model.
+FILTERS = ('kf', 'ekf', 'ukf')
+
+
+class EstimatorConfigError(ValueError):
+    """A setting of :class:`EstimatorConfig` is out of range."""
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Estimator settings. Units SI; defaults for the board (5 kHz, TLV493D).
+
+    Attributes
+    ----------
+    filter : {'kf', 'ekf', 'ukf'}
+        ``kf``: linear Kalman filter on the reduced 10-state model about the
+        equilibrium (exact ZOH discretisation, compiled). ``ekf``: extended KF
+        on the nonlinear model f, h (compiled finite-difference Jacobians).
+        ``ukf``: filterpy's ``UnscentedKalmanFilter`` on f, h.
+    sample_rate : float
+        Samples per second, Hz.
+    sensor_delay : int
+        Samples between a reading's instant and its arrival (0 or 1; the board
+        has 1). With 1 the reading arriving at sample k is an update at k-1,
+        then the filter predicts to k with the measured currents of k-1.
+    sensor_noise : float
+        Hall noise, T rms per axis.
+    quantization : float
+        Hall resolution, T per LSB (adds ``q^2 / 12`` to the noise variance).
+    current_noise : float
+        Uncertainty of the current held over a sample, A rms per coil (covers
+        the ZOH of the measured current while the coil current ramps, and
+        current-sense noise).
+    acceleration_noise : float
+        Unmodelled force per mass, m/s^2 rms held over each sample.
+    angular_acceleration_noise : float
+        Unmodelled torque per inertia, rad/s^2 rms held over each sample.
+    bias_states : bool
+        Estimate a constant offset per sensor axis (9 random-walk states);
+        False assumes a calibrated board (offsets removed by the driver).
+    bias_walk : float
+        Random walk of the bias states, T rms per sample.
+    initial_bias : float
+        Initial standard deviation of the bias states, T.
+    gate_probability : float
+        Per-sensor chi-square gate: a sensor's 3-axis innovation is rejected
+        when its NIS exceeds the chi-square(3) quantile of this probability.
+    freeze_samples : int
+        A sensor whose reading (all three axes) has been identical this many
+        samples in a row is frozen: its readings are treated as missing until
+        it changes (the firmware resets a sensor after 20 identical samples).
+    nis_window : int
+        Samples in the diagnostics' NIS window.
+    initial_position, initial_angle, initial_velocity, initial_rate : float
+        Initial standard deviations: m, rad, m/s, rad/s.
+    """
+
+    filter: str = 'kf'
+    sample_rate: float = 5000.0
+    sensor_delay: int = 1
+    sensor_noise: float = 1.0e-4
+    quantization: float = 0.098e-3
+    current_noise: float = 0.003
+    acceleration_noise: float = 0.1
+    angular_acceleration_noise: float = 0.5
+    bias_states: bool = False
+    bias_walk: float = 1.0e-8
+    initial_bias: float = 1.0e-3
+    gate_probability: float = 0.99999
+    freeze_samples: int = 4
+    nis_window: int = 500
+    initial_position: float = 1.0e-3
+    initial_angle: float = 0.03
+    initial_velocity: float = 0.02
+    initial_rate: float = 2.0
+
+    def __post_init__(self):
+        if self.filter not in FILTERS:
+            raise EstimatorConfigError(
+                f'filter must be one of {", ".join(FILTERS)}, got {self.filter!r}'
+            )
+        if self.sensor_delay not in (0, 1) or isinstance(self.sensor_delay, bool):
+            raise EstimatorConfigError(f'sensor_delay must be 0 or 1, got {self.sensor_delay!r}')
+        if not isinstance(self.bias_states, bool):
+            raise EstimatorConfigError(
+                f'bias_states must be true or false, got {self.bias_states!r}'
+            )
+        for name in ('freeze_samples', 'nis_window'):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or value < 2:
+                raise EstimatorConfigError(f'{name} must be an integer >= 2, got {value!r}')
+        positive = (
+            'sample_rate',
+            'sensor_noise',
+            'initial_position',
+            'initial_angle',
+            'initial_velocity',
+            'initial_rate',
+            'initial_bias',
+        )
+        non_negative = (
+            'quantization',
+            'current_noise',
+            'acceleration_noise',
+            'angular_acceleration_noise',
+            'bias_walk',
+        )
+        for name in positive + non_negative:
+            value = getattr(self, name)
+            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
+            ok = ok and math.isfinite(value) and (value > 0 if name in positive else value >= 0)
+            if not ok:
+                need = 'positive' if name in positive else '>= 0'
+                raise EstimatorConfigError(f'{name} must be a finite number {need}, got {value!r}')
+        if not (0.5 < self.gate_probability <= 1.0):
+            raise EstimatorConfigError(
+                f'gate_probability must be in (0.5, 1], got {self.gate_probability!r}'
+            )
+
+    @classmethod
+    def from_mapping(cls, values: dict) -> EstimatorConfig:
+        """Build from a mapping (e.g. ROS parameters), naming unknown keys.
+
+        Raises
+        ------
+        EstimatorConfigError
+            On an unknown key or a bad value.
+        """
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise EstimatorConfigError(
+                f'unknown estimator setting(s) {", ".join(unknown)}; '
+                f'known: {", ".join(sorted(known))}'
+            )
+        return cls(**values)
+
+    @property
+    def dt(self) -> float:
+        """Sample period, s."""
+        return 1.0 / self.sample_rate
+
+    @property
+    def measurement_variance(self) -> float:
+        """Variance per axis, T^2: noise plus uniform quantisation error."""
+        return self.sensor_noise**2 + self.quantization**2 / 12.0

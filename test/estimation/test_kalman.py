@@ -1,0 +1,137 @@
+"""The linear KF against filterpy, gating, freezes, missing samples, covariance health."""
+
+import numpy as np
+import pytest
+from filterpy.kalman import KalmanFilter
+from scipy.stats import chi2
+
+from maglev_ros.estimation import (
+    EstimatorConfig,
+    EstimatorConfigError,
+    KalmanEstimator,
+    make_estimator,
+)
+
+
+def _filterpy_twin(est):
+    kf = KalmanFilter(dim_x=est.n_states, dim_z=est.n_outputs, dim_u=est.n_inputs)
+    kf.F, kf.B, kf.H, kf.Q = est.F.copy(), est.B.copy(), est.H.copy(), est.Q.copy()
+    kf.R = np.diag(est.r_diag)
+    kf.x = np.zeros(est.n_states)
+    kf.P = est.initial_covariance()
+    return kf
+
+
+@pytest.mark.parametrize('delay', [1, 0])
+@pytest.mark.parametrize('bias', [False, True])
+def test_kf_agrees_with_filterpy(v2, v2_linear, v2_data, delay, bias):
+    ys, cs, _ = v2_data
+    ys = ys.copy()
+    missing = [40, 41, 42, 300]
+    ys[missing] = np.nan  # whole samples missing: predict only
+    config = EstimatorConfig(sensor_delay=delay, bias_states=bias, gate_probability=1.0)
+    est = KalmanEstimator(v2, config, linear=v2_linear)
+    kf = _filterpy_twin(est)
+    worst_x = worst_p = 0.0
+    prev = None
+    for k, (y, i) in enumerate(zip(ys, cs, strict=True)):
+        out = est.step(y, i)
+        held = i if (delay == 0 or prev is None) else prev
+        z = est.measurement(y, held)
+        kf.update(None if k in missing else z)
+        if delay == 0:
+            x_pub, p_pub = kf.x.copy(), kf.P.copy()
+            kf.predict(u=i - est.u_eq)
+        else:
+            kf.predict(u=0.5 * (held + i) - est.u_eq)
+            x_pub, p_pub = kf.x.copy(), kf.P.copy()
+        prev = i
+        dx = (out - est.x_eq)[est.reduced]
+        worst_x = max(worst_x, np.max(np.abs(dx - x_pub[:10])) / np.max(np.abs(x_pub[:10])))
+        worst_p = max(
+            worst_p, np.max(np.abs(est.state_covariance - p_pub)) / np.max(np.abs(p_pub))
+        )
+    assert worst_x < 1e-9 and worst_p < 1e-9, (worst_x, worst_p)
+    assert est.status().missing == (4, 4, 4)
+
+
+def test_gate_rejects_an_outlier_of_one_sensor(v2, v2_linear, v2_data):
+    ys, cs, xs = v2_data
+    est = KalmanEstimator(v2, linear=v2_linear)
+    for k in range(400):
+        est.step(ys[k], cs[k])
+    assert est.status().rejected == (0, 0, 0)
+    bad = ys[400].copy()
+    bad[3:6] += 2e-3  # sensor 1 off by 2 mT on every axis
+    before = est.state
+    est.step(bad, cs[400])
+    assert est.last_accepted.tolist() == [True, False, True]
+    assert est.last_nis_sensor[1] > chi2.ppf(0.99999, 3)
+    assert est.status().rejected == (0, 1, 0)
+    assert np.max(np.abs(est.state[:3] - before[:3])) < 5e-5
+
+
+def test_a_frozen_sensor_is_missing_and_named(v2, v2_linear, v2_data):
+    ys, cs, _ = v2_data
+    est = KalmanEstimator(v2, EstimatorConfig(freeze_samples=4), linear=v2_linear)
+    for k in range(300):
+        est.step(ys[k], cs[k])
+    base = est.status()
+    stuck = ys[300, 6:9].copy()
+    for k in range(300, 320):
+        y = ys[k].copy()
+        y[6:9] = stuck
+        est.step(y, cs[k])
+        if k >= 303:  # the 4th identical reading on
+            assert est.status().frozen == (2,)
+            assert not est.last_accepted[2] and est.last_accepted[0]
+    status = est.status()
+    assert status.frozen_names() == ('sensor_2',)
+    assert status.missing[2] - base.missing[2] == 17
+    assert status.freeze_events[2] - base.freeze_events[2] == 1
+    est.step(ys[320], cs[320])
+    assert est.status().frozen == ()
+
+
+def test_covariance_stays_symmetric_positive_definite(v2, v2_linear, v2_data):
+    ys, cs, _ = v2_data
+    est = KalmanEstimator(v2, EstimatorConfig(bias_states=True), linear=v2_linear)
+    rng = np.random.default_rng(0)
+    for k in range(len(ys)):
+        y = ys[k].copy()
+        y[rng.random(9).reshape(3, 3).any(axis=1).repeat(3) & (rng.random() < 0.3)] = np.nan
+        est.step(y, cs[k])
+        p = est.state_covariance
+        assert np.array_equal(p, p.T)
+    assert np.min(np.linalg.eigvalsh(p)) > 0
+
+
+@pytest.mark.parametrize('kind', ['ekf', 'ukf'])
+def test_nonlinear_filters_agree_with_the_kf_near_the_equilibrium(v2, v2_linear, v2_data, kind):
+    ys, cs, _ = v2_data
+    n = 400 if kind == 'ekf' else 200
+    kf = make_estimator(v2, EstimatorConfig(filter='kf'), linear=v2_linear)
+    other = make_estimator(v2, EstimatorConfig(filter=kind), linear=v2_linear)
+    for k in range(n):
+        a = kf.step(ys[k], cs[k])
+        b = other.step(ys[k], cs[k])
+    sigma = kf.state_std()[:3]
+    assert np.all(np.abs(a[:3] - b[:3]) < 0.2 * sigma)
+    assert np.all(np.abs(other.state_std()[:3] - sigma) < 0.1 * sigma)
+
+
+@pytest.mark.parametrize(
+    ('changes', 'match'),
+    [
+        ({'filter': 'pf'}, 'filter must be one of kf, ekf, ukf'),
+        ({'sensor_delay': 2}, 'sensor_delay must be 0 or 1'),
+        ({'sensor_noise': -1.0}, 'sensor_noise must be a finite number positive'),
+        ({'freeze_samples': 1}, 'freeze_samples must be an integer >= 2'),
+        ({'gate_probability': 0.2}, 'gate_probability must be in'),
+    ],
+)
+def test_bad_settings_name_the_value(changes, match):
+    with pytest.raises(EstimatorConfigError, match=match):
+        EstimatorConfig(**changes)
+    with pytest.raises(ValueError, match='unknown estimator setting'):
+        EstimatorConfig.from_mapping({'sensor_nois': 1e-4})
