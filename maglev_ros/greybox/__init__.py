@@ -6,9 +6,19 @@ minimisation estimates the free ones. The static part (:mod:`.static`) fits
 the field against the coil currents recorded with the magnet absent or held
 fixed; :mod:`.identifiability` reports what the data cannot identify;
 :mod:`.export` writes the calibrated set as a parameter file that loads like
-``config/maggy_v2.yaml``.
+``config/maggy_v2.yaml``. The dynamic part (:mod:`.dynamic`) fits the
+linearised model's Kalman predictor to levitation data (the magnet's mass and
+polarisation, which static data cannot give).
 """
 
+from .dynamic import (
+    DynamicCalibration,
+    GreyBoxSystem,
+    LevitationExperiment,
+    LinearGreyBoxProblem,
+    calibrate_dynamic,
+    noise_level,
+)
 from .errors import GreyBoxError
 from .export import parameters_to_mapping, write_parameters
 from .identifiability import Identifiability, Unidentified, analyse, correlated_pairs
@@ -46,4 +56,10 @@ __all__ = [
     'best_delay',
     'calibrate_static',
     'fit_percent',
+    'LevitationExperiment',
+    'GreyBoxSystem',
+    'LinearGreyBoxProblem',
+    'DynamicCalibration',
+    'calibrate_dynamic',
+    'noise_level',
 ]
