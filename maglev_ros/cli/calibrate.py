@@ -1,16 +1,23 @@
-r"""``maglev-calibrate``: calibrate a board's physical model from its bags (static part).
+r"""``maglev-calibrate``: calibrate a board's physical model from its bags.
 
-Reads bags recorded with the levitating magnet absent or held fixed (for
-example ``maglev-lab --magnet absent`` and ``--magnet fixed``), estimates the
-chosen physics parameters from the field against the coil currents, and
-writes a parameter file that loads like ``maggy_v2.yaml``::
+Static mode: bags recorded with the levitating magnet absent or held fixed
+(for example ``maglev-lab --magnet absent`` and ``--magnet fixed``); the
+chosen physics parameters are estimated from the field against the coil
+currents. Dynamic mode: bags recorded while the magnet levitates under
+feedback with an excitation added (``--magnet free``); a linear grey-box
+(the model linearised at the parameters' equilibrium, its Kalman predictor)
+is fitted by prediction error, which gives the magnet's mass and
+polarisation. Either writes a parameter file that loads like ``maggy_v2.yaml``::
 
     maglev-calibrate absent/ fixed/ --params maggy_v2 \
-        --free 'coil*.gain' 'sensor*.offset_*' magnet.polarization --out myboard.yaml
+        --free 'coil*.gain' 'sensor*.offset_*' --out static.yaml
+    maglev-calibrate levitating/ --params static.yaml \
+        --free magnet.mass magnet.polarization --out myboard.yaml
 
-Names accept shell patterns; ``--list`` shows every parameter. Whether a bag
-had the magnet absent or fixed comes from its run metadata (``magnet``), or
-from ``--magnet``, or from a suffix ``BAG@absent`` / ``BAG@fixed``.
+Names accept shell patterns; ``--list`` shows every parameter. Where the
+magnet was comes from a bag's run metadata (``magnet``: absent, fixed or
+free), or from ``--magnet``, or from a suffix ``BAG@absent`` / ``BAG@fixed``
+/ ``BAG@free``. Static and levitation bags go in separate runs.
 Exit status: 0 on success, 2 on bad input (one line on stderr).
 """
 
@@ -80,13 +87,15 @@ def build_parser() -> argparse.ArgumentParser:
     p = Parser(
         prog=PROG,
         description='Calibrate the physics parameters of a board from bags recorded with '
-        'the magnet absent or held fixed (static calibration).',
+        'the magnet absent or held fixed (static calibration) or levitating under feedback '
+        'with an excitation (dynamic calibration: mass, polarisation).',
     )
     p.add_argument(
         'bags',
         nargs='*',
         metavar='BAG',
-        help='bag directories; BAG@absent or BAG@fixed says where the magnet was '
+        help='bag directories; BAG@absent, BAG@fixed or BAG@free (levitating) says where '
+        'the magnet was '
         '(default: the bag metadata, else --magnet)',
     )
     p.add_argument(
@@ -123,8 +132,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         '--magnet',
-        choices=('absent', 'fixed'),
-        help='where the magnet was, for bags whose metadata does not say',
+        choices=('absent', 'fixed', 'free'),
+        help='where the magnet was, for bags whose metadata does not say (free: levitating)',
     )
     p.add_argument(
         '--split',
@@ -150,6 +159,13 @@ def build_parser() -> argparse.ArgumentParser:
         '--hold-pose',
         action='store_true',
         help='do not estimate where a fixed magnet is held (use the nominal equilibrium)',
+    )
+    p.add_argument(
+        '--process-noise',
+        type=positive_float,
+        default=1e-3,
+        metavar='AMPS',
+        help='dynamic mode: input disturbance level of the Kalman predictor, A rms (default 1e-3)',
     )
     p.add_argument('--list', action='store_true', help='list the parameters and exit')
     p.add_argument(
@@ -211,7 +227,7 @@ def _bag_sensors(bag: str, count: int) -> list[int]:
 
 def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
     from maglev_ros.bags import read_bag
-    from maglev_ros.greybox import StaticExperiment
+    from maglev_ros.greybox import LevitationExperiment, StaticExperiment
 
     _say(f'reading {bag} ...')
     ds = read_bag(
@@ -225,15 +241,28 @@ def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
     magnet = mode or _recorded_magnet(ds.metadata)
     if magnet is None:
         raise UsageError(
-            f'{bag}: the bag does not say whether the magnet was absent or fixed: '
-            f'give --magnet or {bag}@absent / {bag}@fixed'
+            f'{bag}: the bag does not say whether the magnet was absent, fixed or free '
+            f'(levitating): give --magnet or {bag}@absent / {bag}@fixed / {bag}@free'
         )
-    if magnet not in ('absent', 'fixed'):
+    if magnet not in ('absent', 'fixed', 'free'):
         raise UsageError(
-            f'{bag}: recorded with the magnet {magnet}; static calibration needs it absent '
-            'or held fixed (the dynamic calibration from levitation data comes later)'
+            f'{bag}: recorded with the magnet {magnet!r}; calibration needs it absent, '
+            'held fixed or free (levitating)'
         )
     data = ds.data
+    if magnet == 'free':
+        exp = LevitationExperiment(
+            u=data.u,
+            y=data.y,
+            name=f'{bag} (levitating)',
+            Ts=data.Ts,
+            sensors=tuple(sensors),
+        )
+        _say(
+            f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet levitating, '
+            f'sensors {", ".join(map(str, sensors))}'
+        )
+        return exp
     exp = StaticExperiment(
         u=data.u,
         y=data.y,
@@ -254,7 +283,12 @@ def _header(args, cal, bags) -> list[str]:
     lines = [
         f'Calibrated by {PROG} on {now} from {args.params}',
         f'bags: {", ".join(bags)}',
-        'static calibration (field vs coil currents); estimate +- standard deviation:',
+        (
+            'dynamic calibration (levitation data, linear grey-box, Kalman predictor)'
+            if getattr(cal, 'form', None)
+            else 'static calibration (field vs coil currents)'
+        )
+        + '; estimate +- standard deviation:',
     ]
     for name in cal.names:
         spec = cal.vector[name]
@@ -274,7 +308,13 @@ def _header(args, cal, bags) -> list[str]:
 
 
 def _run(args: argparse.Namespace) -> int:
-    from maglev_ros.greybox import calibrate_static, parameter_vector, write_parameters
+    from maglev_ros.greybox import (
+        LevitationExperiment,
+        calibrate_dynamic,
+        calibrate_static,
+        parameter_vector,
+        write_parameters,
+    )
     from maglev_ros.physics import load_parameters
 
     limit_blas_threads(1)  # small solves: see limit_blas_threads
@@ -283,7 +323,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.list:
         return _list(vector)
     if not args.bags:
-        raise UsageError('give at least one BAG (recorded with the magnet absent or fixed)')
+        raise UsageError(
+            'give at least one BAG (recorded with the magnet absent, fixed or levitating)'
+        )
     if not args.free:
         raise UsageError("choose parameters with --free (e.g. 'coil*.gain'); --list shows them")
     vector = vector.with_free(args.free)
@@ -313,16 +355,33 @@ def _run(args: argparse.Namespace) -> int:
     for bag, mode in parsed:
         experiments.append(_experiment(bag, mode, args, sensors, outputs, inputs))
         bags.append(bag)
-    delays = None if args.delay is None else [args.delay] * len(experiments)
-    cal = calibrate_static(
-        vector,
-        experiments,
-        split=args.split,
-        delays=delays,
-        fit_pose=not args.hold_pose,
-        progress=_say,
-        frozen_run=args.frozen_run,
-    )
+    levitating = [isinstance(e, LevitationExperiment) for e in experiments]
+    if any(levitating) and not all(levitating):
+        raise UsageError(
+            'levitation bags (magnet free) and static bags (absent/fixed) go in separate '
+            'runs: calibrate the static part first, then pass its file as --params'
+        )
+    if all(levitating):
+        _say('dynamic calibration from levitation data (linear grey-box, Kalman predictor)')
+        cal = calibrate_dynamic(
+            vector,
+            experiments,
+            split=args.split,
+            delay=args.delay,
+            process_noise=args.process_noise,
+            progress=_say,
+        )
+    else:
+        delays = None if args.delay is None else [args.delay] * len(experiments)
+        cal = calibrate_static(
+            vector,
+            experiments,
+            split=args.split,
+            delays=delays,
+            fit_pose=not args.hold_pose,
+            progress=_say,
+            frozen_run=args.frozen_run,
+        )
     print()
     for line in cal.table():
         print(line)
@@ -335,7 +394,14 @@ def _run(args: argparse.Namespace) -> int:
         for a, b, r in cal.correlated:
             print(f'  {a} ~ {b}: r = {r:+.3f}')
     print(f'\nweighted residual per degree of freedom {cal.chi2_per_dof:.3f} (1 = noise level)')
-    print('validation (data not used for estimation):')
+    if getattr(cal, 'form', None):
+        print(
+            f'equilibrium height: nominal {1e3 * cal.z_eq[0]:.4f} mm, '
+            f'calibrated {1e3 * cal.z_eq[1]:.4f} mm'
+        )
+        print('validation (data not used for estimation; one-step-ahead Kalman prediction):')
+    else:
+        print('validation (data not used for estimation):')
     for nom, new in zip(cal.validation_nominal, cal.validation_calibrated, strict=True):
         print(
             f'  {nom.experiment}: RMS error nominal {1e3 * nom.total_rms:.4g} mT, calibrated '
@@ -353,7 +419,8 @@ def _run(args: argparse.Namespace) -> int:
         for i, exp in enumerate(experiments):
             target = Path(plot)
             if len(experiments) > 1:
-                target = target.with_name(f'{target.stem}_{i}_{exp.magnet}{target.suffix}')
+                kind = getattr(exp, 'magnet', 'free')
+                target = target.with_name(f'{target.stem}_{i}_{kind}{target.suffix}')
             print(f'wrote     {calibration_plot(cal, i, target, Ts=exp.Ts)}')
     return 0
 

@@ -88,8 +88,9 @@ def calibration_plot(
                 ax.set_ylabel('field (mT)')
             if k == sensors - 1:
                 ax.set_xlabel('time (s)')
+    what = 'one-step Kalman prediction' if getattr(cal, 'form', None) else 'model'
     fig.suptitle(
-        f'{fit_cal.experiment}: validation data, measured vs model - RMS error '
+        f'{fit_cal.experiment}: validation data, measured vs {what} - RMS error '
         f'nominal {1e3 * fit_nom.total_rms:.3g} mT, calibrated {1e3 * fit_cal.total_rms:.3g} mT '
         f'(noise {1e3 * float(np.sqrt(np.mean(cal.noise[index] ** 2))):.3g} mT)',
         fontsize=11,

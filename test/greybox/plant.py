@@ -85,15 +85,20 @@ def write_bag(
     ``magnet`` None leaves where the magnet was out of the metadata; ``key`` is
     its metadata key.
     """
+    u, y = simulate(magnet or 'absent', n, seed)
+    metadata = {'params': 'maggy_v2', 'seed': seed}
+    if magnet is not None:
+        metadata[key] = magnet
+    return write_record(path, u, y, metadata)
+
+
+def write_record(path: Path, u: np.ndarray, y: np.ndarray, metadata: dict) -> Path:
+    """Write currents (N, 4) and fields (N, 9) as a bag with lockstep stamps at 5 kHz."""
     from rclpy.serialization import serialize_message
     from sensor_msgs.msg import JointState, MagneticField
 
     from maglev_ros.bags import BagWriter
 
-    u, y = simulate(magnet or 'absent', n, seed)
-    metadata = {'params': 'maggy_v2', 'seed': seed}
-    if magnet is not None:
-        metadata[key] = magnet
     with BagWriter(path, storage='mcap', metadata=metadata) as bag:
         sensors = [
             bag.add_topic(f'/maglev/sensor_{k}/field', 'sensor_msgs/msg/MagneticField')

@@ -117,3 +117,24 @@ def test_magnet_from_the_recorder_metadata(tmp_path, capsys):
     bag = write_bag(tmp_path / 'lab', 'absent', 1500, key='maglev_simulator.magnet')
     assert main([str(bag), '--free', 'coil0.gain']) == 0
     assert 'magnet absent' in capsys.readouterr().out
+
+
+def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
+    from .levitation import TRUTH, levitation_record
+    from .plant import write_record
+
+    exp, _ = levitation_record()
+    bag = write_record(tmp_path / 'levitating', exp.u, exp.y, {'magnet': 'free'})
+    out = tmp_path / 'dynamic.yaml'
+    status = main([str(bag), '--free', 'magnet.mass', 'magnet.polarization', '--out', str(out)])
+    text = capsys.readouterr().out
+    assert status == 0, text
+    assert 'dynamic calibration' in text and 'iteration 1:' in text
+    params = load_parameters(out)
+    assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
+    assert abs(params.magnet.polarization / TRUTH['magnet.polarization'] - 1) < 0.01
+    assert (tmp_path / 'dynamic.png').stat().st_size > 10_000
+    # a levitation bag with a static one: one clear line
+    static = write_bag(tmp_path / 'absent', 'absent', 1500)
+    assert main([str(bag), str(static), '--free', 'magnet.mass']) == 2
+    assert 'separate runs' in _error(capsys)
