@@ -8,9 +8,12 @@ fixed; :mod:`.identifiability` reports what the data cannot identify;
 :mod:`.export` writes the calibrated set as a parameter file that loads like
 ``config/maggy_v2.yaml``. The dynamic part (:mod:`.dynamic`) fits the
 linearised model's Kalman predictor to levitation data (the magnet's mass and
-polarisation, which static data cannot give).
+polarisation, which static data cannot give); :mod:`.closed_loop_fit` fits
+the full nonlinear model by simulating the closed loop with the known
+estimator and controller.
 """
 
+from .closed_loop_fit import ClosedLoopFit, LoopSetup, calibrate_closed_loop
 from .dynamic import (
     DynamicCalibration,
     GreyBoxSystem,
@@ -62,4 +65,7 @@ __all__ = [
     'DynamicCalibration',
     'calibrate_dynamic',
     'noise_level',
+    'LoopSetup',
+    'ClosedLoopFit',
+    'calibrate_closed_loop',
 ]
