@@ -82,9 +82,9 @@ class ControllerConfig:
     coil_dynamics: bool = True
     current_limit: float = 1.0
     position_scale: float = 1.0e-4
-    angle_scale: float = 0.01
+    angle_scale: float = 0.003
     velocity_scale: float = 0.02
-    rate_scale: float = 2.0
+    rate_scale: float = 0.5
     current_scale: float = 1.0
     integral: bool = False
     integral_scale: float = 2.0e-5

@@ -18,6 +18,7 @@ __all__ = [
     'spd_inverse',
     'kf_predict',
     'gated_update',
+    'ekf_transition',
     'ekf_predict',
     'ekf_measure',
     'embed_state',
@@ -220,15 +221,20 @@ def embed_state(dx, x_eq, reduced):  # pragma: no cover - jitted
 
 
 @njit(cache=True)
-def ekf_predict(
-    dx, P, u, Q, x_eq, reduced, dt, step, src, coil, rim, par, work
+def ekf_transition(
+    dx, u, x_eq, reduced, dt, step, src, coil, rim, par, work
 ):  # pragma: no cover - jitted
-    """EKF prediction on the nonlinear model over one sample (ZOH current ``u``).
+    """Propagated mean and transition matrix of the nonlinear model over one sample.
 
-    The mean is propagated with one RK4 step of f; the covariance with the
-    transition matrix ``exp(A dt)`` (third-order series; ``|A| dt < 0.05`` at
-    5 kHz) of the reduced Jacobian A, by central differences of f (``step``).
-    States beyond the 10 reduced ones (sensor biases) are random walks.
+    The mean: one RK4 step of f with the current ``u`` held (ZOH). The
+    transition: ``exp(A dt)`` (third-order series; ``|A| dt < 0.05`` at 5 kHz)
+    of the reduced Jacobian A, by central differences of f (``step``). States
+    beyond the 10 reduced ones (sensor biases) are random walks.
+
+    Returns
+    -------
+    x_next : ndarray, shape (n,)
+    F : ndarray, shape (n, n)
     """
     n_r = reduced.shape[0]
     n = dx.shape[0]
@@ -246,14 +252,23 @@ def ekf_predict(
         for i in range(n_r):
             A[i, j] = (fp[reduced[i]] - fm[reduced[i]]) / (2.0 * step)
     Ad = A * dt
-    A2 = Ad @ Ad
+    A2 = _mm(Ad, Ad)
     F = np.eye(n)
-    F[:n_r, :n_r] += Ad + 0.5 * A2 + (A2 @ Ad) / 6.0
+    F[:n_r, :n_r] += Ad + 0.5 * A2 + _mm(A2, Ad) / 6.0
     xn = dx.copy()
     for i in range(n_r):
         xn[i] = new[reduced[i]] - x_eq[reduced[i]]
-    Pn = F @ P @ F.T + Q
-    return xn, 0.5 * (Pn + Pn.T)
+    return xn, F
+
+
+@njit(cache=True)
+def ekf_predict(
+    dx, P, u, Q, x_eq, reduced, dt, step, src, coil, rim, par, work
+):  # pragma: no cover - jitted
+    """EKF prediction over one sample: :func:`ekf_transition`, then ``F P F' + Q``."""
+    xn, F = ekf_transition(dx, u, x_eq, reduced, dt, step, src, coil, rim, par, work)
+    Pn = _mmt(_mm(F, P), F) + Q
+    return xn, _symmetrise(Pn)
 
 
 @njit(cache=True)
