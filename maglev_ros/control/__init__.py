@@ -27,7 +27,16 @@ __all__ = [
 
 
 def make_controller(model, config: ControllerConfig | None = None, linear=None):
-    """Build the controller ``config.mode`` names (LQR or PD)."""
+    """Build the controller ``config.mode`` names (LQR or PD).
+
+    Parameters
+    ----------
+    model : MaggyModel
+        The model the controller believes.
+    config : ControllerConfig, optional
+    linear : LinearModel, optional
+        Linearisation about the equilibrium, to share one computation.
+    """
     config = config or ControllerConfig()
     if config.mode == 'pd':
         return PdController(model, config, linear)

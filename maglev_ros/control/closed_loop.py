@@ -22,7 +22,15 @@ __all__ = ['ClosedLoop', 'LoopResult', 'make_closed_loop', 'moving_rms']
 
 
 def moving_rms(values: np.ndarray, window: int) -> np.ndarray:
-    """Trailing moving RMS over ``window`` samples, shape like ``values`` (first ones partial)."""
+    """Trailing moving RMS over ``window`` samples, shape like ``values`` (first ones partial).
+
+    Parameters
+    ----------
+    values : array_like, shape (N, ...)
+        Samples.
+    window : int
+        Samples per window.
+    """
     v = np.asarray(values, dtype=float)
     sq = np.concatenate([np.zeros((1,) + v.shape[1:]), np.cumsum(v**2, axis=0)])
     idx = np.arange(1, v.shape[0] + 1)
@@ -95,7 +103,13 @@ class LoopResult:
         return float(self.t[1] - self.t[0]) if self.t.size > 1 else 0.0
 
     def position_error(self, against_reference: bool = False) -> np.ndarray:
-        """x, y, z - z_eq (or minus the reference), m, shape (N, 3)."""
+        """x, y, z - z_eq (or minus the reference), m, shape (N, 3).
+
+        Parameters
+        ----------
+        against_reference : bool
+            Subtract the reference instead of the equilibrium.
+        """
         if against_reference:
             return self.x[:, :3] - self.reference
         err = self.x[:, :3].copy()
@@ -106,6 +120,13 @@ class LoopResult:
         """Return the first time every axis' ``window``-s moving RMS is below ``threshold``.
 
         Returns inf when it never is.
+
+        Parameters
+        ----------
+        threshold : float
+            RMS bound, m.
+        window : float
+            Window, s.
         """
         n = max(1, int(round(window / self.dt)))
         rms = moving_rms(self.position_error(), n)
@@ -115,18 +136,37 @@ class LoopResult:
         return float(self.t[hits[0]]) if hits.size else float('inf')
 
     def hold(self, start: float) -> tuple[np.ndarray, np.ndarray]:
-        """RMS and largest excursion per axis from ``start`` (s) on, m, shapes (3,), (3,)."""
+        """RMS and largest excursion per axis from ``start`` (s) on, m, shapes (3,), (3,).
+
+        Parameters
+        ----------
+        start : float
+            s.
+        """
         err = self.position_error()[self.t >= start]
         return np.sqrt(np.mean(err**2, axis=0)), np.max(np.abs(err), axis=0)
 
     def consistency(self, start: float) -> np.ndarray:
-        """Fraction of samples from ``start`` with |estimate - true| <= 3 sigma, for x, y, z."""
+        """Fraction of samples from ``start`` with |estimate - true| <= 3 sigma, for x, y, z.
+
+        Parameters
+        ----------
+        start : float
+            s.
+        """
         sel = (self.t >= start) & np.all(np.isfinite(self.estimate), axis=1)
         err = np.abs(self.estimate[sel, :3] - self.x[sel, :3])
         return np.mean(err <= 3.0 * self.std[sel, :3], axis=0)
 
     def nis_windows(self, start: float, window: int = 500) -> tuple[np.ndarray, np.ndarray]:
         """Windowed NIS sums from ``start`` and whether each lies in its 99 % band.
+
+        Parameters
+        ----------
+        start : float
+            s.
+        window : int
+            Samples per window.
 
         Returns
         -------
@@ -147,7 +187,13 @@ class LoopResult:
         return nis, inside
 
     def nis_average(self, start: float) -> tuple[float, tuple[float, float]]:
-        """NIS summed from ``start`` on and its 99 % band (the time-averaged NIS test)."""
+        """NIS summed from ``start`` on and its 99 % band (the time-averaged NIS test).
+
+        Parameters
+        ----------
+        start : float
+            s.
+        """
         sel = self.t >= start
         total = float(self.nis[sel].sum())
         return total, nis_band(int(self.dof[sel].sum()))

@@ -155,6 +155,11 @@ class ControllerConfig:
 
         Integers are accepted where floats are expected (YAML ``1`` for 1.0).
 
+        Parameters
+        ----------
+        values : dict
+            Setting name to value.
+
         Raises
         ------
         ControllerConfigError

@@ -78,13 +78,23 @@ class LqrController:
         self.last_command = np.zeros(self.n_inputs)
 
     def set_enabled(self, enabled: bool) -> None:
-        """Enable or disable (disabled: zero currents, integrators cleared)."""
+        """Enable or disable (disabled: zero currents, integrators cleared).
+
+        Parameters
+        ----------
+        enabled : bool
+        """
         self.enabled = bool(enabled)
         if not self.enabled:
             self._e[:] = 0.0
 
     def set_reference(self, position=None) -> None:
         """Set-point of the magnet's centre, world frame, m (None: the equilibrium).
+
+        Parameters
+        ----------
+        position : array_like, shape (3,), or None
+            m.
 
         Raises
         ------

@@ -71,7 +71,12 @@ class PdController:
         self.last_command = np.zeros(self.n_inputs)
 
     def set_enabled(self, enabled: bool) -> None:
-        """Enable or disable (disabled: zero currents)."""
+        """Enable or disable (disabled: zero currents).
+
+        Parameters
+        ----------
+        enabled : bool
+        """
         self.enabled = bool(enabled)
 
     def command(self, t: float, y=None, currents=None) -> np.ndarray:

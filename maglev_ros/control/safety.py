@@ -61,7 +61,13 @@ class Watchdog:
         self.reason = ''
 
     def feed(self, t: float) -> bool:
-        """Register an input at time ``t`` (s); return True when armed (may re-arm now)."""
+        """Register an input at time ``t`` (s); return True when armed (may re-arm now).
+
+        Parameters
+        ----------
+        t : float
+            Time of the input, s.
+        """
         if self.safe:
             if self.last_input is not None and t - self.last_input > self.timeout:
                 self.fresh = 0  # the input stalled again while re-arming
@@ -76,7 +82,13 @@ class Watchdog:
         return True
 
     def check(self, t: float) -> bool:
-        """Return True while armed at time ``t`` (goes safe on a stale input)."""
+        """Return True while armed at time ``t`` (goes safe on a stale input).
+
+        Parameters
+        ----------
+        t : float
+            Now, s.
+        """
         if self.safe:
             return False
         if self.last_input is not None and t - self.last_input > self.timeout:

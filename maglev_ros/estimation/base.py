@@ -33,6 +33,13 @@ __all__ = ['Estimator', 'EstimatorStatus', 'nis_band']
 def nis_band(dof: int, probability: float = 0.99) -> tuple[float, float]:
     """Two-sided chi-square band of a NIS sum with ``dof`` degrees of freedom.
 
+    Parameters
+    ----------
+    dof : int
+        Degrees of freedom.
+    probability : float
+        Probability inside the band.
+
     Returns
     -------
     low, high : float
@@ -154,7 +161,13 @@ class Estimator:
         )
 
     def process_noise(self, gd: np.ndarray) -> np.ndarray:
-        """Q from the discretised disturbance matrix ``gd`` (10, 9), bias walk added."""
+        """Q from the discretised disturbance matrix ``gd`` (10, 9), bias walk added.
+
+        Parameters
+        ----------
+        gd : ndarray, shape (10, 9)
+            ZOH-discretised :meth:`disturbance_matrix`.
+        """
         q = np.zeros((self.n_states, self.n_states))
         std = self.disturbance_std()
         q[: self.n_reduced, : self.n_reduced] = (gd * std**2) @ gd.T
@@ -164,7 +177,13 @@ class Estimator:
 
     # ------------------------------------------------------------------ state
     def reset(self, x0=None) -> None:
-        """Restart: state at ``x0`` (12-state; default the equilibrium), P initial."""
+        """Restart: state at ``x0`` (12-state; default the equilibrium), P initial.
+
+        Parameters
+        ----------
+        x0 : array_like, shape (12,), optional
+            Initial estimate.
+        """
         dx = np.zeros(self.n_states)
         if x0 is not None:
             full = np.asarray(x0, dtype=float)
@@ -268,7 +287,13 @@ class Estimator:
         return result
 
     def predict_only(self, currents) -> np.ndarray:
-        """Advance one sample without a reading (the whole sample is missing)."""
+        """Advance one sample without a reading (the whole sample is missing).
+
+        Parameters
+        ----------
+        currents : array_like, shape (n_s,)
+            Measured coil currents, A.
+        """
         nan = np.full(self.n_outputs, np.nan)
         return self.step(nan, currents)
 

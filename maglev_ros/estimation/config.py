@@ -130,6 +130,11 @@ class EstimatorConfig:
     def from_mapping(cls, values: dict) -> EstimatorConfig:
         """Build from a mapping (e.g. ROS parameters), naming unknown keys.
 
+        Parameters
+        ----------
+        values : dict
+            Setting name to value.
+
         Raises
         ------
         EstimatorConfigError

@@ -57,7 +57,13 @@ class ExtendedEstimator(Estimator):
         return self._P.copy()
 
     def predicted_reading(self, currents) -> tuple[np.ndarray, np.ndarray]:
-        """H at the current state and its Jacobian: (3 k,), (3 k, n)."""
+        """H at the current state and its Jacobian: (3 k,), (3 k, n).
+
+        Parameters
+        ----------
+        currents : array_like, shape (n_s,)
+            Coil currents, A.
+        """
         return ekf_measure(
             self._x,
             np.ascontiguousarray(currents, dtype=float),

@@ -71,7 +71,13 @@ def _mv(a, v):  # pragma: no cover - jitted
 
 @njit(cache=True)
 def spd_inverse(s):  # pragma: no cover - jitted
-    """Inverse of a small symmetric positive definite matrix (Cholesky), symmetric."""
+    """Inverse of a small symmetric positive definite matrix (Cholesky), symmetric.
+
+    Parameters
+    ----------
+    s : ndarray, shape (k, k)
+        Symmetric positive definite.
+    """
     n = s.shape[0]
     L = np.zeros((n, n))
     for j in range(n):
@@ -119,7 +125,17 @@ def _symmetrise(p):  # pragma: no cover - jitted
 
 @njit(cache=True)
 def kf_predict(x, P, F, B, u, Q):  # pragma: no cover - jitted
-    """Linear prediction: returns (F x + B u, F P F' + Q), P symmetrised."""
+    """Linear prediction: returns (F x + B u, F P F' + Q), P symmetrised.
+
+    Parameters
+    ----------
+    x : ndarray, shape (n,)
+    P : ndarray, shape (n, n)
+    F : ndarray, shape (n, n)
+    B : ndarray, shape (n, m)
+    u : ndarray, shape (m,)
+    Q : ndarray, shape (n, n)
+    """
     xn = _mv(F, x) + _mv(B, u)
     Pn = _mmt(_mm(F, P), F) + Q
     return xn, _symmetrise(Pn)
@@ -213,7 +229,17 @@ def gated_update(x, P, H, r_diag, nu, available, gate):  # pragma: no cover - ji
 
 @njit(cache=True)
 def embed_state(dx, x_eq, reduced):  # pragma: no cover - jitted
-    """Full 12-state from a reduced deviation: ``x_eq`` plus ``dx`` at ``reduced``."""
+    """Full 12-state from a reduced deviation: ``x_eq`` plus ``dx`` at ``reduced``.
+
+    Parameters
+    ----------
+    dx : ndarray, shape (10,)
+        Reduced deviation.
+    x_eq : ndarray, shape (12,)
+        Equilibrium.
+    reduced : ndarray of int, shape (10,)
+        Indices of the reduced states in the 12-state.
+    """
     x = x_eq.copy()
     for i in range(reduced.shape[0]):
         x[reduced[i]] += dx[i]
@@ -230,6 +256,21 @@ def ekf_transition(
     transition: ``exp(A dt)`` (third-order series; ``|A| dt < 0.05`` at 5 kHz)
     of the reduced Jacobian A, by central differences of f (``step``). States
     beyond the 10 reduced ones (sensor biases) are random walks.
+
+    Parameters
+    ----------
+    dx : ndarray, shape (n,)
+        Reduced deviation (+ biases).
+    u : ndarray, shape (m,)
+        Coil currents, A.
+    x_eq : ndarray, shape (12,)
+    reduced : ndarray of int, shape (10,)
+    dt : float
+        s.
+    step : float
+        Finite-difference step.
+    src, coil, rim, par, work : ndarray
+        The fast model's packed arguments (``MaggyModel.fast_arguments``).
 
     Returns
     -------
@@ -265,7 +306,22 @@ def ekf_transition(
 def ekf_predict(
     dx, P, u, Q, x_eq, reduced, dt, step, src, coil, rim, par, work
 ):  # pragma: no cover - jitted
-    """EKF prediction over one sample: :func:`ekf_transition`, then ``F P F' + Q``."""
+    """EKF prediction over one sample: :func:`ekf_transition`, then ``F P F' + Q``.
+
+    Parameters
+    ----------
+    dx : ndarray, shape (n,)
+    P, Q : ndarray, shape (n, n)
+    u : ndarray, shape (m,)
+        A.
+    x_eq : ndarray, shape (12,)
+    reduced : ndarray of int, shape (10,)
+    dt : float
+        s.
+    step : float
+    src, coil, rim, par, work : ndarray
+        As :func:`ekf_transition`.
+    """
     xn, F = ekf_transition(dx, u, x_eq, reduced, dt, step, src, coil, rim, par, work)
     Pn = _mmt(_mm(F, P), F) + Q
     return xn, _symmetrise(Pn)
@@ -275,7 +331,19 @@ def ekf_predict(
 def ekf_measure(
     dx, u, x_eq, reduced, step, src, coil, sens, mag, work
 ):  # pragma: no cover - jitted
-    """Predicted reading h(x, u) (+ bias states) and its Jacobian, shape (3 k,), (3 k, n)."""
+    """Predicted reading h(x, u) (+ bias states) and its Jacobian, shape (3 k,), (3 k, n).
+
+    Parameters
+    ----------
+    dx : ndarray, shape (n,)
+    u : ndarray, shape (m,)
+        A.
+    x_eq : ndarray, shape (12,)
+    reduced : ndarray of int, shape (10,)
+    step : float
+    src, coil, sens, mag, work : ndarray
+        The fast model's packed measurement arguments.
+    """
     n_r = reduced.shape[0]
     n = dx.shape[0]
     x12 = embed_state(dx[:n_r], x_eq, reduced)
@@ -303,6 +371,17 @@ def freeze_check(y, last, runs, run):  # pragma: no cover - jitted
     """Frozen-sensor bookkeeping (see :class:`FreezeDetector`), in place.
 
     Returns ``(available, frozen)`` per sensor.
+
+    Parameters
+    ----------
+    y : ndarray, shape (3 k,)
+        Readings, T.
+    last : ndarray, shape (k, 3)
+        Previous readings (updated).
+    runs : ndarray of int, shape (k,)
+        Run lengths (updated).
+    run : int
+        Run length that makes a sensor frozen.
     """
     k = runs.shape[0]
     available = np.empty(k, dtype=np.bool_)
@@ -332,6 +411,26 @@ def kf_sample(
     Returns (x_out, P_out, x_prior, P_prior, accepted, nis_sensor, nis, dof): the
     published estimate (the prediction when ``delayed``, else the posterior)
     and the next sample's prior.
+
+    Parameters
+    ----------
+    x, P : ndarray
+        Prior at the reading's instant.
+    y : ndarray, shape (3 k,)
+        Readings, T.
+    held : ndarray, shape (m,)
+        Currents at the reading's instant, A.
+    nxt : ndarray, shape (m,)
+        Currents held over the prediction, A.
+    delayed : bool
+    F, B, H, D, Q : ndarray
+        Model matrices.
+    y_eq, u_eq : ndarray
+        Equilibrium reading (T) and currents (A).
+    r_diag : ndarray
+        Measurement variances, T^2.
+    available : ndarray of bool, shape (k,)
+    gate : float
     """
     m = y.shape[0]
     du = held - u_eq

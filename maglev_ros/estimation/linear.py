@@ -72,7 +72,15 @@ class KalmanEstimator(Estimator):
         return self._P.copy()
 
     def measurement(self, y, currents) -> np.ndarray:
-        """``z = y - y_eq - D (i - u_eq)``: the reading as the linear filter sees it, T."""
+        """``z = y - y_eq - D (i - u_eq)``: the reading as the linear filter sees it, T.
+
+        Parameters
+        ----------
+        y : array_like, shape (3 k,)
+            Readings, T.
+        currents : array_like, shape (m,)
+            Currents at the reading's instant, A.
+        """
         return y - self.y_eq - self.D @ (currents - self.u_eq)
 
     def _update(self, y, currents, available):
