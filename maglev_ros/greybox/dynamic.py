@@ -116,12 +116,24 @@ class LevitationExperiment:
         return self.u.shape[0]
 
     def channels(self, sensor_count: int) -> np.ndarray:
-        """Return the indices of y's columns in the model's output vector."""
+        """Return the indices of y's columns in the model's output vector.
+
+        Parameters
+        ----------
+        sensor_count : int
+            Sensors of the parameter set.
+        """
         chosen = range(sensor_count) if self.sensors is None else self.sensors
         return np.array([3 * k + a for k in chosen for a in range(3)], dtype=int)
 
     def split(self, fraction: float) -> tuple[LevitationExperiment, LevitationExperiment]:
-        """Estimation (first ``fraction``) and validation (the rest) parts."""
+        """Estimation (first ``fraction``) and validation (the rest) parts.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the samples in the first part.
+        """
         n = int(round(self.samples * fraction))
         return tuple(
             LevitationExperiment(self.u[s], self.y[s], self.name, self.Ts, self.sensors)
@@ -134,6 +146,11 @@ def noise_level(y: np.ndarray) -> np.ndarray:
 
     A white sequence's second difference has 6 times its variance; a smooth
     motion at 5 kHz hardly contributes.
+
+    Parameters
+    ----------
+    y : array_like, shape (N, 3 k)
+        Readings, T.
     """
     d2 = np.diff(np.asarray(y, dtype=float), n=2, axis=0)
     mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
@@ -198,7 +215,17 @@ class GreyBoxSystem:
     z_eq: float
 
     def innovations(self, u: np.ndarray, y: np.ndarray, delay: int) -> np.ndarray:
-        """Prediction errors eps (N - delay, 3 k) of readings ``y`` given currents ``u``."""
+        """Prediction errors eps (N - delay, 3 k) of readings ``y`` given currents ``u``.
+
+        Parameters
+        ----------
+        u : ndarray, shape (N, n_s)
+            Coil currents, A.
+        y : ndarray, shape (N, 3 k)
+            Readings, T.
+        delay : int
+            Sensor delay, samples.
+        """
         out = np.empty((u.shape[0] - delay, self.C.shape[0]))
         _innovations(self.Ad, self.Bd, self.K, self.C, self.D, self.y_eq, u, y, int(delay), out)
         return out
@@ -247,11 +274,22 @@ class LinearGreyBoxProblem:
         self.evaluations = 0
 
     def values(self, z: np.ndarray) -> dict[str, float]:
-        """Parameter values of the scaled free vector ``z`` (theta = nominal + scale z)."""
+        """Parameter values of the scaled free vector ``z`` (theta = nominal + scale z).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
         return self.vector.values(self.center + self.scale * np.asarray(z))
 
     def system(self, values: dict[str, float]) -> GreyBoxSystem:
         """Return the discrete grey-box and its Kalman gain for parameter values.
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI (missing ones nominal).
 
         Raises
         ------
@@ -282,12 +320,24 @@ class LinearGreyBoxProblem:
         )
 
     def errors(self, values: dict[str, float]) -> list[np.ndarray]:
-        """Prediction errors per experiment (burn-in left out), T."""
+        """Prediction errors per experiment (burn-in left out), T.
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI.
+        """
         sys_ = self.system(values)
         return [sys_.innovations(e.u, e.y, self.delay)[self.burn :] for e in self.experiments]
 
     def residual(self, z: np.ndarray) -> np.ndarray:
-        """Weighted prediction errors, all experiments and channels, flattened."""
+        """Weighted prediction errors, all experiments and channels, flattened.
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
         try:
             errs = self.errors(self.values(z))
         except (GreyBoxError, np.linalg.LinAlgError, ValueError):
@@ -295,7 +345,16 @@ class LinearGreyBoxProblem:
         return np.concatenate([(e / self.sigma).ravel() for e in errs])
 
     def jacobian(self, z: np.ndarray, step: float = 1e-2) -> np.ndarray:
-        """D residual / d z by central differences (scaled units)."""
+        """Return d residual / d z by central differences (scaled units).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        step : float
+            Difference step in parameter scales (the linearisation is itself a
+            finite difference: a tiny step differentiates its noise).
+        """
         z = np.asarray(z, dtype=float)
         cols = []
         for p in range(z.size):
