@@ -62,7 +62,13 @@ def default_channels(sensors: Sequence[int], coils: int) -> tuple[list[str], lis
 
 
 def parse_bounds(text: str) -> tuple[str, float, float]:
-    """Argparse type: ``NAME=LOWER:UPPER`` in SI units."""
+    """Argparse type: ``NAME=LOWER:UPPER`` in SI units.
+
+    Parameters
+    ----------
+    text : str
+        ``NAME=LOWER:UPPER`` in SI units.
+    """
     name, sep, rest = text.partition('=')
     lower, sep2, upper = rest.partition(':')
     try:
@@ -426,7 +432,13 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``maglev-calibrate``; return the exit status (2 on bad input)."""
+    """Run ``maglev-calibrate``; return the exit status (2 on bad input).
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments (default: the command line).
+    """
     return run_command(PROG, build_parser(), _run, argv)
 
 

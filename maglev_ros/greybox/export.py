@@ -38,6 +38,11 @@ def parameters_to_mapping(params: MaggyParameters) -> dict:
 
     Sensor rotation, gain and offset are written only where they differ from
     identity, 1 and 0.
+
+    Parameters
+    ----------
+    params : MaggyParameters
+        The parameter set.
     """
     m = params.magnet
     sensors = []

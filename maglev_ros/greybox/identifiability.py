@@ -137,7 +137,17 @@ def analyse(jacobian: np.ndarray, specs: Sequence[ParameterSpec]) -> Identifiabi
 def correlated_pairs(
     names: Sequence[str], correlation: np.ndarray, threshold: float = 0.95
 ) -> tuple[tuple[str, str, float], ...]:
-    """Pairs of estimates whose correlation exceeds ``threshold`` in magnitude."""
+    """Pairs of estimates whose correlation exceeds ``threshold`` in magnitude.
+
+    Parameters
+    ----------
+    names : sequence of str
+        Parameter names, in the matrix order.
+    correlation : ndarray, shape (n, n)
+        Correlation matrix of the estimates.
+    threshold : float
+        Pairs with |r| above this are returned.
+    """
     pairs = []
     for i in range(len(names)):
         for j in range(i + 1, len(names)):

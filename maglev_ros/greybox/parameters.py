@@ -102,7 +102,13 @@ class ParameterSpec:
     in_file: bool = True
 
     def display(self, value: float) -> str:
-        """``value`` (SI) formatted in the display unit, e.g. ``'0.125 mm'``."""
+        """``value`` (SI) formatted in the display unit, e.g. ``'0.125 mm'``.
+
+        Parameters
+        ----------
+        value : float
+            Value in SI units.
+        """
         unit = self.display_unit or ('' if self.unit == '1' else self.unit)
         return f'{value * self.display_factor:.6g} {unit}'.rstrip()
 
@@ -287,6 +293,11 @@ class ParameterVector:
     def expand(self, patterns: Iterable[str]) -> tuple[str, ...]:
         """Names matching shell-style patterns (``sensor*.offset_*``), in vector order.
 
+        Parameters
+        ----------
+        patterns : iterable of str
+            Shell-style name patterns.
+
         Raises
         ------
         GreyBoxError
@@ -305,13 +316,26 @@ class ParameterVector:
 
     # ------------------------------------------------------------------ changes
     def with_free(self, patterns: Iterable[str]) -> ParameterVector:
-        """Return a copy whose free set is exactly the parameters matching ``patterns``."""
+        """Return a copy whose free set is exactly the parameters matching ``patterns``.
+
+        Parameters
+        ----------
+        patterns : iterable of str
+            Shell-style patterns of the parameters to free.
+        """
         chosen = set(self.expand(patterns))
         specs = [dataclasses.replace(s, free=s.name in chosen) for s in self.specs]
         return ParameterVector(self.base, specs)
 
     def with_bounds(self, name: str, lower: float, upper: float) -> ParameterVector:
         """Return a copy with other bounds for ``name`` (SI units).
+
+        Parameters
+        ----------
+        name : str
+            The parameter.
+        lower, upper : float
+            New bounds, SI units.
 
         Raises
         ------
@@ -334,7 +358,13 @@ class ParameterVector:
         return ParameterVector(self.base, specs)
 
     def with_nominal(self, values: Mapping[str, float]) -> ParameterVector:
-        """Return a copy with other nominal values (bounds widened to hold them)."""
+        """Return a copy with other nominal values (bounds widened to hold them).
+
+        Parameters
+        ----------
+        values : mapping of str to float
+            New nominal values by name, SI.
+        """
         specs = list(self.specs)
         for name, value in values.items():
             i = self._lookup(name)
@@ -362,7 +392,13 @@ class ParameterVector:
 
     # ------------------------------------------------------------------ values
     def values(self, free_values: Sequence[float] | None = None) -> dict[str, float]:
-        """Every value by name: nominal, with the free ones replaced by ``free_values``."""
+        """Every value by name: nominal, with the free ones replaced by ``free_values``.
+
+        Parameters
+        ----------
+        free_values : sequence of float, optional
+            Values of the free parameters, in order (None: nominal).
+        """
         out = self.nominal
         if free_values is not None:
             names = self.free_names
@@ -375,7 +411,15 @@ class ParameterVector:
         return out
 
     def pose(self, index: int, values: Mapping[str, float]) -> np.ndarray:
-        """Return the 12-state of fixed-magnet experiment ``index`` from ``values``."""
+        """Return the 12-state of fixed-magnet experiment ``index`` from ``values``.
+
+        Parameters
+        ----------
+        index : int
+            Experiment number.
+        values : mapping of str to float
+            Parameter values by name (holding ``pose{index}.*``).
+        """
         x = np.zeros(12)
         for i, name in enumerate(POSE_NAMES):
             x[(0, 1, 2, 3, 4)[i]] = values[f'pose{index}.{name}']
@@ -387,6 +431,11 @@ class ParameterVector:
         The solenoid radius correction is always written out (so a changed
         coil never triggers the slow filament computation); coil gains become
         effective turns (``turns * gain``).
+
+        Parameters
+        ----------
+        values : mapping of str to float
+            Parameter values by name, SI.
         """
         p = self.base
         get = {**self.nominal, **values}.__getitem__

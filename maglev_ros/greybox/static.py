@@ -122,7 +122,13 @@ class StaticExperiment:
                 )
 
     def channels(self, sensor_count: int) -> np.ndarray:
-        """Return the indices of y's columns in the model's output vector (3 per sensor)."""
+        """Return the indices of y's columns in the model's output vector (3 per sensor).
+
+        Parameters
+        ----------
+        sensor_count : int
+            Sensors of the parameter set.
+        """
         chosen = range(sensor_count) if self.sensors is None else self.sensors
         return np.array([3 * k + a for k in chosen for a in range(3)], dtype=int)
 
@@ -132,7 +138,13 @@ class StaticExperiment:
         return self.u.shape[0]
 
     def split(self, fraction: float) -> tuple[StaticExperiment, StaticExperiment]:
-        """Estimation (first ``fraction``) and validation (the rest) parts."""
+        """Estimation (first ``fraction``) and validation (the rest) parts.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the samples in the first part.
+        """
         n = int(round(self.samples * fraction))
         cut = [slice(0, n), slice(n, None)]
         return tuple(
@@ -160,6 +172,13 @@ class StaticExperiment:
         repeat of such a run is marked, the run's first reading is genuine
         and kept. Shorter runs are left alone (quantised noise repeats now and
         then), and so are repeats under unchanged currents (no sign of a freeze).
+
+        Parameters
+        ----------
+        min_run : int
+            Shortest run of identical readings taken as a freeze.
+        delay : int
+            Sensor delay, samples.
         """
         n = self.samples
         out = np.zeros(n, dtype=bool)
@@ -224,6 +243,13 @@ class AffineStatistics:
     def of(cls, exp: StaticExperiment, delay: int) -> AffineStatistics:
         """Compute the statistics of ``exp`` for a given delay (samples).
 
+        Parameters
+        ----------
+        exp : StaticExperiment
+            The record.
+        delay : int
+            Sensor delay, samples.
+
         Raises
         ------
         GreyBoxError
@@ -261,6 +287,13 @@ def best_delay(exp: StaticExperiment, max_delay: int = 5) -> int:
 
     Chooses ``d`` in 0..max_delay minimising the affine regression's residual
     (currents at ``i - d`` against readings at ``i``).
+
+    Parameters
+    ----------
+    exp : StaticExperiment
+        The record.
+    max_delay : int
+        Largest delay tried, samples.
     """
     best, best_ss = 0, np.inf
     for d in range(max_delay + 1):
@@ -273,7 +306,15 @@ def best_delay(exp: StaticExperiment, max_delay: int = 5) -> int:
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
-    """NRMSE fit per column, percent: ``100 (1 - |y - yhat| / |y - mean(y)|)``."""
+    """NRMSE fit per column, percent: ``100 (1 - |y - yhat| / |y - mean(y)|)``.
+
+    Parameters
+    ----------
+    y : ndarray, shape (N, p)
+        Measured.
+    yhat : ndarray, shape (N, p)
+        Predicted.
+    """
     err = np.linalg.norm(y - yhat, axis=0)
     spread = np.linalg.norm(y - y.mean(axis=0), axis=0)
     with np.errstate(divide='ignore', invalid='ignore'):
@@ -353,15 +394,33 @@ class StaticProblem:
 
     # ------------------------------------------------------------------ model
     def values(self, z: np.ndarray) -> dict[str, float]:
-        """Parameter values of the scaled free vector ``z`` (theta = nominal + scale z)."""
+        """Parameter values of the scaled free vector ``z`` (theta = nominal + scale z).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
         return self.vector.values(self.center + self.scale * np.asarray(z))
 
     def model(self, values: dict[str, float]) -> MaggyModel:
-        """Return the fast model of a parameter vector's values."""
+        """Return the fast model of a parameter vector's values.
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI.
+        """
         return MaggyModel(self.vector.apply(values))
 
     def features(self, values: dict[str, float]) -> list[np.ndarray]:
-        """Affine features ``[c; M]`` (n_s + 1, 3 k) per experiment."""
+        """Affine features ``[c; M]`` (n_s + 1, 3 k) per experiment.
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI.
+        """
         model = self.model(values)
         self.evaluations += 1
         out = []
@@ -377,14 +436,32 @@ class StaticProblem:
         return out
 
     def predict(self, values: dict[str, float], exp: StaticExperiment, index: int, delay: int):
-        """Predicted readings of ``exp`` (the ``index``-th experiment), shape (N - delay, 3 k)."""
+        """Predicted readings of ``exp`` (the ``index``-th experiment), shape (N - delay, 3 k).
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI.
+        exp : StaticExperiment
+            The record.
+        index : int
+            Its position in the problem.
+        delay : int
+            Sensor delay, samples.
+        """
         theta = self.features(values)[index]
         u, _ = _shifted(exp, delay)
         return _regressors(u) @ theta
 
     # ------------------------------------------------------------------ criterion
     def residual(self, z: np.ndarray) -> np.ndarray:
-        """Weighted reduced residual vector (length experiments x (n_s + 1) x 3 k)."""
+        """Weighted reduced residual vector (length experiments x (n_s + 1) x 3 k).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
         feats = self.features(self.values(z))
         return np.concatenate(
             [
@@ -394,7 +471,13 @@ class StaticProblem:
         )
 
     def jacobian(self, z: np.ndarray) -> np.ndarray:
-        """Return d residual / d z by central differences of the features (scaled units)."""
+        """Return d residual / d z by central differences of the features (scaled units).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
         z = np.asarray(z, dtype=float)
         cols = []
         step = 1e-3
@@ -422,7 +505,13 @@ class StaticProblem:
         return sum(s.theta_hat.size for s in self.stats)
 
     def chi2(self, z: np.ndarray) -> float:
-        """Weighted sum of squares over every sample and channel (not just the reduced part)."""
+        """Weighted sum of squares over every sample and channel (not just the reduced part).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
         r = self.residual(z)
         floor = sum(float(np.sum(s.residual_ss / s.sigma**2)) for s in self.stats)
         return floor + float(r @ r)
