@@ -14,6 +14,7 @@ CLI_TOOLS = {
     'sysid': 'maglev_ros.cli.sysid:main',
     'lab': 'maglev_ros.cli.lab:main',
     'bag2data': 'maglev_ros.cli.bag2data:main',
+    'calibrate': 'maglev_ros.cli.calibrate:main',
 }
 # ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.
 NODES: dict[str, str] = {

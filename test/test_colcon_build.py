@@ -143,7 +143,7 @@ def test_installed_package_is_imported(colcon_build: ColconBuild) -> None:
         assert Path(line).resolve().is_relative_to(site), f'{line} is not under {site}'
 
 
-@pytest.mark.parametrize('verb', ['model', 'sysid'])
+@pytest.mark.parametrize('verb', ['model', 'sysid', 'calibrate'])
 def test_installed_cli_runs(colcon_build: ColconBuild, verb: str) -> None:
     colcon_build.require()
     if not (PKG_DIR / PACKAGE / 'cli' / f'{verb}.py').is_file():

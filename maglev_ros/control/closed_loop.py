@@ -74,6 +74,9 @@ class LoopResult:
         sensors' names as the estimator's diagnostics gave them, in order.
     wall_time : float
         s spent in the loop.
+    readings : ndarray, shape (N, 3 k)
+        Sensor readings available at each sample (what the estimator or the
+        PD was given, whether or not cut), T.
     """
 
     t: np.ndarray
@@ -92,6 +95,7 @@ class LoopResult:
     reason: str
     messages: tuple = field(default=())
     wall_time: float = 0.0
+    readings: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def dt(self) -> float:
@@ -234,6 +238,7 @@ class ClosedLoop:
         reference=None,
         cut: tuple[float, float] | None = None,
         progress=None,
+        excitation=None,
     ) -> LoopResult:
         """Run for ``duration`` s of simulated time from ``x0`` (stops at a crash).
 
@@ -252,6 +257,9 @@ class ClosedLoop:
             estimate reaches the controller (PD: no sample).
         progress : callable, optional
             ``progress(t)`` called about every simulated second.
+        excitation : array_like, shape (N, n_s), optional
+            Currents added to the controller's command at each sample, A
+            (identification experiments; rows past its end add nothing).
         """
         sim, est, ctrl = self.simulator, self.estimator, self.controller
         dt = sim.dt
@@ -269,6 +277,7 @@ class ClosedLoop:
         ref_arr = np.zeros((n, 3))
         level = np.empty(n, dtype=object)
         frozen = np.zeros((n, k_sensors), dtype=bool)
+        readings = np.full((n, sim.model.n_outputs), np.nan)
         messages: list[str] = []
         y = sim.reset(x0)
         if est is not None:
@@ -291,6 +300,7 @@ class ClosedLoop:
             currents = sim.currents
             xs[k] = sim.state
             cur_arr[k] = currents
+            readings[k] = y
             ref_arr[k] = ctrl.reference if not self.pd else np.nan
             is_cut = cut_start <= t < cut_end
             if self.pd:
@@ -314,6 +324,8 @@ class ClosedLoop:
                             messages.append(text)
                     command = ctrl.command(t, x_hat, currents)
             cmd_arr[k] = command
+            if excitation is not None and k < len(excitation):
+                command = command + excitation[k]
             if not ctrl.active or last_level != 'OK':
                 status = ctrl.status()
                 level[k] = status.level
@@ -352,6 +364,7 @@ class ClosedLoop:
             reason=reason,
             messages=tuple(messages),
             wall_time=wall,
+            readings=readings[:done],
         )
 
 

@@ -1,0 +1,446 @@
+r"""``maglev-calibrate``: calibrate a board's physical model from its bags.
+
+Static mode: bags recorded with the levitating magnet absent or held fixed
+(for example ``maglev-lab --magnet absent`` and ``--magnet fixed``); the
+chosen physics parameters are estimated from the field against the coil
+currents. Dynamic mode: bags recorded while the magnet levitates under
+feedback with an excitation added (``--magnet free``); a linear grey-box
+(the model linearised at the parameters' equilibrium, its Kalman predictor)
+is fitted by prediction error, which gives the magnet's mass and
+polarisation. Either writes a parameter file that loads like ``maggy_v2.yaml``::
+
+    maglev-calibrate absent/ fixed/ --params maggy_v2 \
+        --free 'coil*.gain' 'sensor*.offset_*' --out static.yaml
+    maglev-calibrate levitating/ --params static.yaml \
+        --free magnet.mass magnet.polarization --out myboard.yaml
+
+Names accept shell patterns; ``--list`` shows every parameter. Where the
+magnet was comes from a bag's run metadata (``magnet``: absent, fixed or
+free), or from ``--magnet``, or from a suffix ``BAG@absent`` / ``BAG@fixed``
+/ ``BAG@free``. Static and levitation bags go in separate runs.
+Exit status: 0 on success, 2 on bad input (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from .bag2data import add_channel_arguments
+from .usage import Parser, UsageError, limit_blas_threads, positive_float, run_command
+
+__all__ = ['build_parser', 'main', 'default_channels', 'parse_bounds']
+
+PROG = 'maglev-calibrate'
+AXES = ('x', 'y', 'z')
+
+
+def default_channels(sensors: Sequence[int], coils: int) -> tuple[list[str], list[str]]:
+    """Return the channel specs of the field (outputs) and the coil currents (inputs) of a run.
+
+    Parameters
+    ----------
+    sensors : sequence of int
+        The 3-axis sensors recorded.
+    coils : int
+        Number of solenoids.
+
+    Returns
+    -------
+    outputs, inputs : list of str
+        ``B{axis}_{k}=maglev/sensor_{k}/field:magnetic_field.{axis}`` and
+        ``i{j}=maglev/currents:effort[{j}]``.
+    """
+    outputs = [
+        f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}' for k in sensors for a in AXES
+    ]
+    inputs = [f'i{j}=maglev/currents:effort[{j}]' for j in range(coils)]
+    return outputs, inputs
+
+
+def parse_bounds(text: str) -> tuple[str, float, float]:
+    """Argparse type: ``NAME=LOWER:UPPER`` in SI units.
+
+    Parameters
+    ----------
+    text : str
+        ``NAME=LOWER:UPPER`` in SI units.
+    """
+    name, sep, rest = text.partition('=')
+    lower, sep2, upper = rest.partition(':')
+    try:
+        if not (sep and sep2 and name):
+            raise ValueError
+        return name, float(lower), float(upper)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f'expected NAME=LOWER:UPPER (SI units), got {text!r}'
+        ) from None
+
+
+def _split_fraction(text: str) -> float:
+    value = positive_float(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f'must be a fraction in (0, 1), got {text!r}')
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """Return the argument parser of ``maglev-calibrate``."""
+    p = Parser(
+        prog=PROG,
+        description='Calibrate the physics parameters of a board from bags recorded with '
+        'the magnet absent or held fixed (static calibration) or levitating under feedback '
+        'with an excitation (dynamic calibration: mass, polarisation).',
+    )
+    p.add_argument(
+        'bags',
+        nargs='*',
+        metavar='BAG',
+        help='bag directories; BAG@absent, BAG@fixed or BAG@free (levitating) says where '
+        'the magnet was '
+        '(default: the bag metadata, else --magnet)',
+    )
+    p.add_argument(
+        '--params', default='maggy_v2', help='nominal parameter set: preset or YAML path'
+    )
+    p.add_argument(
+        '--free',
+        nargs='+',
+        action='extend',
+        default=[],
+        metavar='NAME',
+        help="parameters to estimate (shell patterns, e.g. 'coil*.gain' 'sensor*.offset_*')",
+    )
+    p.add_argument(
+        '--bounds',
+        type=parse_bounds,
+        action='append',
+        default=[],
+        metavar='NAME=LO:HI',
+        help='bounds of a parameter in SI units (must contain the nominal value)',
+    )
+    p.add_argument('--out', metavar='FILE.yaml', help='write the calibrated parameter file')
+    p.add_argument(
+        '--plot',
+        metavar='FILE.png',
+        help='measured vs model plot (default: next to --out; one file per bag)',
+    )
+    p.add_argument(
+        '--sensors',
+        type=int,
+        nargs='+',
+        metavar='K',
+        help='sensors recorded (default: those of the parameter set that the first bag has)',
+    )
+    p.add_argument(
+        '--magnet',
+        choices=('absent', 'fixed', 'free'),
+        help='where the magnet was, for bags whose metadata does not say (free: levitating)',
+    )
+    p.add_argument(
+        '--split',
+        type=_split_fraction,
+        default=0.5,
+        help='fraction of each bag used for estimation; the rest validates (default 0.5)',
+    )
+    p.add_argument(
+        '--delay',
+        type=int,
+        metavar='SAMPLES',
+        help='sensor delay in samples (default: estimated per bag)',
+    )
+    p.add_argument(
+        '--frozen-run',
+        type=int,
+        default=3,
+        metavar='N',
+        help='leave out a sensor frozen for N or more identical readings while the '
+        'currents change (default 3; 0 keeps every reading)',
+    )
+    p.add_argument(
+        '--hold-pose',
+        action='store_true',
+        help='do not estimate where a fixed magnet is held (use the nominal equilibrium)',
+    )
+    p.add_argument(
+        '--process-noise',
+        type=positive_float,
+        default=1e-3,
+        metavar='AMPS',
+        help='dynamic mode: input disturbance level of the Kalman predictor, A rms (default 1e-3)',
+    )
+    p.add_argument('--list', action='store_true', help='list the parameters and exit')
+    p.add_argument(
+        '--ts',
+        type=positive_float,
+        metavar='SECONDS',
+        help='sample time (default: estimated from the first output stamps)',
+    )
+    add_channel_arguments(p)
+    return p
+
+
+def _say(line: str) -> None:
+    print(line, flush=True)
+
+
+def _list(vector) -> int:
+    print(f'{"parameter":<28}{"unit":<6}{"nominal":>14}{"lower":>14}{"upper":>14}  meaning')
+    for s in vector.specs:
+        print(
+            f'{s.name:<28}{s.unit:<6}{s.nominal:>14.6g}{s.lower:>14.6g}{s.upper:>14.6g}  '
+            f'{s.description}'
+        )
+    print('pose{e}.x|y|z|alpha|beta: where fixed-magnet bag e held the magnet (estimated)')
+    return 0
+
+
+def _bag_and_magnet(text: str, default: str | None) -> tuple[str, str | None]:
+    bag, sep, mode = text.rpartition('@')
+    if sep and mode in ('absent', 'fixed', 'free'):
+        return bag, mode
+    return text, default
+
+
+def _recorded_magnet(metadata: dict) -> str | None:
+    """Where the magnet was, from run metadata (``magnet`` or ``<node>.magnet``)."""
+    for key, value in metadata.items():
+        if key == 'magnet' or key.endswith('.magnet'):
+            text = str(value).strip()
+            if text:
+                return text
+    return None
+
+
+def _bag_sensors(bag: str, count: int) -> list[int]:
+    """Sensors of the parameter set whose field topic the bag has."""
+    from maglev_ros.bags import BagReader
+
+    with BagReader(bag) as reader:
+        topics = reader.topics
+    found = [k for k in range(count) if f'/maglev/sensor_{k}/field' in topics]
+    if not found:
+        raise UsageError(
+            f'{bag}: no field topic /maglev/sensor_K/field (K < {count}); its topics: '
+            f'{", ".join(sorted(topics))}'
+        )
+    return found
+
+
+def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
+    from maglev_ros.bags import read_bag
+    from maglev_ros.greybox import LevitationExperiment, StaticExperiment
+
+    _say(f'reading {bag} ...')
+    ds = read_bag(
+        bag,
+        outputs,
+        inputs,
+        Ts=args.ts,
+        allow_gaps=args.allow_gaps,
+        tolerance=args.tolerance,
+    )
+    magnet = mode or _recorded_magnet(ds.metadata)
+    if magnet is None:
+        raise UsageError(
+            f'{bag}: the bag does not say whether the magnet was absent, fixed or free '
+            f'(levitating): give --magnet or {bag}@absent / {bag}@fixed / {bag}@free'
+        )
+    if magnet not in ('absent', 'fixed', 'free'):
+        raise UsageError(
+            f'{bag}: recorded with the magnet {magnet!r}; calibration needs it absent, '
+            'held fixed or free (levitating)'
+        )
+    data = ds.data
+    if magnet == 'free':
+        exp = LevitationExperiment(
+            u=data.u,
+            y=data.y,
+            name=f'{bag} (levitating)',
+            Ts=data.Ts,
+            sensors=tuple(sensors),
+        )
+        _say(
+            f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet levitating, '
+            f'sensors {", ".join(map(str, sensors))}'
+        )
+        return exp
+    exp = StaticExperiment(
+        u=data.u,
+        y=data.y,
+        magnet=magnet,
+        name=f'{bag} (magnet {magnet})',
+        Ts=data.Ts,
+        sensors=tuple(sensors),
+    )
+    _say(
+        f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet {magnet}, '
+        f'sensors {", ".join(map(str, sensors))}'
+    )
+    return exp
+
+
+def _header(args, cal, bags) -> list[str]:
+    now = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')
+    lines = [
+        f'Calibrated by {PROG} on {now} from {args.params}',
+        f'bags: {", ".join(bags)}',
+        (
+            'dynamic calibration (levitation data, linear grey-box, Kalman predictor)'
+            if getattr(cal, 'form', None)
+            else 'static calibration (field vs coil currents)'
+        )
+        + '; estimate +- standard deviation:',
+    ]
+    for name in cal.names:
+        spec = cal.vector[name]
+        lines.append(
+            f'  {name} = {spec.display(cal.estimate[name])} +- {spec.display(cal.std[name])}'
+            f' (nominal {spec.display(spec.nominal)})'
+        )
+    for u in cal.identifiability.unidentified:
+        lines.append(f'  {u.line()}')
+    for nom, new in zip(cal.validation_nominal, cal.validation_calibrated, strict=True):
+        lines.append(
+            f'validation RMS error {nom.experiment}: nominal {1e3 * nom.total_rms:.4g} mT, '
+            f'calibrated {1e3 * new.total_rms:.4g} mT'
+        )
+    lines.append('coil gains appear as effective turns (solenoids.turns = nominal turns x gain)')
+    return lines
+
+
+def _run(args: argparse.Namespace) -> int:
+    from maglev_ros.greybox import (
+        LevitationExperiment,
+        calibrate_dynamic,
+        calibrate_static,
+        parameter_vector,
+        write_parameters,
+    )
+    from maglev_ros.physics import load_parameters
+
+    limit_blas_threads(1)  # small solves: see limit_blas_threads
+    base = load_parameters(args.params)
+    vector = parameter_vector(base)
+    if args.list:
+        return _list(vector)
+    if not args.bags:
+        raise UsageError(
+            'give at least one BAG (recorded with the magnet absent, fixed or levitating)'
+        )
+    if not args.free:
+        raise UsageError("choose parameters with --free (e.g. 'coil*.gain'); --list shows them")
+    vector = vector.with_free(args.free)
+    for name, lower, upper in args.bounds:
+        vector = vector.with_bounds(name, lower, upper)
+    if args.frozen_run < 0:
+        raise UsageError(f'--frozen-run must be >= 0, got {args.frozen_run}')
+    if args.delay is not None and args.delay < 0:
+        raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
+    if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
+        raise UsageError(f'--out must name a .yaml file, got {args.out!r}')
+    count = len(base.sensors)
+    parsed = [_bag_and_magnet(text, args.magnet) for text in args.bags]
+    sensors = args.sensors
+    if sensors is None:
+        if args.output:
+            sensors = list(range(len(args.output) // 3))
+        else:
+            sensors = _bag_sensors(parsed[0][0], count)
+    bad = [k for k in sensors if not 0 <= k < count]
+    if bad:
+        raise UsageError(f'--sensors {bad}: {base.name} has sensors 0 to {count - 1}')
+    defaults = default_channels(sensors, base.solenoids.count)
+    outputs = args.output or defaults[0]
+    inputs = args.input or defaults[1]
+    experiments, bags = [], []
+    for bag, mode in parsed:
+        experiments.append(_experiment(bag, mode, args, sensors, outputs, inputs))
+        bags.append(bag)
+    levitating = [isinstance(e, LevitationExperiment) for e in experiments]
+    if any(levitating) and not all(levitating):
+        raise UsageError(
+            'levitation bags (magnet free) and static bags (absent/fixed) go in separate '
+            'runs: calibrate the static part first, then pass its file as --params'
+        )
+    if all(levitating):
+        _say('dynamic calibration from levitation data (linear grey-box, Kalman predictor)')
+        cal = calibrate_dynamic(
+            vector,
+            experiments,
+            split=args.split,
+            delay=args.delay,
+            process_noise=args.process_noise,
+            progress=_say,
+        )
+    else:
+        delays = None if args.delay is None else [args.delay] * len(experiments)
+        cal = calibrate_static(
+            vector,
+            experiments,
+            split=args.split,
+            delays=delays,
+            fit_pose=not args.hold_pose,
+            progress=_say,
+            frozen_run=args.frozen_run,
+        )
+    print()
+    for line in cal.table():
+        print(line)
+    if cal.identifiability.unidentified:
+        print('\nnot identified by these data (held at their nominal values):')
+        for u in cal.identifiability.unidentified:
+            print(f'  {u.line()}')
+    if cal.correlated:
+        print('\nstrongly correlated estimates (each is uncertain along their combination):')
+        for a, b, r in cal.correlated:
+            print(f'  {a} ~ {b}: r = {r:+.3f}')
+    print(f'\nweighted residual per degree of freedom {cal.chi2_per_dof:.3f} (1 = noise level)')
+    if getattr(cal, 'form', None):
+        print(
+            f'equilibrium height: nominal {1e3 * cal.z_eq[0]:.4f} mm, '
+            f'calibrated {1e3 * cal.z_eq[1]:.4f} mm'
+        )
+        print('validation (data not used for estimation; one-step-ahead Kalman prediction):')
+    else:
+        print('validation (data not used for estimation):')
+    for nom, new in zip(cal.validation_nominal, cal.validation_calibrated, strict=True):
+        print(
+            f'  {nom.experiment}: RMS error nominal {1e3 * nom.total_rms:.4g} mT, calibrated '
+            f'{1e3 * new.total_rms:.4g} mT; mean fit nominal {nom.mean_fit:.1f} %, '
+            f'calibrated {new.mean_fit:.1f} %'
+        )
+    if args.out:
+        params = cal.params.replace(name=Path(args.out).stem)
+        path = write_parameters(params, args.out, _header(args, cal, bags))
+        print(f'wrote     {path}')
+    plot = args.plot or (str(Path(args.out).with_suffix('.png')) if args.out else None)
+    if plot:
+        from maglev_ros.greybox.plots import calibration_plot
+
+        for i, exp in enumerate(experiments):
+            target = Path(plot)
+            if len(experiments) > 1:
+                kind = getattr(exp, 'magnet', 'free')
+                target = target.with_name(f'{target.stem}_{i}_{kind}{target.suffix}')
+            print(f'wrote     {calibration_plot(cal, i, target, Ts=exp.Ts)}')
+    return 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``maglev-calibrate``; return the exit status (2 on bad input).
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        Arguments (default: the command line).
+    """
+    return run_command(PROG, build_parser(), _run, argv)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

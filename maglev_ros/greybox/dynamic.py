@@ -1,0 +1,585 @@
+"""Dynamic calibration from levitation data: a linear grey-box fitted by prediction error.
+
+While the magnet levitates under feedback (with an excitation added to the
+command), the coil currents ``u`` (inputs) and the fields ``y`` (outputs) are
+recorded. The grey-box model is the physics model linearised at the
+equilibrium of the parameter set ``theta`` (as MATLAB's ``idgrey``: the
+matrices are functions of the parameters)::
+
+    A, B, C, D, y_eq = linearize(MaggyModel(theta)).reduced()      (10 states)
+    Ad, Bd = zoh(A, B, Ts)                                          (exact ZOH)
+    x_{k+1} = Ad x_k + Bd u_k + w_k
+    y_{k+d} = y_eq + C x_k + D u_k + e_k                            (d: sensor delay)
+
+The plant is open-loop unstable, so the output-error simulation of this model
+diverges and the data are closed-loop: the one-step predictor is the
+steady-state Kalman predictor in innovation form (``greyest`` with the ``'K'``
+disturbance model)::
+
+    eps_k = y_{k+d} - y_eq - C xh_k - D u_k
+    xh_{k+1} = Ad xh_k + Bd u_k + K eps_k
+
+with ``K`` the stationary Kalman gain of ``(Ad, C)`` (discrete Riccati
+equation) for measurement noise ``R = diag(sigma^2)`` (``sigma``: each
+channel's noise level, from the data) and a small input-disturbance process
+noise ``Q = Bd Bd^T q^2`` (``q`` A rms). So ``K`` is a function of ``theta``
+too, not a block of free parameters: the simulated plant has no process
+noise, its true predictor is the Kalman one with ``q -> 0``; a real board's
+unmeasured disturbances are what ``q`` stands for. The free parameters
+minimise ``sum |eps_k / sigma|^2`` (scipy's ``least_squares``, Jacobian by
+central differences of the predictor); standard deviations from the Jacobian
+at the optimum, scaled by the residual variance.
+
+The currents come from the coil drivers, measured at the samples; the ZOH
+assumes them constant over a sample.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy.linalg import solve_discrete_are
+from scipy.optimize import least_squares
+
+from ..physics.discretization import zoh
+from ..physics.equilibria import find_equilibria
+from ..physics.linearization import linearize
+from ..physics.model import MaggyModel
+from .errors import GreyBoxError
+from .identifiability import analyse, correlated_pairs
+from .parameters import ParameterVector
+from .static import StaticCalibration, ValidationFit, fit_percent
+
+__all__ = [
+    'LevitationExperiment',
+    'GreyBoxSystem',
+    'LinearGreyBoxProblem',
+    'DynamicCalibration',
+    'calibrate_dynamic',
+    'noise_level',
+]
+
+
+@dataclass(frozen=True)
+class LevitationExperiment:
+    """One record of the levitating magnet under feedback.
+
+    Attributes
+    ----------
+    u : ndarray, shape (N, n_s)
+        Measured coil currents, A.
+    y : ndarray, shape (N, 3 k)
+        Sensor readings [Bx_0, By_0, Bz_0, Bx_1, ...], T.
+    name : str
+        For messages and plots.
+    Ts : float
+        Sample time, s.
+    sensors : tuple of int or None
+        Which of the parameter set's sensors ``y`` holds (None: all).
+    """
+
+    u: np.ndarray
+    y: np.ndarray
+    name: str = 'levitation'
+    Ts: float = 2e-4
+    sensors: tuple[int, ...] | None = None
+
+    def __post_init__(self):
+        u = np.ascontiguousarray(self.u, dtype=float)
+        y = np.ascontiguousarray(self.y, dtype=float)
+        if u.ndim != 2 or y.ndim != 2 or u.shape[0] != y.shape[0]:
+            raise GreyBoxError(
+                f'{self.name}: u (N, n_s) and y (N, 3 k) must have as many rows, '
+                f'got {u.shape} and {y.shape}'
+            )
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(y))):
+            raise GreyBoxError(f'{self.name}: currents and fields must be finite')
+        if not (np.isfinite(self.Ts) and self.Ts > 0):
+            raise GreyBoxError(f'{self.name}: Ts must be positive, got {self.Ts!r}')
+        object.__setattr__(self, 'u', u)
+        object.__setattr__(self, 'y', y)
+        if self.sensors is not None:
+            object.__setattr__(self, 'sensors', tuple(int(k) for k in self.sensors))
+            if y.shape[1] != 3 * len(self.sensors):
+                raise GreyBoxError(
+                    f'{self.name}: {len(self.sensors)} sensors need {3 * len(self.sensors)} '
+                    f'field channels, got {y.shape[1]}'
+                )
+
+    @property
+    def samples(self) -> int:
+        """Number of samples N."""
+        return self.u.shape[0]
+
+    def channels(self, sensor_count: int) -> np.ndarray:
+        """Return the indices of y's columns in the model's output vector.
+
+        Parameters
+        ----------
+        sensor_count : int
+            Sensors of the parameter set.
+        """
+        chosen = range(sensor_count) if self.sensors is None else self.sensors
+        return np.array([3 * k + a for k in chosen for a in range(3)], dtype=int)
+
+    def split(self, fraction: float) -> tuple[LevitationExperiment, LevitationExperiment]:
+        """Estimation (first ``fraction``) and validation (the rest) parts.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the samples in the first part.
+        """
+        n = int(round(self.samples * fraction))
+        return tuple(
+            LevitationExperiment(self.u[s], self.y[s], self.name, self.Ts, self.sensors)
+            for s in (slice(0, n), slice(n, None))
+        )
+
+
+def noise_level(y: np.ndarray) -> np.ndarray:
+    """Noise level per channel from second differences (robust, MAD), T rms, shape (3 k,).
+
+    A white sequence's second difference has 6 times its variance; a smooth
+    motion at 5 kHz hardly contributes.
+
+    Parameters
+    ----------
+    y : array_like, shape (N, 3 k)
+        Readings, T.
+    """
+    d2 = np.diff(np.asarray(y, dtype=float), n=2, axis=0)
+    mad = np.median(np.abs(d2 - np.median(d2, axis=0)), axis=0)
+    return np.maximum(1.4826 * mad / np.sqrt(6.0), 1e-9)
+
+
+@njit(cache=True)
+def _innovations(ad, bd, gain, c, d, y0, u, y, delay, out):  # pragma: no cover - compiled
+    """Kalman predictor in innovation form; fills ``out`` (N - delay, p) with eps_k."""
+    n = ad.shape[0]
+    m = bd.shape[1]
+    p = c.shape[0]
+    x = np.zeros(n)
+    xn = np.zeros(n)
+    e = np.zeros(p)
+    for k in range(out.shape[0]):
+        for i in range(p):
+            s = y[k + delay, i] - y0[i]
+            for j in range(n):
+                s -= c[i, j] * x[j]
+            for j in range(m):
+                s -= d[i, j] * u[k, j]
+            e[i] = s
+            out[k, i] = s
+        for i in range(n):
+            s = 0.0
+            for j in range(n):
+                s += ad[i, j] * x[j]
+            for j in range(m):
+                s += bd[i, j] * u[k, j]
+            for j in range(p):
+                s += gain[i, j] * e[j]
+            xn[i] = s
+        for i in range(n):
+            x[i] = xn[i]
+
+
+@dataclass(frozen=True)
+class GreyBoxSystem:
+    """The discrete linear grey-box of one parameter set (what ``idgrey``'s function returns).
+
+    Attributes
+    ----------
+    Ad : ndarray, shape (10, 10)
+    Bd : ndarray, shape (10, n_s)
+    C : ndarray, shape (3 k, 10)
+    D : ndarray, shape (3 k, n_s)
+    K : ndarray, shape (10, 3 k)
+        Stationary Kalman gain (innovation form).
+    y_eq : ndarray, shape (3 k,)
+        Field at the equilibrium, T.
+    z_eq : float
+        Equilibrium height, m.
+    """
+
+    Ad: np.ndarray
+    Bd: np.ndarray
+    C: np.ndarray
+    D: np.ndarray
+    K: np.ndarray
+    y_eq: np.ndarray
+    z_eq: float
+
+    def innovations(self, u: np.ndarray, y: np.ndarray, delay: int) -> np.ndarray:
+        """Prediction errors eps (N - delay, 3 k) of readings ``y`` given currents ``u``.
+
+        Parameters
+        ----------
+        u : ndarray, shape (N, n_s)
+            Coil currents, A.
+        y : ndarray, shape (N, 3 k)
+            Readings, T.
+        delay : int
+            Sensor delay, samples.
+        """
+        out = np.empty((u.shape[0] - delay, self.C.shape[0]))
+        _innovations(self.Ad, self.Bd, self.K, self.C, self.D, self.y_eq, u, y, int(delay), out)
+        return out
+
+
+class LinearGreyBoxProblem:
+    """The linear grey-box prediction-error problem over a parameter vector.
+
+    Parameters
+    ----------
+    vector : ParameterVector
+        Parameters (the free ones are estimated).
+    experiments : sequence of LevitationExperiment
+        Estimation data (same sample time and sensors).
+    delay : int
+        Sensor delay, samples.
+    sigma : ndarray, shape (3 k,)
+        Noise level per channel, T rms (weights and the Kalman filter's R).
+    process_noise : float
+        Input-disturbance level ``q`` of the Kalman gain, A rms.
+    burn : int
+        Samples of each record left out of the criterion while the
+        predictor's initial error dies out.
+    """
+
+    def __init__(
+        self,
+        vector: ParameterVector,
+        experiments: Sequence[LevitationExperiment],
+        delay: int,
+        sigma: np.ndarray,
+        process_noise: float = 1e-3,
+        burn: int = 100,
+    ):
+        self.vector = vector
+        self.experiments = tuple(experiments)
+        self.delay = int(delay)
+        self.sigma = np.asarray(sigma, dtype=float)
+        self.process_noise = float(process_noise)
+        self.burn = int(burn)
+        self.free = vector.free_specs
+        self.scale = np.array([s.scale for s in self.free])
+        self.center = np.array([s.nominal for s in self.free])
+        self.Ts = self.experiments[0].Ts
+        self.channels = self.experiments[0].channels(len(vector.base.sensors))
+        self.evaluations = 0
+
+    def values(self, z: np.ndarray) -> dict[str, float]:
+        """Parameter values of the scaled free vector ``z`` (theta = nominal + scale z).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
+        return self.vector.values(self.center + self.scale * np.asarray(z))
+
+    def system(self, values: dict[str, float]) -> GreyBoxSystem:
+        """Return the discrete grey-box and its Kalman gain for parameter values.
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI (missing ones nominal).
+
+        Raises
+        ------
+        GreyBoxError
+            The parameter set has no equilibrium (the magnet cannot levitate).
+        """
+        self.evaluations += 1
+        model = MaggyModel(self.vector.apply(values))
+        found = find_equilibria(model)
+        if not found:
+            raise GreyBoxError(f'no equilibrium for {values}')
+        lin = linearize(model, model.hover_state(found[0].z)).reduced()
+        ad, bd = zoh(lin.A, lin.B, self.Ts)
+        c = np.ascontiguousarray(lin.C[self.channels])
+        d = np.ascontiguousarray(lin.D[self.channels])
+        q = (self.process_noise**2) * (bd @ bd.T) + 1e-30 * np.eye(ad.shape[0])
+        r = np.diag(self.sigma**2)
+        p = solve_discrete_are(ad.T, c.T, q, r)
+        gain = ad @ p @ c.T @ np.linalg.inv(c @ p @ c.T + r)
+        return GreyBoxSystem(
+            np.ascontiguousarray(ad),
+            np.ascontiguousarray(bd),
+            c,
+            d,
+            np.ascontiguousarray(gain),
+            np.ascontiguousarray(lin.y_eq[self.channels]),
+            float(found[0].z),
+        )
+
+    def errors(self, values: dict[str, float]) -> list[np.ndarray]:
+        """Prediction errors per experiment (burn-in left out), T.
+
+        Parameters
+        ----------
+        values : dict
+            Parameter values by name, SI.
+        """
+        sys_ = self.system(values)
+        return [sys_.innovations(e.u, e.y, self.delay)[self.burn :] for e in self.experiments]
+
+    def residual(self, z: np.ndarray) -> np.ndarray:
+        """Weighted prediction errors, all experiments and channels, flattened.
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        """
+        try:
+            errs = self.errors(self.values(z))
+        except (GreyBoxError, np.linalg.LinAlgError, ValueError):
+            return np.full(self.residual_size, 1e3)
+        return np.concatenate([(e / self.sigma).ravel() for e in errs])
+
+    def jacobian(self, z: np.ndarray, step: float = 1e-2) -> np.ndarray:
+        """Return d residual / d z by central differences (scaled units).
+
+        Parameters
+        ----------
+        z : array_like, shape (free,)
+            Scaled free parameters.
+        step : float
+            Difference step in parameter scales (the linearisation is itself a
+            finite difference: a tiny step differentiates its noise).
+        """
+        z = np.asarray(z, dtype=float)
+        cols = []
+        for p in range(z.size):
+            zp, zm = z.copy(), z.copy()
+            zp[p] += step
+            zm[p] -= step
+            cols.append((self.residual(zp) - self.residual(zm)) / (2 * step))
+        if not cols:
+            return np.zeros((self.residual_size, 0))
+        return np.column_stack(cols)
+
+    @property
+    def residual_size(self) -> int:
+        """Length of the residual vector."""
+        return sum(
+            (e.samples - self.delay - self.burn) * self.channels.size for e in self.experiments
+        )
+
+
+@dataclass(frozen=True)
+class DynamicCalibration(StaticCalibration):
+    """Result of a dynamic calibration (the fields of :class:`StaticCalibration`, and these).
+
+    ``validation_*`` and ``predictions`` hold one-step-ahead predictions of
+    the validation part (Kalman predictor of each parameter set).
+
+    Attributes
+    ----------
+    form : str
+        ``linear`` (grey-box prediction error) or ``nonlinear``.
+    process_noise : float
+        Kalman gain's input-disturbance level, A rms.
+    z_eq : tuple of float
+        Equilibrium height of the nominal and the calibrated set, m.
+    """
+
+    form: str = 'linear'
+    process_noise: float = 0.0
+    z_eq: tuple = ()
+
+
+def calibrate_dynamic(
+    vector: ParameterVector,
+    experiments: Sequence[LevitationExperiment],
+    split: float = 0.5,
+    delay: int | None = None,
+    process_noise: float = 1e-3,
+    progress: Callable[[str], None] | None = None,
+    jacobian: str = 'central',
+    max_delay: int = 3,
+) -> DynamicCalibration:
+    """Estimate the free parameters of ``vector`` from levitation data (linear grey-box).
+
+    Parameters
+    ----------
+    vector : ParameterVector
+        Parameters; the free ones are estimated (the magnet's mass and
+        polarisation, which static data cannot give, and others).
+    experiments : sequence of LevitationExperiment
+        Levitation records (each split into estimation and validation parts).
+    split : float
+        Fraction of each record used for estimation.
+    delay : int, optional
+        Sensor delay, samples (default: the one in 0..``max_delay`` with the
+        smallest nominal prediction error).
+    process_noise : float
+        Kalman gain's input-disturbance level, A rms.
+    progress : callable, optional
+        Called with a line of text at each stage and iteration.
+    jacobian : {'central', '2-point'}
+        ``central``: central differences of the predictor (default);
+        ``2-point``: scipy's own forward differences (for comparison).
+    max_delay : int
+        Largest delay tried.
+
+    Returns
+    -------
+    DynamicCalibration
+
+    Raises
+    ------
+    GreyBoxError
+        No experiment, no free parameter, bad split, mismatched records, or
+        a nominal set without equilibrium.
+    """
+    say = progress or (lambda _line: None)
+    if not experiments:
+        raise GreyBoxError('dynamic calibration needs at least one levitation record')
+    if not 0.0 < split <= 1.0:
+        raise GreyBoxError(f'split must be in (0, 1], got {split!r}')
+    if not (np.isfinite(process_noise) and process_noise > 0):
+        raise GreyBoxError(f'process_noise must be positive, got {process_noise!r}')
+    n_s = vector.base.solenoids.count
+    count = len(vector.base.sensors)
+    first = experiments[0]
+    for e in experiments:
+        n_y = 3 * (count if e.sensors is None else len(e.sensors))
+        if e.sensors is not None and not all(0 <= k < count for k in e.sensors):
+            raise GreyBoxError(
+                f'{e.name}: sensors {list(e.sensors)} out of range: {vector.base.name} has '
+                f'{count} sensors (0 to {count - 1})'
+            )
+        if e.u.shape[1] != n_s or e.y.shape[1] != n_y:
+            raise GreyBoxError(
+                f'{e.name}: {vector.base.name} has {n_s} coils and {n_y // 3} sensors here; '
+                f'the data have {e.u.shape[1]} currents and {e.y.shape[1]} field channels'
+            )
+        if e.sensors != first.sensors or abs(e.Ts - first.Ts) > 1e-9 * first.Ts:
+            raise GreyBoxError(f'{e.name}: every record needs the same sensors and sample time')
+        if e.samples * split < 1000:
+            raise GreyBoxError(f'{e.name}: {e.samples} samples are too few (2000 or more)')
+    if not vector.free_names:
+        raise GreyBoxError('no free parameter: choose some with --free')
+    parts = [e.split(split) if split < 1.0 else (e, e) for e in experiments]
+    estimation = [p[0] for p in parts]
+    validation = [p[1] for p in parts]
+    sigma = np.median([noise_level(e.y) for e in estimation], axis=0)
+    say(f'noise level per channel: {", ".join(f"{1e3 * s:.3f}" for s in sigma)} mT rms')
+
+    start = time.perf_counter()
+    if delay is None:
+        costs = []
+        for d in range(max_delay + 1):
+            trial = LinearGreyBoxProblem(vector, estimation, d, sigma, process_noise)
+            r = trial.residual(np.zeros(len(trial.free)))
+            costs.append(float(r @ r) / r.size)
+        delay = int(np.argmin(costs))
+        say(
+            f'sensor delay {delay} sample(s) (nominal prediction error per reading: '
+            + ', '.join(f'{d}: {c:.3g}' for d, c in enumerate(costs))
+            + ')'
+        )
+    problem = LinearGreyBoxProblem(vector, estimation, delay, sigma, process_noise)
+    z0 = np.zeros(len(problem.free))
+    ident = analyse(problem.jacobian(z0), problem.free)
+    for line in ident.lines():
+        say(line)
+    keep = [s.name for s in problem.free if s.name not in ident.unidentified_names]
+    if not keep:
+        raise GreyBoxError(
+            'none of the free parameters is identified by these data: ' + '; '.join(ident.lines())
+        )
+    vector_fit = vector.with_free(keep) if len(keep) < len(problem.free) else vector
+    if vector_fit is not vector:
+        problem = LinearGreyBoxProblem(vector_fit, estimation, delay, sigma, process_noise)
+    lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
+    upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
+    iteration = [0]
+
+    def jac(z):
+        iteration[0] += 1
+        r = problem.residual(z)
+        say(f'iteration {iteration[0]}: weighted cost per reading {float(r @ r) / r.size:.6g}')
+        return problem.jacobian(z)
+
+    say(
+        f'fitting {len(keep)} parameters to {problem.residual_size} readings '
+        f'(linear grey-box, Kalman predictor, delay {delay})'
+    )
+    solution = least_squares(
+        problem.residual,
+        np.zeros(len(keep)),
+        jac=jac if jacobian == 'central' else '2-point',
+        bounds=(lower, upper),
+        method='trf',
+        x_scale=1.0,
+        ftol=1e-10,
+        xtol=1e-10,
+        gtol=1e-10,
+        max_nfev=50,
+    )
+    z = solution.x
+    values = problem.values(z)
+    jac_hat = problem.jacobian(z)
+    r = problem.residual(z)
+    dof = max(r.size - len(keep), 1)
+    s2 = float(r @ r) / dof
+    cov_z = np.linalg.pinv(jac_hat.T @ jac_hat) * s2
+    sd_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
+    with np.errstate(divide='ignore', invalid='ignore'):
+        corr = cov_z / np.outer(sd_z, sd_z)
+    names = tuple(s.name for s in problem.free)
+    std = {n: float(sd * s.scale) for n, sd, s in zip(names, sd_z, problem.free, strict=True)}
+    seconds = time.perf_counter() - start
+    say(f'done in {seconds:.2f} s: {solution.message}')
+
+    nominal_values = vector.nominal
+    fits_nom, fits_cal, predictions = [], [], {}
+    check = LinearGreyBoxProblem(vector_fit, validation, delay, sigma, process_noise)
+    z_eq = []
+    for label, values_set, sink in (
+        ('nominal', nominal_values, fits_nom),
+        ('calibrated', values, fits_cal),
+    ):
+        system = check.system(values_set)
+        z_eq.append(system.z_eq)
+        for i, e in enumerate(validation):
+            y = e.y[delay:][check.burn :]
+            err = system.innovations(e.u, e.y, delay)[check.burn :]
+            yhat = y - err
+            sink.append(ValidationFit(e.name, fit_percent(y, yhat), np.sqrt(np.mean(err**2, 0))))
+            predictions[(i, label)] = yhat
+            predictions[(i, 'measured')] = y
+    return DynamicCalibration(
+        vector=vector,
+        names=names,
+        estimate=values,
+        std=std,
+        correlation=corr,
+        identifiability=ident,
+        correlated=correlated_pairs(names, corr, 0.95),
+        params=vector_fit.apply(values),
+        delays=tuple(delay for _ in experiments),
+        validation_nominal=tuple(fits_nom),
+        validation_calibrated=tuple(fits_cal),
+        sensors=tuple(
+            tuple(range(count)) if e.sensors is None else e.sensors for e in experiments
+        ),
+        noise=tuple(sigma for _ in experiments),
+        chi2_per_dof=s2,
+        evaluations=problem.evaluations,
+        seconds=seconds,
+        message=str(solution.message),
+        predictions=predictions,
+        form='linear',
+        process_noise=float(process_noise),
+        z_eq=tuple(z_eq),
+    )

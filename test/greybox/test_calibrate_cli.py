@@ -1,0 +1,140 @@
+"""``maglev-calibrate`` on simulated bags: the calibrated file, the plots, one-line errors."""
+
+from __future__ import annotations
+
+import pytest
+
+from maglev_ros.cli.calibrate import main
+from maglev_ros.physics import load_parameters
+
+from .plant import write_bag
+
+
+@pytest.fixture(scope='module')
+def bags(tmp_path_factory):
+    root = tmp_path_factory.mktemp('bags')
+    return {
+        'absent': write_bag(root / 'absent', 'absent', 5000),
+        'fixed': write_bag(root / 'fixed', 'fixed', 5000),
+        'unlabelled': write_bag(root / 'unlabelled', None, 1500),
+    }
+
+
+def _error(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    return err[0]
+
+
+def test_calibrates_and_writes_a_loadable_file(bags, tmp_path, capsys):
+    out = tmp_path / 'myboard.yaml'
+    status = main(
+        [
+            str(bags['absent']),
+            str(bags['fixed']),
+            '--params',
+            'maggy_v2',
+            '--free',
+            'coil*.gain',
+            'sensor1.x',
+            'magnet.polarization',
+            'magnet.mass',
+            '--out',
+            str(out),
+        ]
+    )
+    text = capsys.readouterr().out
+    assert status == 0
+    assert 'iteration 1:' in text  # progress
+    assert 'magnet.mass: not identifiable' in text
+    params = load_parameters(out)
+    assert params.name == 'myboard'
+    assert 0.99 < params.solenoids.turns[0] / 480 / 1.03 < 1.01  # coil 0 gain, +3 %
+    assert (tmp_path / 'myboard_0_absent.png').stat().st_size > 10_000
+    assert (tmp_path / 'myboard_1_fixed.png').stat().st_size > 10_000
+    assert out.read_text().startswith('# Calibrated by maglev-calibrate')
+
+
+def test_unlabelled_bag_takes_the_magnet_from_the_command_line(bags, tmp_path, capsys):
+    assert main([str(bags['unlabelled']), '--free', 'coil0.gain']) == 2
+    assert '--magnet' in _error(capsys)
+    status = main([f'{bags["unlabelled"]}@absent', '--free', 'coil0.gain', '--delay', '1'])
+    assert status == 0
+
+
+@pytest.mark.parametrize(
+    ('args', 'expected'),
+    [
+        (['--free', 'coil7.gain'], "no parameter matches 'coil7.gain'"),
+        (['--free', 'coil0.gain', '--bounds', 'coil0.gain=1.1:1.3'], 'exclude its nominal'),
+        (['--free', 'coil0.gain', '--bounds', 'nope=0:1'], "unknown parameter 'nope'"),
+        (
+            ['--free', 'coil0.gain', '--output', 'maglev/sensor_5/field:magnetic_field.x'],
+            "has no topic '/maglev/sensor_5/field'",
+        ),
+        (['--free', 'coil0.gain', '--params', 'maggy_v9'], 'maggy_v9'),
+        ([], '--free'),
+    ],
+)
+def test_bad_input_one_line_status_2(bags, capsys, args, expected):
+    assert main([str(bags['absent']), *args]) == 2
+    assert expected in _error(capsys)
+
+
+def test_a_bag_without_the_topics(tmp_path, capsys):
+    from rclpy.serialization import serialize_message
+    from std_msgs.msg import String
+
+    from maglev_ros.bags import BagWriter
+
+    with BagWriter(tmp_path / 'other', storage='mcap', metadata={'magnet': 'absent'}) as bag:
+        chatter = bag.add_topic('/chatter', 'std_msgs/msg/String')
+        for k in range(10):
+            bag.write(chatter, 1_000_000 * (k + 1), serialize_message(String(data='hi')))
+    assert main([str(tmp_path / 'other'), '--free', 'coil0.gain']) == 2
+    assert 'no field topic /maglev/sensor_K/field' in _error(capsys)
+
+
+def test_list(capsys):
+    assert main(['--list']) == 0
+    assert 'sensor2.offset_z' in capsys.readouterr().out
+
+
+def test_a_subset_of_the_sensors(bags, capsys):
+    status = main(
+        [str(bags['absent']), '--sensors', '1', '2', '--free', 'coil0.gain', 'sensor0.x']
+    )
+    out = capsys.readouterr().out
+    assert status == 0
+    assert 'sensors 1, 2' in out
+    assert 'sensor0.x: not identifiable, these data do not depend on it' in out
+    assert main([str(bags['absent']), '--sensors', '3', '--free', 'coil0.gain']) == 2
+    assert 'has sensors 0 to 2' in _error(capsys)
+
+
+def test_magnet_from_the_recorder_metadata(tmp_path, capsys):
+    # the recorder stores the simulator's parameters as '<node>.<parameter>'
+    bag = write_bag(tmp_path / 'lab', 'absent', 1500, key='maglev_simulator.magnet')
+    assert main([str(bag), '--free', 'coil0.gain']) == 0
+    assert 'magnet absent' in capsys.readouterr().out
+
+
+def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
+    from .levitation import TRUTH, levitation_record
+    from .plant import write_record
+
+    exp, _ = levitation_record()
+    bag = write_record(tmp_path / 'levitating', exp.u, exp.y, {'magnet': 'free'})
+    out = tmp_path / 'dynamic.yaml'
+    status = main([str(bag), '--free', 'magnet.mass', 'magnet.polarization', '--out', str(out)])
+    text = capsys.readouterr().out
+    assert status == 0, text
+    assert 'dynamic calibration' in text and 'iteration 1:' in text
+    params = load_parameters(out)
+    assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
+    assert abs(params.magnet.polarization / TRUTH['magnet.polarization'] - 1) < 0.01
+    assert (tmp_path / 'dynamic.png').stat().st_size > 10_000
+    # a levitation bag with a static one: one clear line
+    static = write_bag(tmp_path / 'absent', 'absent', 1500)
+    assert main([str(bag), str(static), '--free', 'magnet.mass']) == 2
+    assert 'separate runs' in _error(capsys)
