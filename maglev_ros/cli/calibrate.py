@@ -29,6 +29,8 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from maglev_ros.topics import current_channel, field_channel, field_topic
+
 from .bag2data import add_channel_arguments
 from .usage import Parser, UsageError, limit_blas_threads, positive_float, run_command
 
@@ -54,10 +56,8 @@ def default_channels(sensors: Sequence[int], coils: int) -> tuple[list[str], lis
         ``B{axis}_{k}=maglev/sensor_{k}/field:magnetic_field.{axis}`` and
         ``i{j}=maglev/currents:effort[{j}]``.
     """
-    outputs = [
-        f'B{a}_{k}=maglev/sensor_{k}/field:magnetic_field.{a}' for k in sensors for a in AXES
-    ]
-    inputs = [f'i{j}=maglev/currents:effort[{j}]' for j in range(coils)]
+    outputs = [f'B{a}_{k}={field_channel(k, a)}' for k in sensors for a in AXES]
+    inputs = [f'i{j}={current_channel(j)}' for j in range(coils)]
     return outputs, inputs
 
 
@@ -222,11 +222,11 @@ def _bag_sensors(bag: str, count: int) -> list[int]:
 
     with BagReader(bag) as reader:
         topics = reader.topics
-    found = [k for k in range(count) if f'/maglev/sensor_{k}/field' in topics]
+    found = [k for k in range(count) if '/' + field_topic(k) in topics]
     if not found:
         raise UsageError(
-            f'{bag}: no field topic /maglev/sensor_K/field (K < {count}); its topics: '
-            f'{", ".join(sorted(topics))}'
+            f'{bag}: no field topic of sensors 0 to {count - 1} (/{field_topic(0)}, ...); '
+            f'its topics: {", ".join(sorted(topics))}'
         )
     return found
 
