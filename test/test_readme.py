@@ -24,8 +24,10 @@ from pathlib import Path
 import pytest
 
 README = Path(__file__).resolve().parents[1] / 'README.md'
+# fences may be indented (a block inside a list item), its marker then indented alike
 BLOCK = re.compile(
-    r'(?:<!-- readme: (?P<mark>[^\n]*?) -->\n)?```(?P<lang>\w*)\n(?P<body>.*?)^```', re.S | re.M
+    r'(?:<!-- readme: (?P<mark>[^\n]*?) -->\n[ \t]*)?```(?P<lang>\w*)\n(?P<body>.*?)^[ \t]*```',
+    re.S | re.M,
 )
 MARKS = ('run', 'run-after-install', 'output', 'file', 'skip')
 TIMEOUT = 900  # s per block: the main job takes 10-80 s, the accurate model 10-30 s
