@@ -24,7 +24,7 @@ from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.packet import sendable_pwm
 from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.v2x_stream import record_size
-from maglev_ros.hardware.virtual_board import VirtualBoard
+from maglev_ros.hardware.virtual_board import VirtualBoard, VirtualBoardError
 from maglev_ros.nodes.driver import DriverNode, DriverParameterError, build_config
 
 TIMEOUT = 15.0  # s, generous: the machine is shared
@@ -35,6 +35,8 @@ class Harness:
     """The driver node and a peer node, each spun by its own executor thread."""
 
     def __init__(self, ctx, port, *, n_sensors=1, listen=False, **params):
+        self.port = port
+        self.closed = False
         overrides = [Parameter('port', value=port), Parameter('n_sensors', value=n_sensors)]
         overrides += [Parameter(k, value=v) for k, v in params.items()]
         self.driver = DriverNode(context=ctx, parameter_overrides=overrides)
@@ -94,6 +96,9 @@ class Harness:
         return future.result()
 
     def close(self):
+        if self.closed:
+            return
+        self.closed = True
         for executor in self.executors:
             executor.shutdown(timeout_sec=2.0)
         self.driver.destroy_node()
@@ -101,8 +106,23 @@ class Harness:
 
 
 @pytest.fixture
-def make_harness(ctx):
+def make_harness(ctx, monkeypatch):
     made = []
+    close_board = VirtualBoard.close
+
+    def close_drivers_first(board):
+        # the driver lets go of its board before the board goes away: otherwise its I/O
+        # thread logs the lost link after the test, outside pytest's capture
+        try:
+            path = board.path
+        except VirtualBoardError:  # not open (any more)
+            path = None
+        for harness in made:
+            if harness.port == path:
+                harness.close()
+        close_board(board)
+
+    monkeypatch.setattr(VirtualBoard, 'close', close_drivers_first)
 
     def make(port, **kwargs):
         harness = Harness(ctx, port, **kwargs)
