@@ -175,7 +175,7 @@ def test_help_exits_zero(capsys):
 @pytest.fixture(scope='module')
 def second_order_mat(tmp_path_factory):
     """The lab's data.mat from a lower-order board: DATA rows Bx, spare, spare, Ix."""
-    from .systems import lab_second_order
+    from sysid.systems import lab_second_order
 
     d = lab_second_order()
     path = tmp_path_factory.mktemp('second_order') / 'data.mat'

@@ -92,7 +92,7 @@ def test_a_bag_without_the_topics(tmp_path, capsys):
         for k in range(10):
             bag.write(chatter, 1_000_000 * (k + 1), serialize_message(String(data='hi')))
     assert main([str(tmp_path / 'other'), '--free', 'coil0.gain']) == 2
-    assert 'no field topic /maglev/sensor_K/field' in _error(capsys)
+    assert 'no field topic of sensors 0 to 2 (/maglev/sensor_0/field, ...)' in _error(capsys)
 
 
 def test_list(capsys):
