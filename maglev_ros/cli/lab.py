@@ -362,16 +362,6 @@ def _check_params(params: str) -> None:
         raise UsageError(f'--params {params!r}: {err}') from None
 
 
-def _wait(predicate, ctx, what: str, timeout: float = WAIT_S, stop=None) -> None:
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if not ctx.ok() or (stop is not None and stop.requested):
-            raise KeyboardInterrupt
-        if time.monotonic() > deadline:
-            raise RuntimeError(f'timed out after {timeout:g} s waiting for {what}')
-        time.sleep(0.01)
-
-
 def overrides(**values) -> list:
     """Return ROS parameter overrides ``name=value`` for a node built in this process.
 
@@ -407,11 +397,8 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
     KeyboardInterrupt
         On a stop signal (the bag is finalised first).
     """
-    import rclpy
-
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
-    from maglev_ros.nodes.runtime import Spinner
     from maglev_ros.nodes.simulator import SimulatorNode
 
     topics = [field_topic(k) for k in args.sensors] + [
@@ -420,9 +407,8 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
         TRUE_STATE_TOPIC,
         CLOCK_TOPIC,
     ]
-    ctx = _lab_context()
-    nodes, spinner = [], None
-    try:
+    with _lab_bringup() as lab:
+        ctx = lab.context
         sim = SimulatorNode(
             context=ctx,
             parameter_overrides=overrides(
@@ -441,7 +427,7 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
                 command_timeout=5.0,
             ),
         )
-        nodes.append(sim)
+        lab.add(sim)
         excite = ExcitationNode(
             context=ctx,
             parameter_overrides=overrides(
@@ -454,23 +440,22 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
                 max_commands=args.samples,
             ),
         )
-        nodes.append(excite)
+        lab.add(excite)
         recorder = RecorderNode(
             context=ctx,
             parameter_overrides=overrides(
                 path=str(bag), storage=args.storage, topics=topics, log_clock='topic'
             ),
         )
-        nodes.insert(0, recorder)  # destroyed last: finalises the bag
-        spinner = Spinner(ctx, nodes)
-        _wait(
+        lab.add(recorder, destroy_last=True)  # finalises the bag
+        lab.start()
+        lab.wait_until(
             lambda: (
                 len(recorder.subscribed) == len(topics)
                 and recorder.metadata_complete
-                and excite._pub.get_subscription_count() >= 2
-                and sim._current_pub.get_subscription_count() >= 2
+                and excite.command_subscribers >= 2
+                and sim.currents_subscribers >= 2
             ),
-            ctx,
             'the node graph',
             stop=stop,
         )
@@ -485,16 +470,15 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
                 bar.update(max(0, min(sim.counters['samples'] - 1, args.samples) - bar.n))
                 return sim.counters['samples'] >= target or sim.sim.crashed
 
-            _wait(done, ctx, 'the simulation', timeout=1e9, stop=stop)
+            lab.wait_until(done, 'the simulation', timeout=1e9, stop=stop)
         sim.set_paused(True)
         wall = time.monotonic() - wall
         published = sim.counters['samples']
-        _wait(
+        lab.wait_until(
             lambda: (
                 recorder.counts['/' + CURRENTS_TOPIC] >= published
                 and recorder.counts['/' + COMMAND_TOPIC] >= published - 1
             ),
-            ctx,
             'the recorder',
             stop=stop,
         )
@@ -506,12 +490,6 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
             'crashed': sim.sim.crashed,
             'crash_reason': sim.sim.reason,
         }
-    finally:
-        if spinner is not None:
-            spinner.close()
-        for node in reversed(nodes):
-            node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
 
 
 def start_virtual_board(params: str, magnet: str) -> tuple[subprocess.Popen, str]:
@@ -628,28 +606,24 @@ def run_board_experiment(
     KeyboardInterrupt
         On a stop signal (the bag is finalised first).
     """
-    import rclpy
-
     from maglev_ros.nodes.driver import DriverNode
     from maglev_ros.nodes.excitation import ExcitationNode
     from maglev_ros.nodes.recorder import RecorderNode
-    from maglev_ros.nodes.runtime import Spinner
 
     topics = [field_topic(k) for k in args.sensors] + [
         CURRENTS_TOPIC,
         COMMAND_TOPIC,
     ]
     currents_topic = '/' + CURRENTS_TOPIC
-    ctx = _lab_context()
-    nodes, spinner = [], None
-    try:
+    with _lab_bringup() as lab:
+        ctx = lab.context
         recorder = RecorderNode(
             context=ctx,
             parameter_overrides=overrides(
                 path=str(bag), storage=args.storage, topics=topics, metadata_node='maglev_driver'
             ),
         )
-        nodes.append(recorder)  # destroyed last: finalises the bag
+        lab.add(recorder)  # destroyed last: finalises the bag
         # an open-loop recording: latency does not matter, so the driver reads the port
         # every 2 ms (two bursts per read), which roughly halves its CPU time
         driver = DriverNode(
@@ -662,9 +636,9 @@ def run_board_experiment(
                 read_interval=BOARD_READ_INTERVAL,
             ),
         )
-        nodes.append(driver)
-        spinner = Spinner(ctx, nodes)
-        _wait(
+        lab.add(driver)
+        lab.start()
+        lab.wait_until(
             lambda: (
                 len(recorder.subscribed) == len(topics) - 1
                 and recorder.metadata_complete
@@ -673,7 +647,6 @@ def run_board_experiment(
                 # to compile after the port opens, and the recording clock starts now
                 and driver.counters['records'] > 0
             ),
-            ctx,
             'the driver, its first board record and the recorder',
             stop=stop,
         )
@@ -691,14 +664,9 @@ def run_board_experiment(
                 sample_rate=args.command_rate,
             ),
         )
-        nodes.append(excite)
-        spinner.add_node(excite)
-        _wait(
-            lambda: (
-                len(recorder.subscribed) == len(topics)
-                and excite._pub.get_subscription_count() >= 2
-            ),
-            ctx,
+        lab.add(excite)
+        lab.wait_until(
+            lambda: len(recorder.subscribed) == len(topics) and excite.command_subscribers >= 2,
             'the excitation',
             stop=stop,
         )
@@ -712,7 +680,7 @@ def run_board_experiment(
                 bar.update(min(now - wall, args.duration) - bar.n)
                 return now >= end
 
-            _wait(done, ctx, 'the recording', timeout=args.duration + 1, stop=stop)
+            lab.wait_until(done, 'the recording', timeout=args.duration + 1, stop=stop)
         recorder.close()  # finalised; the driver zeroes the currents when destroyed
         wall = time.monotonic() - wall
         samples = recorder.counts[currents_topic] - start
@@ -725,12 +693,6 @@ def run_board_experiment(
             'crash_reason': '',
             'driver': dict(driver.counters),
         }
-    finally:
-        if spinner is not None:
-            spinner.close()
-        for node in reversed(nodes):
-            node.destroy_node()
-        rclpy.try_shutdown(context=ctx)
 
 
 def _run_board(args: argparse.Namespace, bag: Path, stop=None) -> dict:
@@ -749,20 +711,17 @@ def _run_board(args: argparse.Namespace, bag: Path, stop=None) -> dict:
         stop_child(child)
 
 
-def _lab_context():
-    """Return an initialised rclpy Context for the lab's nodes, discovery kept local.
+def _lab_bringup():
+    """Return a :class:`~maglev_ros.nodes.bringup.Bringup` for the lab's nodes, discovery local.
 
     ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is set to LOCALHOST unless the
-    environment sets it: the lab's graph stays on this machine.
+    environment sets it: the lab's graph stays on this machine. Its context
+    has no rclpy signal handlers (the session's StopSignals handle them).
     """
-    import rclpy
-    from rclpy.context import Context
-    from rclpy.signals import SignalHandlerOptions
+    from maglev_ros.nodes.bringup import Bringup
 
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    ctx = Context()
-    rclpy.init(context=ctx, args=[], signal_handler_options=SignalHandlerOptions.NO)
-    return ctx
+    return Bringup()
 
 
 def _run(args: argparse.Namespace) -> int:

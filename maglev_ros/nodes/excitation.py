@@ -252,6 +252,16 @@ class ExcitationNode(Node):
         """True once ``max_commands`` commands were published (nothing more is sent)."""
         return bool(self.config.max_commands) and self.sent >= self.config.max_commands
 
+    @property
+    def command_subscribers(self) -> int:
+        """Subscriptions matched to this node's ``maglev/command`` publisher.
+
+        Counts every matched subscription in the graph (the simulator's or
+        driver's, a recorder's, ...): wait on it for discovery before the
+        first command so that it is received.
+        """
+        return self._pub.get_subscription_count()
+
     def publish_next(self) -> None:
         """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
         if self.exhausted:

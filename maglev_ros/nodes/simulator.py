@@ -461,6 +461,17 @@ class SimulatorNode(Node):
         return self.session.counters
 
     @property
+    def currents_subscribers(self) -> int:
+        """Subscriptions matched to this node's ``maglev/currents`` publisher.
+
+        The currents message ends each sample (a lockstep excitation answers
+        it with the next command; a recorder counts samples by it), so this is
+        the readiness to wait on before stepping; lockstep starts once it
+        reaches ``start_subscribers``.
+        """
+        return self._current_pub.get_subscription_count()
+
+    @property
     def paused(self) -> bool:
         """Whether stepping is paused."""
         return self.session.paused
@@ -632,7 +643,7 @@ class SimulatorNode(Node):
             if not session.started:
                 if (
                     self.count_publishers(contract.COMMAND_TOPIC) >= 1
-                    and self._current_pub.get_subscription_count() >= self.config.start_subscribers
+                    and self.currents_subscribers >= self.config.start_subscribers
                 ):
                     self._publish(session.start(now))
                 return

@@ -69,10 +69,7 @@ def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
     spinner = contract.Spinner(ctx, [excite, sim, peer])
     try:
         wait_for(
-            lambda: (
-                excite._pub.get_subscription_count() >= 2
-                and sim._current_pub.get_subscription_count() >= 2
-            ),
+            lambda: excite.command_subscribers >= 2 and sim.currents_subscribers >= 2,
             what='discovery',
         )
         sim.set_paused(False)
@@ -227,7 +224,7 @@ def test_max_commands_stops_a_lockstep_simulation_after_exactly_that_many_steps(
     )  # fmt: skip
     spinner = contract.Spinner(ctx, [excite, sim])
     try:
-        wait_for(lambda: sim._current_pub.get_subscription_count() >= 1, what='discovery')
+        wait_for(lambda: sim.currents_subscribers >= 1, what='discovery')
         sim.set_paused(False)
         wait_for(lambda: excite.exhausted, what='the last command')
         time.sleep(0.5)  # nothing more comes: the simulator waits for a command

@@ -63,8 +63,8 @@ def record_lockstep(ctx, bag, n, storage='mcap'):
             lambda: (
                 len(recorder.subscribed) == 5
                 and recorder.metadata_complete
-                and excite._pub.get_subscription_count() >= 2
-                and sim._current_pub.get_subscription_count() >= 2
+                and excite.command_subscribers >= 2
+                and sim.currents_subscribers >= 2
             ),
             what='the graph',
         )

@@ -78,10 +78,7 @@ class Peer:
         self.closed = False
         self.spinner = contract.Spinner(ctx, [self.sim, self.node])
         wait_for(
-            lambda: (
-                self.pub.get_subscription_count() > 0
-                and self.sim._current_pub.get_subscription_count() > 0
-            ),
+            lambda: self.pub.get_subscription_count() > 0 and self.sim.currents_subscribers > 0,
             what='discovery',
         )
 
