@@ -20,6 +20,13 @@ One command per sample (the lockstep contract of
 * PD: one command per sample, when its ``maglev/currents`` arrives (the
   fields of the same stamp first).
 
+The lockstep simulator applies the command of sample k over k -> k+1; the
+board applies it about one sample later, and the LQR's ``command_delay: 1``
+designs for that. ``delay_commands: true`` (the simulation launch file sets
+it) publishes for sample k the command computed at k - 1, so a lockstep
+graph has the board's timing and steps exactly as
+:class:`~maglev_ros.control.ClosedLoop` with ``command_delay`` 1.
+
 Safety. Stale input (no estimate / sample for ``input_timeout``): zero
 currents and an ERROR on ``/diagnostics`` at once. The controller re-arms by
 itself once ``rearm_samples`` fresh inputs arrived in a row (integrators and
@@ -97,6 +104,8 @@ class ControllerNodeConfig:
         Parameter set the controller believes.
     controller : ControllerConfig
         The control law's settings.
+    delay_commands : bool
+        Publish the command of sample k - 1 for sample k (lockstep simulation).
     start_enabled : bool
         Enabled at start.
     diagnostics_period : float
@@ -105,6 +114,7 @@ class ControllerNodeConfig:
 
     params: str
     controller: ControllerConfig
+    delay_commands: bool
     start_enabled: bool
     diagnostics_period: float
 
@@ -154,6 +164,11 @@ PARAMETERS = ParameterTable(
             )
             for f in fields(ControllerConfig)
         },
+        'delay_commands': Param(
+            False,
+            'publish each command one sample late (lockstep simulation: the one-sample '
+            'command latency of the board that command_delay designs for)',
+        ),
         'start_enabled': Param(True, f'enabled at start (then {CONTROLLER_ENABLE_SERVICE})'),
         'diagnostics_period': Param(
             0.5, 's of the node clock between diagnostics', check=number(0, above=True)
@@ -181,13 +196,14 @@ def build_config(values: dict) -> ControllerNodeConfig:
     """
     v = PARAMETERS.validate(values)
     params = v.pop('params')
+    delay = v.pop('delay_commands')
     start_enabled = v.pop('start_enabled')
     period = v.pop('diagnostics_period')
     try:
         config = ControllerConfig.from_mapping(v)
     except ControllerConfigError as err:
         raise ControllerParameterError(str(err)) from None
-    return ControllerNodeConfig(params, config, start_enabled, period)
+    return ControllerNodeConfig(params, config, delay, start_enabled, period)
 
 
 def _stamp_ns(msg) -> int:
@@ -230,6 +246,7 @@ class ControllerNode(Node):
         self._answered: int = -1  # stamp of the last sample a command was published for
         self._last_level = 'OK'
         self._last_input_ns: int | None = None  # node clock at the last input
+        self._pending = np.zeros(model.n_inputs)  # delay_commands: computed, not yet sent
         self._msg = Float64MultiArray()
         self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
@@ -254,6 +271,8 @@ class ControllerNode(Node):
     # ------------------------------------------------------------------ inputs
     def _publish(self, stamp: int, command: np.ndarray) -> None:
         self._answered = stamp
+        if self.config.delay_commands:
+            command, self._pending = self._pending, command
         self.last_command = command
         self._msg.data = [float(v) for v in command]
         self._pub.publish(self._msg)
