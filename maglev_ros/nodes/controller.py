@@ -177,6 +177,9 @@ PARAMETERS = ParameterTable(
 )
 
 
+_PARAMETERS = PARAMETERS  # the name test_launch uses
+
+
 def build_config(values: dict) -> ControllerNodeConfig:
     """Validate raw parameter values.
 

@@ -157,6 +157,9 @@ PARAMETERS = ParameterTable(
 )
 
 
+_PARAMETERS = PARAMETERS  # the name test_launch uses
+
+
 def build_config(values: dict) -> EstimatorNodeConfig:
     """Validate raw parameter values.
 
