@@ -280,9 +280,11 @@ class ControllerNode(Node):
         self._msg.data = [float(v) for v in command]
         self._pub.publish(self._msg)
         self.commands += 1
-        level = self.controller.status().level
-        if level != self._last_level:
-            self._last_level = level
+        status = self.controller.status()
+        if status.level != self._last_level:
+            self._last_level = status.level
+            if status.level == 'ERROR':
+                self.get_logger().warning(status.message)
             self.publish_diagnostics()  # an ERROR (stale input) is reported at once
 
     def _on_currents(self, msg: JointState) -> None:
