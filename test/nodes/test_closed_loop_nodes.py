@@ -191,3 +191,34 @@ def test_cut_estimator_input_gives_zero_currents_and_an_error(ctx):
     assert np.all(after[-10:] == 0.0), after[-10:]
     assert ctrl.controller.status().level == 'ERROR'
     assert ctrl.controller.watchdog.timeouts == 1
+
+
+def test_enable_service_switches_to_zero_currents_and_back(ctx):
+    from std_srvs.srv import SetBool
+
+    sim, est, ctrl = _graph(ctx, command_timeout=120.0)
+    peer = _Peer(ctx)
+    client = peer.node.create_client(SetBool, topics.CONTROLLER_ENABLE_SERVICE)
+    spinner = _start(sim, [sim, est, ctrl, peer.node], ctx)
+
+    def call(data):
+        future = client.call_async(SetBool.Request(data=data))
+        wait_for(future.done, what=f'enable {data}')
+        assert future.result().success
+        return len(peer.commands)
+
+    try:
+        assert client.wait_for_service(timeout_sec=30.0)
+        wait_for(lambda: len(peer.estimates) >= 500, timeout=120.0, what='500 estimates')
+        n_off = call(False)
+        wait_for(lambda: len(peer.commands) >= n_off + 20, what='commands while disabled')
+        level = ctrl.controller.status()
+        n_on = call(True)
+        wait_for(lambda: len(peer.commands) >= n_on + 20, what='commands after enabling')
+    finally:
+        sim.set_paused(True)
+        spinner.close()
+    assert level.level == 'WARN' and 'disabled' in level.message
+    assert np.all(np.array(peer.commands[n_off + 2 : n_on - 2]) == 0.0)
+    assert np.any(np.array(peer.commands[n_on + 5 :]) != 0.0)
+    assert any(s.level == DiagnosticStatus.WARN and 'disabled' in s.message for s in peer.diags)
