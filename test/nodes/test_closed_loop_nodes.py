@@ -43,7 +43,7 @@ def _x0():
     return [5e-4, 0.0, z_eq] + [0.0] * 9
 
 
-def _graph(ctx, command_timeout):
+def _graph(ctx, command_timeout, mode='lqr'):
     sim = SimulatorNode(
         context=ctx,
         parameter_overrides=params(
@@ -63,7 +63,8 @@ def _graph(ctx, command_timeout):
     )
     est = EstimatorNode(context=ctx, parameter_overrides=params(diagnostics_period=0.2))
     ctrl = ControllerNode(
-        context=ctx, parameter_overrides=params(diagnostics_period=0.2, delay_commands=True)
+        context=ctx,
+        parameter_overrides=params(diagnostics_period=0.2, delay_commands=True, mode=mode),
     )
     return sim, est, ctrl
 
@@ -222,3 +223,31 @@ def test_enable_service_switches_to_zero_currents_and_back(ctx):
     assert np.all(np.array(peer.commands[n_off + 2 : n_on - 2]) == 0.0)
     assert np.any(np.array(peer.commands[n_on + 5 :]) != 0.0)
     assert any(s.level == DiagnosticStatus.WARN and 'disabled' in s.message for s in peer.diags)
+
+
+def test_pd_node_steps_exactly_as_the_ros_free_loop(ctx):
+    from maglev_ros.control import ControllerConfig
+
+    duration = 1.0
+    n = int(duration * RATE)
+    sim, est, ctrl = _graph(ctx, command_timeout=120.0, mode='pd')
+    peer = _Peer(ctx)
+    spinner = _start(sim, [sim, ctrl, peer.node], ctx)  # no estimator: the PD reads the fields
+    try:
+        wait_for(lambda: len(peer.true) >= n, timeout=240.0, what=f'{n} samples')
+    finally:
+        sim.set_paused(True)
+        spinner.close()
+    stamps = sorted(peer.true)[:n]
+    x = np.array([peer.true[s] for s in stamps])
+    loop = make_closed_loop(
+        'maggy_v2', controller=ControllerConfig(mode='pd'), noise=1e-4, quantization=0.098e-3,
+        seed=SEED,
+    )  # fmt: skip
+    ref = loop.run(duration, x0=np.array(_x0()))
+    assert not ref.crashed
+    np.testing.assert_allclose(x, ref.x[:n], rtol=1e-9, atol=1e-12)
+    # delay_commands: the command published for sample k is the one computed at k - 1
+    published = np.array(peer.commands[1:n])
+    np.testing.assert_allclose(published, ref.command[: n - 1], rtol=1e-9, atol=1e-12)
+    assert np.all(np.abs(x[:, :2]).max(axis=0) < 1e-3)
