@@ -45,6 +45,23 @@ def assert_bag_complete(bag: Path, topics: list[str], metadata_node: str) -> dic
     return indexed
 
 
+def echo_once(ros2, topic: str):
+    """``ros2 topic echo --once TOPIC``, asked again while the topic is not discovered yet.
+
+    Without a daemon, ``ros2 topic echo`` looks the topic's type up once, after a short
+    discovery; a publisher it has not seen yet makes it give up at once ("does not
+    appear to be published yet"), which says nothing about the launch.
+    """
+    deadline = time.monotonic() + START_TIMEOUT
+    while True:
+        echo = ros2.run('topic', 'echo', '--once', topic, timeout=START_TIMEOUT)
+        if echo.returncode == 0 or 'does not appear to be published' not in echo.stdout:
+            return echo
+        if time.monotonic() > deadline:
+            return echo
+        time.sleep(1.0)
+
+
 def stop_like_terminal(launch) -> str:
     """Ctrl-C the launch's process group; check every exit status and the output."""
     launch.interrupt_like_terminal()
@@ -97,7 +114,7 @@ def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
     # the driver publishes once its link has caught up: wait for the first sample
-    echo = ros2.run('topic', 'echo', '--once', '/maglev/currents', timeout=START_TIMEOUT)
+    echo = echo_once(ros2, '/maglev/currents')
     assert echo.returncode == 0 and 'effort' in echo.stdout, echo.stdout + echo.stderr
     time.sleep(RUN_S)
     stop_like_terminal(launch)
