@@ -455,6 +455,7 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
                 and recorder.metadata_complete
                 and excite.command_subscribers >= 2
                 and sim.currents_subscribers >= 2
+                and sim.command_publishers >= 1
             ),
             'the node graph',
             stop=stop,

@@ -421,7 +421,7 @@ class SimulatorNode(Node):
         command_qos = (
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
         )
-        self.create_subscription(
+        self._command_sub = self.create_subscription(
             Float64MultiArray, contract.COMMAND_TOPIC, self._on_command, command_qos
         )
         self.create_service(Trigger, SIMULATOR_RESET_SERVICE, self._on_reset)
@@ -470,6 +470,16 @@ class SimulatorNode(Node):
         reaches ``start_subscribers``.
         """
         return self._current_pub.get_subscription_count()
+
+    @property
+    def command_publishers(self) -> int:
+        """Publishers matched to this node's ``maglev/currents/command`` subscription.
+
+        Discovery is matched from each side separately: a command publisher may
+        see this subscription before this subscription sees it, and a command
+        sent in between is lost (a lockstep timeout). Wait on both sides.
+        """
+        return self._command_sub.get_publisher_count()
 
     @property
     def paused(self) -> bool:
@@ -668,8 +678,10 @@ class SimulatorNode(Node):
                 if self.context.ok() and not self._stop.is_set():
                     raise
                 return
-            if wait > 0:
-                time.sleep(wait)
+            # behind (no wait), still give up the GIL between bursts: a pause or reset
+            # service waiting for the lock in the executor's thread gets it at once
+            # (measured on a loaded machine: without this a pause call waited > 30 s)
+            time.sleep(max(wait, 0.0))
 
     # -- services ---------------------------------------------------------------
 

@@ -69,7 +69,11 @@ def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
     spinner = contract.Spinner(ctx, [excite, sim, peer])
     try:
         wait_for(
-            lambda: excite.command_subscribers >= 2 and sim.currents_subscribers >= 2,
+            lambda: (
+                excite.command_subscribers >= 2
+                and sim.command_publishers >= 1
+                and sim.currents_subscribers >= 2
+            ),
             what='discovery',
         )
         sim.set_paused(False)
@@ -224,7 +228,10 @@ def test_max_commands_stops_a_lockstep_simulation_after_exactly_that_many_steps(
     )  # fmt: skip
     spinner = contract.Spinner(ctx, [excite, sim])
     try:
-        wait_for(lambda: sim.currents_subscribers >= 1, what='discovery')
+        wait_for(
+            lambda: sim.currents_subscribers >= 1 and sim.command_publishers >= 1,
+            what='discovery',
+        )
         sim.set_paused(False)
         wait_for(lambda: excite.exhausted, what='the last command')
         time.sleep(0.5)  # nothing more comes: the simulator waits for a command

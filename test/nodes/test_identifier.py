@@ -133,7 +133,11 @@ def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
     spinner = Spinner(ctx, [sim, excite, ident, peer])
     try:
         wait_for(
-            lambda: excite.command_subscribers >= 1 and sim.currents_subscribers >= 3,
+            lambda: (
+                excite.command_subscribers >= 1
+                and sim.command_publishers >= 1
+                and sim.currents_subscribers >= 3
+            ),
             what='discovery',
         )
         sim.set_paused(False)

@@ -65,6 +65,7 @@ def record_lockstep(ctx, bag, n, storage='mcap'):
                 and recorder.metadata_complete
                 and excite.command_subscribers >= 2
                 and sim.currents_subscribers >= 2
+                and sim.command_publishers >= 1
             ),
             what='the graph',
         )
