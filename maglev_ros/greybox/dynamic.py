@@ -405,6 +405,7 @@ def calibrate_dynamic(
     progress: Callable[[str], None] | None = None,
     jacobian: str = 'central',
     max_delay: int = 3,
+    form: str = 'linear',
 ) -> DynamicCalibration:
     """Estimate the free parameters of ``vector`` from levitation data (linear grey-box).
 
@@ -429,6 +430,10 @@ def calibrate_dynamic(
         ``2-point``: scipy's own forward differences (for comparison).
     max_delay : int
         Largest delay tried.
+    form : {'linear', 'nonlinear'}
+        ``linear``: the linearised model's Kalman predictor (``idgrey``);
+        ``nonlinear``: the full model's predictor with the same gain
+        (``nlgreyest``-like, :mod:`~maglev_ros.greybox.nonlinear`).
 
     Returns
     -------
@@ -441,6 +446,14 @@ def calibrate_dynamic(
         a nominal set without equilibrium.
     """
     say = progress or (lambda _line: None)
+    if form == 'linear':
+        problem_type = LinearGreyBoxProblem
+    elif form == 'nonlinear':
+        from .nonlinear import NonlinearGreyBoxProblem
+
+        problem_type = NonlinearGreyBoxProblem
+    else:
+        raise GreyBoxError(f"form must be 'linear' or 'nonlinear', got {form!r}")
     if not experiments:
         raise GreyBoxError('dynamic calibration needs at least one levitation record')
     if not 0.0 < split <= 1.0:
@@ -478,7 +491,7 @@ def calibrate_dynamic(
     if delay is None:
         costs = []
         for d in range(max_delay + 1):
-            trial = LinearGreyBoxProblem(vector, estimation, d, sigma, process_noise)
+            trial = problem_type(vector, estimation, d, sigma, process_noise)
             r = trial.residual(np.zeros(len(trial.free)))
             costs.append(float(r @ r) / r.size)
         delay = int(np.argmin(costs))
@@ -487,7 +500,7 @@ def calibrate_dynamic(
             + ', '.join(f'{d}: {c:.3g}' for d, c in enumerate(costs))
             + ')'
         )
-    problem = LinearGreyBoxProblem(vector, estimation, delay, sigma, process_noise)
+    problem = problem_type(vector, estimation, delay, sigma, process_noise)
     z0 = np.zeros(len(problem.free))
     ident = analyse(problem.jacobian(z0), problem.free)
     for line in ident.lines():
@@ -499,7 +512,7 @@ def calibrate_dynamic(
         )
     vector_fit = vector.with_free(keep) if len(keep) < len(problem.free) else vector
     if vector_fit is not vector:
-        problem = LinearGreyBoxProblem(vector_fit, estimation, delay, sigma, process_noise)
+        problem = problem_type(vector_fit, estimation, delay, sigma, process_noise)
     lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
     upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
     iteration = [0]
@@ -512,7 +525,7 @@ def calibrate_dynamic(
 
     say(
         f'fitting {len(keep)} parameters to {problem.residual_size} readings '
-        f'(linear grey-box, Kalman predictor, delay {delay})'
+        f'({form} grey-box, Kalman predictor, delay {delay})'
     )
     solution = least_squares(
         problem.residual,
@@ -543,17 +556,15 @@ def calibrate_dynamic(
 
     nominal_values = vector.nominal
     fits_nom, fits_cal, predictions = [], [], {}
-    check = LinearGreyBoxProblem(vector_fit, validation, delay, sigma, process_noise)
+    check = problem_type(vector_fit, validation, delay, sigma, process_noise)
     z_eq = []
     for label, values_set, sink in (
         ('nominal', nominal_values, fits_nom),
         ('calibrated', values, fits_cal),
     ):
-        system = check.system(values_set)
-        z_eq.append(system.z_eq)
-        for i, e in enumerate(validation):
+        z_eq.append(check.system(values_set).z_eq)
+        for i, (e, err) in enumerate(zip(validation, check.errors(values_set), strict=True)):
             y = e.y[delay:][check.burn :]
-            err = system.innovations(e.u, e.y, delay)[check.burn :]
             yhat = y - err
             sink.append(ValidationFit(e.name, fit_percent(y, yhat), np.sqrt(np.mean(err**2, 0))))
             predictions[(i, label)] = yhat
@@ -579,7 +590,7 @@ def calibrate_dynamic(
         seconds=seconds,
         message=str(solution.message),
         predictions=predictions,
-        form='linear',
+        form=form,
         process_noise=float(process_noise),
         z_eq=tuple(z_eq),
     )

@@ -120,15 +120,28 @@ def test_magnet_from_the_recorder_metadata(tmp_path, capsys):
 
 
 def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
+    """The ROS-free loop's levitation record (1.2 s) as the recorder writes it, end to end."""
     from .levitation import TRUTH, levitation_record
     from .plant import write_record
 
     exp, _ = levitation_record()
-    bag = write_record(tmp_path / 'levitating', exp.u, exp.y, {'magnet': 'free'})
+    n = 6000
+    # the recorder's metadata: its own keys, and the simulator's parameters as
+    # '<node>.<parameter>' (maglev_simulator's magnet: free while levitating)
+    metadata = {
+        'recorder.storage': 'mcap',
+        'recorder.topics': '/maglev/sensor_0/field /maglev/sensor_1/field '
+        '/maglev/sensor_2/field /maglev/currents',
+        'maglev_simulator.params': 'maggy_v2',
+        'maglev_simulator.magnet': 'free',
+    }
+    bag = write_record(tmp_path / 'levitating', exp.u[:n], exp.y[:n], metadata)
     out = tmp_path / 'dynamic.yaml'
     status = main([str(bag), '--free', 'magnet.mass', 'magnet.polarization', '--out', str(out)])
     text = capsys.readouterr().out
     assert status == 0, text
+    assert 'magnet levitating' in text  # from the metadata
+    assert 'sensor delay 1 sample(s)' in text  # found, not given
     assert 'dynamic calibration' in text and 'iteration 1:' in text
     params = load_parameters(out)
     assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
