@@ -71,8 +71,12 @@ def test_nonlinear_predictor_recovers_mass_and_polarization():
     """The nlgreyest-like form: the full model's predictor on the first 0.6 s of the record."""
     exp, _ = levitation_record()
     first = LevitationExperiment(exp.u[:3000], exp.y[:3000], 'first 0.6 s', exp.Ts)
-    cal = calibrate_dynamic(nominal_vector().with_free(FREE), [first], delay=1, form='nonlinear')
+    free = (*FREE, 'coils.resistance')  # the measured currents: no effect, reported
+    cal = calibrate_dynamic(nominal_vector().with_free(free), [first], delay=1, form='nonlinear')
     assert cal.form == 'nonlinear'
+    assert cal.identifiability.unidentified_names == ('coils.resistance',)
+    assert set(cal.names) == set(FREE)
+    assert cal.params.coils.resistance == nominal_vector()['coils.resistance'].nominal
     for name in FREE:
         true, est, sd = TRUTH[name], cal.estimate[name], cal.std[name]
         assert abs(est - true) <= 3 * sd, (name, est, true, sd)
