@@ -147,6 +147,17 @@ def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
     assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
     assert abs(params.magnet.polarization / TRUTH['magnet.polarization'] - 1) < 0.01
     assert (tmp_path / 'dynamic.png').stat().st_size > 10_000
+    # the full nonlinear model's predictor on the same bag
+    out = tmp_path / 'nonlinear.yaml'
+    free = ['magnet.mass', 'magnet.polarization']
+    assert main([str(bag), '--free', *free, '--form', 'nonlinear', '--out', str(out)]) == 0
+    assert 'nonlinear grey-box' in capsys.readouterr().out
+    params = load_parameters(out)
+    assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
+    assert abs(params.magnet.polarization / TRUTH['magnet.polarization'] - 1) < 0.01
+    assert 'nonlinear grey-box' in out.read_text().splitlines()[2]
+    assert main([str(bag), '--free', *free, '--form', 'quadratic']) == 2
+    assert "--form: invalid choice: 'quadratic'" in _error(capsys)
     # a levitation bag with a static one: one clear line
     static = write_bag(tmp_path / 'absent', 'absent', 1500)
     assert main([str(bag), str(static), '--free', 'magnet.mass']) == 2
