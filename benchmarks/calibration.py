@@ -33,8 +33,19 @@ estimation. Free: ``magnet.mass``, ``magnet.polarization``.
 * **plain**: ``least_squares(..., jac='2-point')`` on the same prediction
   errors written with the public API (``linearize``, ``zoh``,
   ``solve_discrete_are``) and the predictor as a numpy loop over the samples.
-* **nonlinear**: :func:`maglev_ros.greybox.calibrate_closed_loop` on the
-  first 0.4 s (closed-loop simulations), for its cost.
+* **ours (nonlinear)**: ``calibrate_dynamic(..., form='nonlinear')``: the full
+  nonlinear model's predictor with the Kalman gain of its linearisation, one
+  compiled loop (RK4, the measured currents interpolated), central differences.
+* **plain (nonlinear)**: ``least_squares(..., jac='2-point')`` on the same
+  nonlinear predictor written with the public API (``MaggyModel.dynamics`` and
+  ``.measurement`` per RK4 stage in a Python loop; the gain from ``linearize``,
+  ``zoh``, ``solve_discrete_are``), scipy's default step and ours.
+* **closed-loop simulation**: :func:`maglev_ros.greybox.calibrate_closed_loop`
+  on the first 0.4 s (the older nonlinear form), for its cost and precision.
+
+``--many``: the nonlinear and linear forms on a plant off nominal in six
+parameters at once (mass +3 %, magnet polarisation -2 %, coil gains +2, -2,
++1.5, -1 %), all six free, 2 s.
 
 Time is wall time of one run each (the machine is shared: see docs/benchmarks.md).
 
@@ -42,7 +53,8 @@ Usage::
 
     python benchmarks/calibration.py            # about a minute (the plain run)
     python benchmarks/calibration.py --skip-plain
-    python benchmarks/calibration.py --dynamic  # the dynamic part only
+    python benchmarks/calibration.py --dynamic  # the dynamic part only (a few minutes)
+    python benchmarks/calibration.py --many     # six dynamic parameters at once
 """
 
 from __future__ import annotations
@@ -211,6 +223,103 @@ def plain_dynamic(vector, exp, delay: int, sigma: np.ndarray, diff_step=None):
     return seconds, dict(zip(vector.free_names, center + scale * sol.x, strict=True)), calls[0]
 
 
+def plain_nonlinear(vector, exp, delay: int, sigma: np.ndarray, diff_step=None):
+    """Plain least_squares, 2-point, on the nonlinear predictor in a Python loop."""
+    from scipy.linalg import solve_discrete_are
+
+    from maglev_ros.physics import find_equilibria, linearize, zoh
+    from maglev_ros.physics.linearization import REDUCED_STATES
+
+    est, _ = exp.split(0.5)
+    specs = vector.free_specs
+    center = np.array([s.nominal for s in specs])
+    scale = np.array([s.scale for s in specs])
+    lower = np.array([(s.lower - s.nominal) / s.scale for s in specs])
+    upper = np.array([(s.upper - s.nominal) / s.scale for s in specs])
+    rows = list(REDUCED_STATES)
+    calls = [0]
+    h = est.Ts
+
+    def residual(z):
+        calls[0] += 1
+        model = MaggyModel(vector.apply(vector.values(center + scale * z)))
+        eq = find_equilibria(model)[0]
+        x = model.hover_state(eq.z)
+        lin = linearize(model, x).reduced()
+        ad, bd = zoh(lin.A, lin.B, h)
+        c = lin.C
+        r = np.diag(sigma**2)
+        p = solve_discrete_are(ad.T, c.T, 1e-6 * bd @ bd.T + 1e-30 * np.eye(10), r)
+        k = ad @ p @ c.T @ np.linalg.inv(c @ p @ c.T + r)
+        out = np.empty((est.samples - delay, c.shape[0]))
+        for i in range(out.shape[0]):
+            u0, u1 = est.u[i], est.u[min(i + 1, est.samples - 1)]
+            um = 0.5 * (u0 + u1)
+            e = est.y[i + delay] - model.measurement(x, u0)
+            out[i] = e
+            k1 = model.dynamics(x, u0)
+            k2 = model.dynamics(x + 0.5 * h * k1, um)
+            k3 = model.dynamics(x + 0.5 * h * k2, um)
+            k4 = model.dynamics(x + h * k3, u1)
+            x = x + (h / 6.0) * (k1 + 2 * k2 + 2 * k3 + k4)
+            x[rows] += k @ e
+        return (out[100:] / sigma).ravel()
+
+    start = time.perf_counter()
+    sol = least_squares(
+        residual,
+        np.zeros(len(specs)),
+        jac='2-point',
+        bounds=(lower, upper),
+        method='trf',
+        diff_step=diff_step,
+    )
+    seconds = time.perf_counter() - start
+    return seconds, dict(zip(vector.free_names, center + scale * sol.x, strict=True)), calls[0]
+
+
+MANY_TRUTH = {
+    'magnet.mass': 0.077 * 1.03,
+    'magnet.polarization': -0.98,
+    'coil0.gain': 1.02,
+    'coil1.gain': 0.98,
+    'coil2.gain': 1.015,
+    'coil3.gain': 0.99,
+}
+
+
+def many() -> None:
+    """Six dynamic parameters at once, nonlinear and linear forms."""
+    from maglev_ros.control.closed_loop import make_closed_loop
+    from maglev_ros.excitation.signals import random_binary
+    from maglev_ros.greybox import LevitationExperiment, calibrate_dynamic
+
+    vector = parameter_vector(load_parameters('maggy_v2'))
+    n = int(round(DYN_SECONDS * 5000))
+    exc = np.column_stack([random_binary(n, 0.05, (0.0, 0.2), seed=10 + j) for j in range(4)])
+    loop = make_closed_loop(vector.base, plant=vector.apply(MANY_TRUTH), seed=1)
+    run = loop.run(DYN_SECONDS, excitation=exc)
+    exp = LevitationExperiment(run.currents, run.readings, 'levitation', 2e-4)
+    free = vector.with_free(list(MANY_TRUTH))
+    for form in ('nonlinear', 'linear'):
+        start = time.perf_counter()
+        cal = calibrate_dynamic(free, [exp], delay=1, form=form)
+        seconds = time.perf_counter() - start
+        print(f'{form}: {seconds:.2f} s ({cal.evaluations} model evaluations)')
+        for name in cal.names:
+            true, est, sd = MANY_TRUTH[name], cal.estimate[name], cal.std[name]
+            print(
+                f'  {name:<20} {est:.6g} +- {sd:.3g} (true {true:.6g}): '
+                f'{100 * (est / true - 1):+.3f} %, {(est - true) / sd:+.2f} std'
+            )
+        for a, b, r in cal.correlated:
+            print(f'  correlated: {a} ~ {b}, r = {r:+.3f}')
+        print(
+            f'  validation RMS nominal {1e3 * cal.validation_nominal[0].total_rms:.4f} mT, '
+            f'calibrated {1e3 * cal.validation_calibrated[0].total_rms:.4f} mT'
+        )
+
+
 def dynamic(skip_plain: bool) -> None:
     from maglev_ros.greybox import LoopSetup, calibrate_closed_loop, calibrate_dynamic
 
@@ -240,6 +349,28 @@ def dynamic(skip_plain: bool) -> None:
                 f'evaluations), ratio {seconds / ours:6.1f}x; max |plain - ours| / std = '
                 f'{diff:.3f}'
             )
+    calibrate_dynamic(vector, [exp], delay=1, form='nonlinear')  # compile/load kernels
+    start = time.perf_counter()
+    nl = calibrate_dynamic(vector, [exp], form='nonlinear')
+    ours_nl = time.perf_counter() - start
+    worst = max(abs(nl.estimate[n] - DYN_TRUTH[n]) / nl.std[n] for n in nl.names)
+    rel = max(abs(nl.estimate[n] / DYN_TRUTH[n] - 1) for n in nl.names)
+    print(
+        f'ours (nonlinear)     {ours_nl:8.2f} s  ({nl.evaluations} model evaluations), worst '
+        f'|estimate - truth| = {worst:.2f} std, {100 * rel:.3f} %'
+    )
+    if not skip_plain:
+        for label, step in (('default step', None), ('step 1e-2', 1e-2)):
+            seconds, est, calls = plain_nonlinear(
+                vector, exp, nl.delays[0], nl.noise[0], diff_step=step
+            )
+            diff = max(abs(est[n] - nl.estimate[n]) / nl.std[n] for n in nl.names)
+            rel = max(abs(est[n] / DYN_TRUTH[n] - 1) for n in nl.names)
+            print(
+                f'plain nonlinear (2-point, {label}, Python loop) {seconds:8.2f} s  ({calls} '
+                f'residual evaluations), ratio {seconds / ours_nl:6.1f}x; max |plain - ours| '
+                f'/ std = {diff:.3f}; worst |estimate - truth| {100 * rel:.3f} %'
+            )
     short = 2000
     from maglev_ros.greybox import LevitationExperiment
 
@@ -258,7 +389,11 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--skip-plain', action='store_true', help='skip the per-sample baseline')
     parser.add_argument('--dynamic', action='store_true', help='the dynamic calibration only')
+    parser.add_argument('--many', action='store_true', help='six dynamic parameters at once')
     args = parser.parse_args()
+    if args.many:
+        many()
+        return
     if args.dynamic:
         dynamic(args.skip_plain)
         return

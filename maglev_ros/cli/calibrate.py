@@ -173,6 +173,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar='AMPS',
         help='dynamic mode: input disturbance level of the Kalman predictor, A rms (default 1e-3)',
     )
+    p.add_argument(
+        '--form',
+        choices=('linear', 'nonlinear'),
+        default='linear',
+        help='dynamic mode: linear grey-box (the linearised model, as idgrey) or the full '
+        'nonlinear model (as nlgreyest), each with its Kalman predictor (default linear)',
+    )
     p.add_argument('--list', action='store_true', help='list the parameters and exit')
     p.add_argument(
         '--ts',
@@ -290,7 +297,7 @@ def _header(args, cal, bags) -> list[str]:
         f'Calibrated by {PROG} on {now} from {args.params}',
         f'bags: {", ".join(bags)}',
         (
-            'dynamic calibration (levitation data, linear grey-box, Kalman predictor)'
+            f'dynamic calibration (levitation data, {cal.form} grey-box, Kalman predictor)'
             if getattr(cal, 'form', None)
             else 'static calibration (field vs coil currents)'
         )
@@ -368,7 +375,7 @@ def _run(args: argparse.Namespace) -> int:
             'runs: calibrate the static part first, then pass its file as --params'
         )
     if all(levitating):
-        _say('dynamic calibration from levitation data (linear grey-box, Kalman predictor)')
+        _say(f'dynamic calibration from levitation data ({args.form} grey-box, Kalman predictor)')
         cal = calibrate_dynamic(
             vector,
             experiments,
@@ -376,6 +383,7 @@ def _run(args: argparse.Namespace) -> int:
             delay=args.delay,
             process_noise=args.process_noise,
             progress=_say,
+            form=args.form,
         )
     else:
         delays = None if args.delay is None else [args.delay] * len(experiments)

@@ -8,9 +8,11 @@ fixed; :mod:`.identifiability` reports what the data cannot identify;
 :mod:`.export` writes the calibrated set as a parameter file that loads like
 ``config/maggy_v2.yaml``. The dynamic part (:mod:`.dynamic`) fits the
 linearised model's Kalman predictor to levitation data (the magnet's mass and
-polarisation, which static data cannot give); :mod:`.closed_loop_fit` fits
+polarisation, which static data cannot give); :mod:`.nonlinear` fits the
+full nonlinear model's predictor with the same Kalman gain (``nlgreyest``-like,
+``calibrate_dynamic(..., form='nonlinear')``); :mod:`.closed_loop_fit` fits
 the full nonlinear model by simulating the closed loop with the known
-estimator and controller.
+estimator and controller (a slower cross-check).
 """
 
 from .closed_loop_fit import ClosedLoopFit, LoopSetup, calibrate_closed_loop
@@ -25,6 +27,7 @@ from .dynamic import (
 from .errors import GreyBoxError
 from .export import parameters_to_mapping, write_parameters
 from .identifiability import Identifiability, Unidentified, analyse, correlated_pairs
+from .nonlinear import NonlinearGreyBoxProblem
 from .parameters import POSE_NAMES, ParameterSpec, ParameterVector, parameter_vector
 from .static import (
     MAGNET_STATES,
@@ -65,6 +68,7 @@ __all__ = [
     'DynamicCalibration',
     'calibrate_dynamic',
     'noise_level',
+    'NonlinearGreyBoxProblem',
     'LoopSetup',
     'ClosedLoopFit',
     'calibrate_closed_loop',

@@ -272,6 +272,8 @@ class LinearGreyBoxProblem:
         self.Ts = self.experiments[0].Ts
         self.channels = self.experiments[0].channels(len(vector.base.sensors))
         self.evaluations = 0
+        self._last: tuple[np.ndarray, np.ndarray] | None = None  # (z, residual)
+        self._last_jacobian: tuple[np.ndarray, float, np.ndarray] | None = None
 
     def values(self, z: np.ndarray) -> dict[str, float]:
         """Parameter values of the scaled free vector ``z`` (theta = nominal + scale z).
@@ -338,11 +340,16 @@ class LinearGreyBoxProblem:
         z : array_like, shape (free,)
             Scaled free parameters.
         """
+        z = np.array(z, dtype=float)
+        if self._last is not None and np.array_equal(self._last[0], z):
+            return self._last[1]  # the solver and the progress line ask for the same point
         try:
             errs = self.errors(self.values(z))
+            r = np.concatenate([(e / self.sigma).ravel() for e in errs])
         except (GreyBoxError, np.linalg.LinAlgError, ValueError):
-            return np.full(self.residual_size, 1e3)
-        return np.concatenate([(e / self.sigma).ravel() for e in errs])
+            r = np.full(self.residual_size, 1e3)
+        self._last = (z, r)
+        return r
 
     def jacobian(self, z: np.ndarray, step: float = 1e-2) -> np.ndarray:
         """Return d residual / d z by central differences (scaled units).
@@ -355,7 +362,10 @@ class LinearGreyBoxProblem:
             Difference step in parameter scales (the linearisation is itself a
             finite difference: a tiny step differentiates its noise).
         """
-        z = np.asarray(z, dtype=float)
+        z = np.array(z, dtype=float)
+        last = self._last_jacobian
+        if last is not None and np.array_equal(last[0], z) and last[1] == step:
+            return last[2]  # the identifiability check's Jacobian is the first iteration's
         cols = []
         for p in range(z.size):
             zp, zm = z.copy(), z.copy()
@@ -364,7 +374,9 @@ class LinearGreyBoxProblem:
             cols.append((self.residual(zp) - self.residual(zm)) / (2 * step))
         if not cols:
             return np.zeros((self.residual_size, 0))
-        return np.column_stack(cols)
+        jac = np.column_stack(cols)
+        self._last_jacobian = (z, step, jac)
+        return jac
 
     @property
     def residual_size(self) -> int:
@@ -405,6 +417,7 @@ def calibrate_dynamic(
     progress: Callable[[str], None] | None = None,
     jacobian: str = 'central',
     max_delay: int = 3,
+    form: str = 'linear',
 ) -> DynamicCalibration:
     """Estimate the free parameters of ``vector`` from levitation data (linear grey-box).
 
@@ -429,6 +442,10 @@ def calibrate_dynamic(
         ``2-point``: scipy's own forward differences (for comparison).
     max_delay : int
         Largest delay tried.
+    form : {'linear', 'nonlinear'}
+        ``linear``: the linearised model's Kalman predictor (``idgrey``);
+        ``nonlinear``: the full model's predictor with the same gain
+        (``nlgreyest``-like, :mod:`~maglev_ros.greybox.nonlinear`).
 
     Returns
     -------
@@ -441,6 +458,14 @@ def calibrate_dynamic(
         a nominal set without equilibrium.
     """
     say = progress or (lambda _line: None)
+    if form == 'linear':
+        problem_type = LinearGreyBoxProblem
+    elif form == 'nonlinear':
+        from .nonlinear import NonlinearGreyBoxProblem
+
+        problem_type = NonlinearGreyBoxProblem
+    else:
+        raise GreyBoxError(f"form must be 'linear' or 'nonlinear', got {form!r}")
     if not experiments:
         raise GreyBoxError('dynamic calibration needs at least one levitation record')
     if not 0.0 < split <= 1.0:
@@ -478,6 +503,7 @@ def calibrate_dynamic(
     if delay is None:
         costs = []
         for d in range(max_delay + 1):
+            # the linear predictor finds the same delay at a tenth of the cost
             trial = LinearGreyBoxProblem(vector, estimation, d, sigma, process_noise)
             r = trial.residual(np.zeros(len(trial.free)))
             costs.append(float(r @ r) / r.size)
@@ -487,7 +513,7 @@ def calibrate_dynamic(
             + ', '.join(f'{d}: {c:.3g}' for d, c in enumerate(costs))
             + ')'
         )
-    problem = LinearGreyBoxProblem(vector, estimation, delay, sigma, process_noise)
+    problem = problem_type(vector, estimation, delay, sigma, process_noise)
     z0 = np.zeros(len(problem.free))
     ident = analyse(problem.jacobian(z0), problem.free)
     for line in ident.lines():
@@ -499,7 +525,7 @@ def calibrate_dynamic(
         )
     vector_fit = vector.with_free(keep) if len(keep) < len(problem.free) else vector
     if vector_fit is not vector:
-        problem = LinearGreyBoxProblem(vector_fit, estimation, delay, sigma, process_noise)
+        problem = problem_type(vector_fit, estimation, delay, sigma, process_noise)
     lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
     upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
     iteration = [0]
@@ -512,7 +538,7 @@ def calibrate_dynamic(
 
     say(
         f'fitting {len(keep)} parameters to {problem.residual_size} readings '
-        f'(linear grey-box, Kalman predictor, delay {delay})'
+        f'({form} grey-box, Kalman predictor, delay {delay})'
     )
     solution = least_squares(
         problem.residual,
@@ -543,17 +569,15 @@ def calibrate_dynamic(
 
     nominal_values = vector.nominal
     fits_nom, fits_cal, predictions = [], [], {}
-    check = LinearGreyBoxProblem(vector_fit, validation, delay, sigma, process_noise)
+    check = problem_type(vector_fit, validation, delay, sigma, process_noise)
     z_eq = []
     for label, values_set, sink in (
         ('nominal', nominal_values, fits_nom),
         ('calibrated', values, fits_cal),
     ):
-        system = check.system(values_set)
-        z_eq.append(system.z_eq)
-        for i, e in enumerate(validation):
+        z_eq.append(check.system(values_set).z_eq)
+        for i, (e, err) in enumerate(zip(validation, check.errors(values_set), strict=True)):
             y = e.y[delay:][check.burn :]
-            err = system.innovations(e.u, e.y, delay)[check.burn :]
             yhat = y - err
             sink.append(ValidationFit(e.name, fit_percent(y, yhat), np.sqrt(np.mean(err**2, 0))))
             predictions[(i, label)] = yhat
@@ -579,7 +603,7 @@ def calibrate_dynamic(
         seconds=seconds,
         message=str(solution.message),
         predictions=predictions,
-        form='linear',
+        form=form,
         process_noise=float(process_noise),
         z_eq=tuple(z_eq),
     )

@@ -120,20 +120,44 @@ def test_magnet_from_the_recorder_metadata(tmp_path, capsys):
 
 
 def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
+    """The ROS-free loop's levitation record (1.2 s) as the recorder writes it, end to end."""
     from .levitation import TRUTH, levitation_record
     from .plant import write_record
 
     exp, _ = levitation_record()
-    bag = write_record(tmp_path / 'levitating', exp.u, exp.y, {'magnet': 'free'})
+    n = 6000
+    # the recorder's metadata: its own keys, and the simulator's parameters as
+    # '<node>.<parameter>' (maglev_simulator's magnet: free while levitating)
+    metadata = {
+        'recorder.storage': 'mcap',
+        'recorder.topics': '/maglev/sensor_0/field /maglev/sensor_1/field '
+        '/maglev/sensor_2/field /maglev/currents',
+        'maglev_simulator.params': 'maggy_v2',
+        'maglev_simulator.magnet': 'free',
+    }
+    bag = write_record(tmp_path / 'levitating', exp.u[:n], exp.y[:n], metadata)
     out = tmp_path / 'dynamic.yaml'
     status = main([str(bag), '--free', 'magnet.mass', 'magnet.polarization', '--out', str(out)])
     text = capsys.readouterr().out
     assert status == 0, text
+    assert 'magnet levitating' in text  # from the metadata
+    assert 'sensor delay 1 sample(s)' in text  # found, not given
     assert 'dynamic calibration' in text and 'iteration 1:' in text
     params = load_parameters(out)
     assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
     assert abs(params.magnet.polarization / TRUTH['magnet.polarization'] - 1) < 0.01
     assert (tmp_path / 'dynamic.png').stat().st_size > 10_000
+    # the full nonlinear model's predictor on the same bag
+    out = tmp_path / 'nonlinear.yaml'
+    free = ['magnet.mass', 'magnet.polarization']
+    assert main([str(bag), '--free', *free, '--form', 'nonlinear', '--out', str(out)]) == 0
+    assert 'nonlinear grey-box' in capsys.readouterr().out
+    params = load_parameters(out)
+    assert abs(params.magnet.mass / TRUTH['magnet.mass'] - 1) < 0.01
+    assert abs(params.magnet.polarization / TRUTH['magnet.polarization'] - 1) < 0.01
+    assert 'nonlinear grey-box' in out.read_text().splitlines()[2]
+    assert main([str(bag), '--free', *free, '--form', 'quadratic']) == 2
+    assert "--form: invalid choice: 'quadratic'" in _error(capsys)
     # a levitation bag with a static one: one clear line
     static = write_bag(tmp_path / 'absent', 'absent', 1500)
     assert main([str(bag), str(static), '--free', 'magnet.mass']) == 2
