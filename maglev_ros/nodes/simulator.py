@@ -239,22 +239,12 @@ def build_config(values: dict) -> SimulatorConfig:
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
-    """Build the physics simulator of a configuration.
+    """:func:`maglev_ros.physics.simulator_config.make_simulator`, its errors as the node's.
 
     Parameters
     ----------
     cfg : SimulatorConfig
         The validated parameters.
-
-    Returns
-    -------
-    Simulator
-        At its initial state (:func:`maglev_ros.physics.simulator_config.make_simulator`).
-
-    Raises
-    ------
-    SimulatorParameterError
-        If the parameter set cannot be loaded or the options do not fit it.
     """
     try:
         return _make_simulator(cfg)

@@ -104,25 +104,20 @@ def test_samples_packets_and_reconnect():
     assert any(level == 'warning' and 'link lost' in text for level, text in r.log.lines)
 
 
+def idle_link(tmp_path, firmware):
+    """A link on a port that does not exist (never opened)."""
+    stream = BoardStream(firmware, 1, CurrentScaling(1000.0))
+    path = str(tmp_path / 'x')
+    return BoardLink(SerialLink(path, 9600), stream, Backoff(0.1, 0.2), Log(), firmware == 'v2x')
+
+
 def test_a_read_only_board_gets_no_packets(tmp_path):
-    link = BoardLink(
-        SerialLink(str(tmp_path / 'x'), 9600),
-        BoardStream('v4x', 1, CurrentScaling(1000.0)),
-        Backoff(0.1, 0.2),
-        Log(),
-        writes=False,
-    )
+    link = idle_link(tmp_path, 'v4x')
     link.send(np.ones(4, dtype=np.int64))  # not open, but nothing is attempted
     assert link.counts['commands_unsent'] == 0 and link.counts['commands_sent'] == 0
 
 
 def test_an_unsent_packet_is_counted(tmp_path):
-    link = BoardLink(
-        SerialLink(str(tmp_path / 'x'), 9600),
-        BoardStream('v2x', 1, CurrentScaling(1000.0)),
-        Backoff(0.1, 0.2),
-        Log(),
-        writes=True,
-    )
+    link = idle_link(tmp_path, 'v2x')
     link.send(np.ones(4, dtype=np.int64))  # the port is not open
     assert link.counts['commands_unsent'] == 1 and link.applied.tolist() == [0, 0, 0, 0]
