@@ -313,7 +313,7 @@ def bench_driver(
         '| resyncs | dropped bytes | board process CPU | recorded share |'
     )
     print('|---|---|---|---|---|---|---|---|---|')
-    domain = 215 + os.getpid() % 18  # ports outside the ephemeral range (test/nodes/conftest.py)
+    domain = 215 + os.getpid() % 18  # ports outside the ephemeral range (test/conftest.py)
     subs = [True] if subscriber_only else ([False, True] if subscriber else [False])
     cases = [(n, with_sub) for with_sub in subs for n in sensors]
     for n_sensors, with_sub in cases:

@@ -1,4 +1,10 @@
-"""Session fixtures shared by every test directory: one colcon build of the package.
+"""Fixtures shared by every test directory: ROS domains and contexts, one colcon build.
+
+``domain`` and ``ctx`` give each test its own ROS domain and rclpy Context
+(tests that start nodes in this process: test/nodes, test/cli). Domain ids
+come from the ranges whose DDS ports stay out of Linux's ephemeral port range
+(32768-60999), 1-101 and 215-232, so a test's discovery ports never collide
+with a random socket; every test of a session gets its own id.
 
 ``colcon_build`` copies the package source into a temporary workspace and runs
 ``colcon build --packages-select maglev_ros`` once per session (a plain copy
@@ -9,6 +15,7 @@ install-tree checks (``test_colcon_build.py``) and the real command-line tests
 
 from __future__ import annotations
 
+import itertools
 import os
 import shutil
 import subprocess
@@ -23,6 +30,36 @@ PKG_DIR = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).parent / 'colcon'
 
 BUILD_TIMEOUT = 300  # seconds; the build itself takes a few
+
+SAFE_DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
+_NEXT = itertools.count(os.getpid() % len(SAFE_DOMAIN_IDS))
+
+
+def next_domain_id() -> int:
+    """A domain id not used yet in this session (wraps after 119 tests)."""
+    return SAFE_DOMAIN_IDS[next(_NEXT) % len(SAFE_DOMAIN_IDS)]
+
+
+@pytest.fixture
+def domain(monkeypatch):
+    """A ROS domain of its own for one test (``ROS_DOMAIN_ID``, localhost discovery)."""
+    domain_id = next_domain_id()
+    monkeypatch.setenv('ROS_DOMAIN_ID', str(domain_id))
+    monkeypatch.setenv('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    return domain_id
+
+
+@pytest.fixture
+def ctx(domain):
+    """An initialised rclpy Context on the test's domain, shut down after the test."""
+    import rclpy
+    from rclpy.context import Context
+
+    context = Context()
+    rclpy.init(context=context, domain_id=domain)
+    yield context
+    rclpy.try_shutdown(context=context)
+
 
 # Excluded wherever they occur in the source tree.
 _IGNORED_ANYWHERE = {'__pycache__', '.pytest_cache', '.ruff_cache', '.mypy_cache'}

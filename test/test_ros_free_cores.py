@@ -7,8 +7,14 @@ import pytest
 
 CORES = (
     'maglev_ros.physics.session',
+    'maglev_ros.physics.session_health',
+    'maglev_ros.physics.sample_encoder',
+    'maglev_ros.physics.simulator_config',
     'maglev_ros.hardware.command_guard',
     'maglev_ros.hardware.board_stream',
+    'maglev_ros.hardware.board_link',
+    'maglev_ros.hardware.driver_config',
+    'maglev_ros.hardware.driver_health',
     'maglev_ros.cdr',
     'maglev_ros.cdr.batch',
 )

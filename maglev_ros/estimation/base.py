@@ -23,6 +23,7 @@ import numpy as np
 from scipy.stats import chi2
 
 from ..physics import linearize
+from ..physics.discretization import zoh
 from ..physics.linearization import REDUCED_STATES
 from .config import EstimatorConfig
 from .freeze import FreezeDetector
@@ -174,6 +175,11 @@ class Estimator:
         for i in range(self.n_reduced, self.n_states):
             q[i, i] = self.config.bias_walk**2
         return 0.5 * (q + q.T)
+
+    def discrete_process_noise(self) -> np.ndarray:
+        """Return Q over one sample from the ZOH-discretised disturbance matrix, (n, n)."""
+        _, gd = zoh(self.linear.A, self.disturbance_matrix(), self.dt)
+        return self.process_noise(gd)
 
     # ------------------------------------------------------------------ state
     def reset(self, x0=None) -> None:

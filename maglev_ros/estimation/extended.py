@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..physics.discretization import zoh
 from ..physics.linearization import FD_STEP
 from .base import Estimator
 from .kernels import ekf_measure, ekf_predict, gated_update
+from .nonlinear import compiled_arguments, require_fast_field
 
 __all__ = ['ExtendedEstimator']
 
@@ -29,19 +29,14 @@ class ExtendedEstimator(Estimator):
     """
 
     def __init__(self, model, config=None, linear=None):
-        if model.options.field != 'fast':
-            raise ValueError(f'the EKF needs the fast field model, got {model.options.field!r}')
+        require_fast_field(model, 'EKF')
         self._x = None
         super().__init__(model, config, linear)
 
     def _set_state(self, dx, P) -> None:
         if self._x is None:
-            src, coil, rim, par, work = self.model.fast_arguments()
-            _, _, sens, mag, _ = self.model.measurement_arguments()
-            self._f_args = (src, coil, rim, par, work)
-            self._h_args = (src, coil, sens, mag, work)
-            _, gd = zoh(self.linear.A, self.disturbance_matrix(), self.dt)
-            self.Q = np.ascontiguousarray(self.process_noise(gd))
+            self._f_args, self._h_args = compiled_arguments(self.model)
+            self.Q = np.ascontiguousarray(self.discrete_process_noise())
             self._x_eq = np.ascontiguousarray(self.x_eq)
         self._x = np.ascontiguousarray(dx, dtype=float)
         self._P = np.ascontiguousarray(P, dtype=float)

@@ -6,9 +6,9 @@ import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
 
 from ..physics import kernels as phys
-from ..physics.discretization import zoh
 from .base import Estimator
 from .kernels import embed_state
+from .nonlinear import compiled_arguments, require_fast_field
 
 __all__ = ['UnscentedEstimator']
 
@@ -33,17 +33,13 @@ class UnscentedEstimator(Estimator):
     """
 
     def __init__(self, model, config=None, linear=None):
-        if model.options.field != 'fast':
-            raise ValueError(f'the UKF needs the fast field model, got {model.options.field!r}')
+        require_fast_field(model, 'UKF')
         self.ukf = None
         super().__init__(model, config, linear)
 
     def _set_state(self, dx, P) -> None:
         if self.ukf is None:
-            src, coil, rim, par, work = self.model.fast_arguments()
-            _, _, sens, mag, _ = self.model.measurement_arguments()
-            self._f_args = (src, coil, rim, par, work)
-            self._h_args = (src, coil, sens, mag, work)
+            self._f_args, self._h_args = compiled_arguments(self.model)
             self._x_eq = np.ascontiguousarray(self.x_eq)
             self._electrical = np.ones(3)
             points = MerweScaledSigmaPoints(self.n_states, alpha=1.0, beta=2.0, kappa=0.0)
@@ -55,8 +51,7 @@ class UnscentedEstimator(Estimator):
                 fx=self._fx,
                 points=points,
             )
-            _, gd = zoh(self.linear.A, self.disturbance_matrix(), self.dt)
-            self.ukf.Q = self.process_noise(gd)
+            self.ukf.Q = self.discrete_process_noise()
             self.ukf.R = np.diag(self.r_diag)
         self.ukf.x = np.array(dx, dtype=float)
         self.ukf.P = np.array(P, dtype=float)

@@ -43,14 +43,14 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 from scipy.linalg import solve_discrete_are
-from scipy.optimize import least_squares
 
 from ..physics.discretization import zoh
 from ..physics.equilibria import find_equilibria
 from ..physics.linearization import linearize
 from ..physics.model import MaggyModel
+from .bounded_fit import fit_bounded, identified, spread
 from .errors import GreyBoxError
-from .identifiability import analyse, correlated_pairs
+from .identifiability import correlated_pairs
 from .parameters import ParameterVector
 from .static import StaticCalibration, ValidationFit, fit_percent
 
@@ -514,56 +514,31 @@ def calibrate_dynamic(
             + ')'
         )
     problem = problem_type(vector, estimation, delay, sigma, process_noise)
-    z0 = np.zeros(len(problem.free))
-    ident = analyse(problem.jacobian(z0), problem.free)
-    for line in ident.lines():
-        say(line)
-    keep = [s.name for s in problem.free if s.name not in ident.unidentified_names]
-    if not keep:
-        raise GreyBoxError(
-            'none of the free parameters is identified by these data: ' + '; '.join(ident.lines())
-        )
-    vector_fit = vector.with_free(keep) if len(keep) < len(problem.free) else vector
-    if vector_fit is not vector:
-        problem = problem_type(vector_fit, estimation, delay, sigma, process_noise)
-    lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
-    upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
-    iteration = [0]
-
-    def jac(z):
-        iteration[0] += 1
-        r = problem.residual(z)
-        say(f'iteration {iteration[0]}: weighted cost per reading {float(r @ r) / r.size:.6g}')
-        return problem.jacobian(z)
-
+    fit = identified(
+        problem,
+        vector,
+        lambda v: problem_type(v, estimation, delay, sigma, process_noise),
+        say,
+    )
+    problem, vector_fit, keep, ident = fit.problem, fit.vector, fit.keep, fit.identifiability
     say(
         f'fitting {len(keep)} parameters to {problem.residual_size} readings '
         f'({form} grey-box, Kalman predictor, delay {delay})'
     )
-    solution = least_squares(
-        problem.residual,
-        np.zeros(len(keep)),
-        jac=jac if jacobian == 'central' else '2-point',
-        bounds=(lower, upper),
-        method='trf',
-        x_scale=1.0,
-        ftol=1e-10,
-        xtol=1e-10,
-        gtol=1e-10,
-        max_nfev=50,
+    solution = fit_bounded(
+        problem,
+        jacobian == 'central',
+        1e-10,
+        50,
+        lambda k, r: say(f'iteration {k}: weighted cost per reading {float(r @ r) / r.size:.6g}'),
     )
     z = solution.x
     values = problem.values(z)
-    jac_hat = problem.jacobian(z)
     r = problem.residual(z)
     dof = max(r.size - len(keep), 1)
     s2 = float(r @ r) / dof
-    cov_z = np.linalg.pinv(jac_hat.T @ jac_hat) * s2
-    sd_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        corr = cov_z / np.outer(sd_z, sd_z)
-    names = tuple(s.name for s in problem.free)
-    std = {n: float(sd * s.scale) for n, sd, s in zip(names, sd_z, problem.free, strict=True)}
+    fitted = spread(problem, problem.jacobian(z), s2)
+    names, std, corr = fitted.names, fitted.std, fitted.correlation
     seconds = time.perf_counter() - start
     say(f'done in {seconds:.2f} s: {solution.message}')
 

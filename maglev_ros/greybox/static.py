@@ -29,12 +29,12 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
 from ..physics.model import MaggyModel
 from ..physics.parameters import MaggyParameters
+from .bounded_fit import fit_bounded, identified, spread
 from .errors import GreyBoxError
-from .identifiability import Identifiability, analyse, correlated_pairs
+from .identifiability import Identifiability, correlated_pairs
 from .parameters import ParameterVector
 
 __all__ = [
@@ -702,59 +702,25 @@ def calibrate_static(
 
     start = time.perf_counter()
     problem = StaticProblem(vector, estimation, delays)
-    z0 = np.zeros(len(problem.free))
-    ident = analyse(problem.jacobian(z0), problem.free)
-    for line in ident.lines():
-        say(line)
-    keep = [s.name for s in problem.free if s.name not in ident.unidentified_names]
-    if not keep:
-        raise GreyBoxError(
-            'none of the free parameters is identified by these data: ' + '; '.join(ident.lines())
-        )
-    vector_fit = vector.with_free(keep) if len(keep) < len(problem.free) else vector
-    problem = (
-        StaticProblem(vector_fit, estimation, delays) if vector_fit is not vector else problem
-    )
-    lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
-    upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
-
-    iteration = [0]
-
-    def jac(z):
-        iteration[0] += 1
-        r = problem.residual(z)
-        say(f'iteration {iteration[0]}: weighted cost {0.5 * float(r @ r):.6g}')
-        return problem.jacobian(z)
-
+    fit = identified(problem, vector, lambda v: StaticProblem(v, estimation, delays), say)
+    problem, vector_fit, keep, ident = fit.problem, fit.vector, fit.keep, fit.identifiability
     say(
         f'fitting {len(keep)} parameters to {problem.observations} readings '
         f'({sum(s.samples for s in problem.stats)} samples)'
     )
-    solution = least_squares(
-        problem.residual,
-        np.zeros(len(keep)),
-        jac=jac if jacobian == 'features' else '2-point',
-        bounds=(lower, upper),
-        method='trf',
-        x_scale=1.0,
-        ftol=1e-12,
-        xtol=1e-12,
-        gtol=1e-12,
-        max_nfev=200,
+    solution = fit_bounded(
+        problem,
+        jacobian == 'features',
+        1e-12,
+        200,
+        lambda k, r: say(f'iteration {k}: weighted cost {0.5 * float(r @ r):.6g}'),
     )
     z = solution.x
     values = problem.values(z)
-    jac_hat = problem.jacobian(z)
     dof = max(problem.observations - len(keep), 1)
-    chi2 = problem.chi2(z)
-    s2 = chi2 / dof
-    info = jac_hat.T @ jac_hat
-    cov_z = np.linalg.pinv(info) * s2
-    sd_z = np.sqrt(np.clip(np.diag(cov_z), 0, None))
-    with np.errstate(divide='ignore', invalid='ignore'):
-        corr = cov_z / np.outer(sd_z, sd_z)
-    names = tuple(s.name for s in problem.free)
-    std = {n: float(sd * s.scale) for n, sd, s in zip(names, sd_z, problem.free, strict=True)}
+    s2 = problem.chi2(z) / dof
+    fitted = spread(problem, problem.jacobian(z), s2)
+    names, std, corr = fitted.names, fitted.std, fitted.correlation
     seconds = time.perf_counter() - start
     say(f'done in {seconds:.2f} s: {solution.message}')
 

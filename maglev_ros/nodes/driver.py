@@ -61,10 +61,9 @@ from __future__ import annotations
 import math
 import threading
 import time
-from dataclasses import dataclass
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
@@ -72,17 +71,26 @@ from std_srvs.srv import SetBool
 
 from maglev_ros.cdr import currents_layout, field_layout
 from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
-from maglev_ros.hardware.board_stream import BoardStream, StreamOutput
+from maglev_ros.hardware.board_link import BoardLink
+from maglev_ros.hardware.board_stream import BoardStream
 from maglev_ros.hardware.command_guard import CommandGuard
-from maglev_ros.hardware.packet import WATCHDOG_S, encode_command
-from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE, CurrentScaling
-from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
+from maglev_ros.hardware.driver_config import (
+    DEFAULT_BAUD,
+    MAX_READ_INTERVAL_S,
+    DriverConfig,
+    DriverConfigError,
+    driver_config,
+)
+from maglev_ros.hardware.driver_health import DriverHealth, driver_counters
+from maglev_ros.hardware.packet import WATCHDOG_S
+from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE
+from maglev_ros.hardware.serial_link import Backoff, SerialLink
 from maglev_ros.hardware.v2x_stream import DecoderStats
-from maglev_ros.hardware.v4x_telemetry import Severity
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
     DIAGNOSTICS_QOS,
     SENSOR_QOS,
+    diagnostic_array,
     run_nodes,
 )
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer
@@ -105,87 +113,11 @@ __all__ = [
 ]
 
 NODE_NAME = 'maglev_driver'
-DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
-MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
-COUNTERS = (  # as /diagnostics lists them
-    'records',
-    'commands_sent',
-    'commands_rejected',
-    'commands_clamped',
-    'commands_unsent',
-    'commands_ignored',
-    'timeouts',
-    'reconnects',
-    'io_errors',
-    'info_messages',
-    'resyncs',
-    'dropped_bytes',
-)
-_NODE_COUNTERS = (
-    'records',
-    'commands_sent',
-    'commands_unsent',
-    'reconnects',
-    'io_errors',
-    'info_messages',
-)
 
 
 class DriverParameterError(NodeParameterError):
     """A driver parameter has an invalid value."""
-
-
-@dataclass(frozen=True)
-class DriverConfig:
-    """Validated driver parameters (see the module docstring for meanings).
-
-    Attributes
-    ----------
-    port : str
-        Serial device path.
-    firmware : str
-        ``'v2x'`` or ``'v4x'``.
-    baudrate : int
-        Baud rate.
-    n_sensors : int
-        Sensors per record or line.
-    sensor_frames : tuple of str
-        Frame id of each sensor's field messages.
-    scaling : CurrentScaling
-        Current to PWM map (V2x).
-    current_limit : float
-        Largest commanded current magnitude in A.
-    command_timeout : float
-        s without a valid command before zero currents are sent.
-    start_enabled : bool
-        Enable state at start-up.
-    reconnect_min_delay, reconnect_max_delay : float
-        Back-off bounds in s for reopening the port.
-    diagnostics_period : float
-        s between diagnostics messages.
-    confirm_records : bool
-        Hold the newest V2x record of each read until the next record
-        confirms its boundary (see ``hardware.v2x_stream``).
-    read_interval : float
-        Shortest time in s between reads of the port (0: read as soon as data
-        arrives, every burst).
-    """
-
-    port: str
-    firmware: str
-    baudrate: int
-    n_sensors: int
-    sensor_frames: tuple[str, ...]
-    scaling: CurrentScaling
-    current_limit: float
-    command_timeout: float
-    start_enabled: bool
-    reconnect_min_delay: float
-    reconnect_max_delay: float
-    diagnostics_period: float
-    confirm_records: bool = True
-    read_interval: float = 0.0
 
 
 def _positive(name: str, value: float) -> float:
@@ -329,38 +261,10 @@ def build_config(values: dict) -> DriverConfig:
     DriverParameterError
         Naming the first invalid parameter and its value.
     """
-    v = PARAMETERS.validate(values)
-    n_sensors = v['n_sensors']
-    frames = v['sensor_frames'] or tuple(sensor_frame(k) for k in range(n_sensors))
-    if len(frames) != n_sensors:
-        raise DriverParameterError(
-            f'sensor_frames must name {n_sensors} frames (n_sensors), got {list(frames)}'
-        )
-    if v['counts_per_ampere']:
-        scaling = CurrentScaling(v['counts_per_ampere'])
-    else:
-        scaling = CurrentScaling.from_supply(v['supply_voltage'], v['coil_resistance'])
-    min_delay, max_delay = v['reconnect_min_delay'], v['reconnect_max_delay']
-    if max_delay < min_delay:
-        raise DriverParameterError(
-            f'reconnect_max_delay must be >= reconnect_min_delay ({min_delay}), got {max_delay}'
-        )
-    return DriverConfig(
-        port=v['port'],
-        firmware=v['firmware'],
-        baudrate=v['baudrate'] or DEFAULT_BAUD[v['firmware']],
-        n_sensors=n_sensors,
-        sensor_frames=frames,
-        scaling=scaling,
-        current_limit=v['current_limit'] or scaling.max_current,
-        command_timeout=v['command_timeout'],
-        start_enabled=v['start_enabled'],
-        reconnect_min_delay=min_delay,
-        reconnect_max_delay=max_delay,
-        diagnostics_period=v['diagnostics_period'],
-        confirm_records=v['confirm_records'],
-        read_interval=v['read_interval'],
-    )
+    try:
+        return driver_config(PARAMETERS.validate(values))
+    except DriverConfigError as err:
+        raise DriverParameterError(str(err)) from None
 
 
 class DriverNode(Node):
@@ -405,14 +309,14 @@ class DriverNode(Node):
             confirm_records=cfg.confirm_records,
             read_interval=cfg.read_interval,
         )
-        self._link = SerialLink(cfg.port, cfg.baudrate)
-        self._backoff = Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay)
-        self._applied = np.zeros(4, dtype=np.int64)  # PWM counts last sent
-        self.link_state = 'connecting'
-        self._connections = 0
-        self._counts = dict.fromkeys(_NODE_COUNTERS, 0)
-        self._rate_mark = (time.monotonic(), 0, 0)
-        self.last_info = ''
+        self.link = BoardLink(
+            SerialLink(cfg.port, cfg.baudrate),
+            self.stream,
+            Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay),
+            self.get_logger(),
+            writes=self._v2x,
+        )
+        self.health = DriverHealth(cfg.firmware, time.monotonic())
         self._field_pubs = [
             self.create_publisher(MagneticField, field_topic(k), SENSOR_QOS)
             for k in range(cfg.n_sensors)
@@ -468,10 +372,17 @@ class DriverNode(Node):
     @property
     def counters(self) -> dict[str, int]:
         """Records, commands sent/rejected/clamped/unsent/ignored, timeouts, link events."""
-        guard, stream = self.guard.counters, self.stream
-        merged = self._counts | guard
-        merged['resyncs'], merged['dropped_bytes'] = stream.resyncs, stream.dropped_bytes
-        return {name: merged[name] for name in COUNTERS}
+        return driver_counters(self.link, self.guard)
+
+    @property
+    def link_state(self) -> str:
+        """``connecting``, ``waiting for board``, ``connected`` or ``disconnected``."""
+        return self.link.state
+
+    @property
+    def last_info(self) -> str:
+        """Text of the board's last info line (V4x)."""
+        return self.link.last_info
 
     @property
     def decoder_stats(self) -> DecoderStats:
@@ -487,15 +398,7 @@ class DriverNode(Node):
 
     def _send(self, counts: np.ndarray) -> None:
         """Send PWM counts (shape (4,)) as one packet (V2x); count failures."""
-        if not self._v2x:
-            return
-        try:
-            self._link.write(encode_command(counts))
-        except LinkError:
-            self._counts['commands_unsent'] += 1
-            return
-        self._applied = counts
-        self._counts['commands_sent'] += 1
+        self.link.send(counts)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         with self._lock:
@@ -534,64 +437,9 @@ class DriverNode(Node):
     # -- board I/O --------------------------------------------------------------
 
     def _io_loop(self) -> None:
-        log = self.get_logger()
-        interval = self.config.read_interval
-        while not self._stop.is_set():
-            if not self._link.is_open:
-                try:
-                    self._link.open()
-                except LinkError as err:
-                    self.link_state = 'waiting for board'
-                    delay = self._backoff.next_delay()
-                    log.warning(f'{err}; retrying in {delay:.1f} s', throttle_duration_sec=5.0)
-                    self._stop.wait(delay)
-                    continue
-                self._on_connected()
-            try:
-                data = self._link.read()
-                if data:
-                    read_at = time.monotonic()
-                    # system time: the ROS time of a node without sim time
-                    self._handle(self.stream.feed(data, time.time_ns()))
-                    if interval:  # let bursts collect: one read, decode, publish for several
-                        self._stop.wait(interval - (time.monotonic() - read_at))
-            except LinkError as err:
-                self._on_disconnected(f'link lost: {err}')
-            except Exception as err:  # noqa: BLE001 - zero the coils, then reconnect
-                if not self.context.ok():  # a signal shut the context down mid-publish:
-                    break  # close() zeroes the coils
-                self._counts['io_errors'] += 1
-                log.error(f'unexpected error on the board link: {err!r}; zeroing and reconnecting')
-                self._send_zero()
-                self._on_disconnected('error')
-                self._stop.wait(self._backoff.next_delay())
-
-    def _on_connected(self) -> None:
-        self._connections += 1
-        self._counts['reconnects'] = self._connections - 1
-        self._backoff.reset()
-        self.stream.connect()
-        self.link_state = 'connected'
-        self.get_logger().info(f'connected to {self.config.port}')
-        self._send_zero()  # a known state; applied once the board's loop runs
-
-    def _on_disconnected(self, reason: str) -> None:
-        self._link.close()
-        self.stream.disconnect()
-        self.link_state = 'disconnected'
-        self.get_logger().warning(f'{self.config.port}: {reason}')
-
-    def _handle(self, output: StreamOutput) -> None:
-        """Log the board's info lines, publish the samples of one read."""
-        for info in output.infos:
-            self._counts['info_messages'] += 1
-            self.last_info = info.text
-            if info.severity >= Severity.WARN:
-                self.get_logger().warning(f'board: {info.text}')
-            else:
-                self.get_logger().info(f'board: {info.text}')
-        if len(output):
-            self._publish(output.stamps_ns, output.values)
+        self.link.run(
+            self._stop, self._publish, self._send_zero, self.config.read_interval, self.context.ok
+        )
 
     def _publish(self, stamps: np.ndarray, values: np.ndarray) -> None:
         """Publish n samples: stamps (n,) ns; values (n, 3 N + 4): each field (T), currents (A).
@@ -611,43 +459,21 @@ class DriverNode(Node):
                 self._publish_calls[n] = publishers
         for publish, message in zip(publishers, messages, strict=True):
             publish(message)
-        self._counts['records'] += n
 
     # -- diagnostics ------------------------------------------------------------
 
     def _publish_diagnostics(self) -> None:
-        now = time.monotonic()
-        counters = self.counters
-        then, records, sent = self._rate_mark
-        span = max(now - then, 1e-9)
-        self._rate_mark = (now, counters['records'], counters['commands_sent'])
-        if self.link_state != 'connected':
-            level, message = DiagnosticStatus.ERROR, f'board link {self.link_state}'
-        elif self.guard.timed_out:
-            level, message = DiagnosticStatus.WARN, 'command timeout: zero currents'
-        else:
-            level, message = DiagnosticStatus.OK, 'connected'
-        values = {
-            'link state': self.link_state,
-            'firmware': self.config.firmware,
-            'field kind': 'raw' if self._v2x else 'baseline and feedthrough removed (V4x)',
-            'enabled': str(self.enabled),
-            'records/s': f'{(counters["records"] - records) / span:.1f}',
-            'command rate (1/s)': f'{(counters["commands_sent"] - sent) / span:.1f}',
-            'applied PWM (counts)': ' '.join(str(int(c)) for c in self._applied),
-            'last board message': self.last_info,
-        }
-        values.update({name.replace('_', ' '): str(v) for name, v in counters.items()})
-        status = DiagnosticStatus(
-            level=level,
-            name=f'{NODE_NAME}: board link',
-            message=message,
-            hardware_id=self.config.port,
-            values=[KeyValue(key=k, value=v) for k, v in values.items()],
+        health = self.health.report(self.link, self.guard, time.monotonic())
+        self._diag_pub.publish(
+            diagnostic_array(
+                self.get_clock().now().nanoseconds,
+                f'{NODE_NAME}: board link',
+                health.level,
+                health.message,
+                health.values,
+                hardware_id=self.config.port,
+            )
         )
-        array = DiagnosticArray(status=[status])
-        array.header.stamp = self.get_clock().now().to_msg()
-        self._diag_pub.publish(array)
 
     # -- shutdown ---------------------------------------------------------------
 
@@ -658,9 +484,9 @@ class DriverNode(Node):
         self._closed = True
         self._stop.set()
         self._io.join(timeout=2.0)
-        if self._v2x and self._link.is_open:
+        if self._v2x and self.link.serial.is_open:
             self._send_zero()
-        self._link.close()
+        self.link.close()
 
     def destroy_node(self) -> None:
         """Close the board link (zero currents first), then destroy the node."""

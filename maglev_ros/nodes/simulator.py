@@ -65,10 +65,8 @@ import math
 import os
 import threading
 import time
-from dataclasses import dataclass
 
-import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
@@ -76,8 +74,6 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from maglev_ros.cdr import clock_layout, currents_layout, field_layout, odometry_layout
-from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
 from maglev_ros.nodes import contract
 from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
 from maglev_ros.nodes.params import (
@@ -88,19 +84,13 @@ from maglev_ros.nodes.params import (
     integer,
     number,
 )
-from maglev_ros.physics import (
-    FIELD_MODELS,
-    KINEMATICS,
-    TORQUE_MODES,
-    CoilDynamics,
-    ParameterError,
-    SensorEffects,
-    Simulator,
-    make_model,
-)
-from maglev_ros.physics.kernels import odometry_values
+from maglev_ros.physics import FIELD_MODELS, KINEMATICS, TORQUE_MODES, Simulator
+from maglev_ros.physics.sample_encoder import SampleEncoder
 from maglev_ros.physics.session import MODES, CommandError, SampleBatch, SimulationSession
+from maglev_ros.physics.session_health import crash_line, session_health, timeout_line
 from maglev_ros.physics.simulation import MAGNET_MODES
+from maglev_ros.physics.simulator_config import SimulatorConfig, SimulatorConfigError
+from maglev_ros.physics.simulator_config import make_simulator as _make_simulator
 from maglev_ros.topics import SIMULATOR_PAUSE_SERVICE, SIMULATOR_RESET_SERVICE
 
 __all__ = [
@@ -120,77 +110,6 @@ WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 
 class SimulatorParameterError(NodeParameterError):
     """A simulator parameter has an invalid value."""
-
-
-@dataclass(frozen=True)
-class SimulatorConfig:
-    """Validated simulator parameters (meanings: ``_PARAMETERS`` below).
-
-    Attributes
-    ----------
-    params : str
-        Parameter set: ``maggy_v2``, ``maggy_v4`` or a YAML path.
-    field_model, torque, kinematics : str
-        Model options.
-    sample_rate : float
-        Hz.
-    substeps : int
-        RK4 steps per sample.
-    magnet : str
-        ``free``, ``fixed`` or ``absent``.
-    initial_state : tuple of float or None
-        12 numbers, or None for the first equilibrium.
-    coil_dynamics : bool
-        Coil L/R electrics with the supply limit.
-    sensor_noise, sensor_quantization : float
-        T rms and T per LSB.
-    sensor_delay : int
-        Samples of sensor delay.
-    seed : int
-        Noise seed.
-    mode : str
-        ``realtime`` or ``lockstep``.
-    command_timeout : float
-        Lockstep: s to wait for a sample's command.
-    pace_period : float
-        Real time: s of wall time between bursts of samples.
-    start_paused : bool
-        Start paused (resume with the pause service).
-    start_subscribers : int
-        Lockstep: subscribers of ``maglev/currents`` to wait for.
-    sensors : tuple of int
-        Indices of the parameter set's sensors to publish.
-    publish_state, publish_clock : bool
-        Publish the true state and ``/clock``.
-    marker_rate : float
-        Hz of wall time (0: no markers).
-    diagnostics_period : float
-        s between diagnostics messages.
-    """
-
-    params: str
-    field_model: str
-    torque: str
-    kinematics: str
-    sample_rate: float
-    substeps: int
-    magnet: str
-    initial_state: tuple[float, ...] | None
-    coil_dynamics: bool
-    sensor_noise: float
-    sensor_quantization: float
-    sensor_delay: int
-    seed: int
-    mode: str
-    command_timeout: float
-    pace_period: float
-    start_paused: bool
-    start_subscribers: int
-    sensors: tuple[int, ...]
-    publish_state: bool
-    publish_clock: bool
-    marker_rate: float
-    diagnostics_period: float
 
 
 def _initial_state(name: str, state: tuple[float, ...]) -> tuple[float, ...] | None:
@@ -320,50 +239,17 @@ def build_config(values: dict) -> SimulatorConfig:
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
-    """Build the physics simulator of a configuration.
+    """:func:`maglev_ros.physics.simulator_config.make_simulator`, its errors as the node's.
 
     Parameters
     ----------
     cfg : SimulatorConfig
         The validated parameters.
-
-    Raises
-    ------
-    SimulatorParameterError
-        If the parameter set cannot be loaded or the options do not fit it.
     """
     try:
-        model = make_model(
-            cfg.params, field=cfg.field_model, torque=cfg.torque, kinematics=cfg.kinematics
-        )
-    except (ParameterError, OSError, ValueError) as err:
-        raise SimulatorParameterError(f'params {cfg.params!r}: {err}') from err
-    n_sensors = len(model.params.sensors)
-    bad = [k for k in cfg.sensors if k >= n_sensors]
-    if bad:
-        raise SimulatorParameterError(
-            f'sensors must be indices below {n_sensors} ({model.params.name} has {n_sensors} '
-            f'sensors), got {list(cfg.sensors)}'
-        )
-    coil = CoilDynamics.from_parameters(model.params) if cfg.coil_dynamics else None
-    sensor = SensorEffects(
-        noise_rms=cfg.sensor_noise,
-        quantization=cfg.sensor_quantization,
-        delay_samples=cfg.sensor_delay,
-    )
-    try:
-        return Simulator(
-            model,
-            cfg.sample_rate,
-            substeps=cfg.substeps,
-            coil=coil,
-            sensor=sensor,
-            seed=cfg.seed,
-            x0=cfg.initial_state,
-            magnet=cfg.magnet,
-        )
-    except ValueError as err:
-        raise SimulatorParameterError(f'initial_state / model: {err}') from err
+        return _make_simulator(cfg)
+    except SimulatorConfigError as err:
+        raise SimulatorParameterError(str(err)) from err
 
 
 class SimulatorNode(Node):
@@ -398,7 +284,6 @@ class SimulatorNode(Node):
         )
         n_all = len(self.sim.model.params.sensors)
         self.sensors = cfg.sensors or tuple(range(n_all))
-        self._columns = np.array([3 * k + j for k in self.sensors for j in range(3)])
         self._lock = threading.RLock()  # the session and the publishing of its batches
 
         qos = contract.SENSOR_QOS
@@ -417,7 +302,7 @@ class SimulatorNode(Node):
         self._diag_pub = self.create_publisher(
             DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
         )
-        self._publisher = self._burst_publisher(cfg)
+        self._wire_publishing(cfg)
         command_qos = (
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
         )
@@ -503,72 +388,41 @@ class SimulatorNode(Node):
 
     # -- publishing -------------------------------------------------------------
 
-    def _burst_publisher(self, cfg: SimulatorConfig) -> SampleSerialiser:
-        """Build the serialiser of one sample's messages and their publish calls.
+    def _wire_publishing(self, cfg: SimulatorConfig) -> None:
+        """Build the sample encoder and bind each of its messages to its publisher.
 
-        Per sample: ``/clock`` in lockstep (every sample: one compiled call
-        serialises the whole sample), the field of each published sensor, the
-        true state, the currents (last: it marks a complete sample). In real
-        time ``/clock`` goes separately, once per burst. Pre-serialised bytes
-        go straight to the publishers' handles: they are safe to use from the
-        stepping thread because the node destroys its publishers only after
-        :meth:`close` joined it.
+        Pre-serialised bytes go straight to the publishers' handles: they are
+        safe to use from the stepping thread because the node destroys its
+        publishers only after :meth:`close` joined it.
         """
-        layouts = [field_layout(contract.sensor_frame(k)) for k in self.sensors]
-        handles = [pub.handle for pub in self._field_pubs]
-        if self._state_pub is not None:
-            layouts.append(odometry_layout())
-            handles.append(self._state_pub.handle)
-        layouts.append(currents_layout())
-        handles.append(self._current_pub.handle)
-        self._clock_batch = None  # real time: /clock once per burst
+        clock = 'none' if self._clock_pub is None else 'sample'
+        if clock == 'sample' and cfg.mode != 'lockstep':
+            clock = 'burst'  # real time: /clock once per burst
+        self._encoder = SampleEncoder(
+            self.sensors, self._state_pub is not None, clock, self.session.burst
+        )
+        pubs = dict(zip(map(contract.field_topic, self.sensors), self._field_pubs, strict=True))
+        pubs[contract.TRUE_STATE_TOPIC] = self._state_pub
+        pubs[contract.CURRENTS_TOPIC] = self._current_pub
+        pubs[contract.CLOCK_TOPIC] = self._clock_pub
+        self._publish_calls = [pubs[topic].handle.publish_raw for topic in self._encoder.topics]
         if self._clock_pub is not None:
-            if cfg.mode == 'lockstep':
-                layouts.insert(0, clock_layout())
-                handles.insert(0, self._clock_pub.handle)
-            else:
-                self._clock_batch = RawMessageBatch(clock_layout())
-                self._publish_clock = self._clock_pub.handle.publish_raw
-        self._publish_calls = [handle.publish_raw for handle in handles]
-        self._odom_cache = np.zeros(13)
-        self._odom_state = b''  # bytes of the state _odom_cache was computed for
-        serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
-        # load its compiled kernel now, not in the stepping thread (up to 1 s the first time)
-        serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, serialiser.n_values)))
-        return serialiser
+            self._publish_clock = self._clock_pub.handle.publish_raw
 
     def _publish(self, batch: SampleBatch | None) -> None:
         """Publish a batch of samples (lockstep: usually one); report a crash.
 
         Real time: the ``/clock`` messages of the batch (one per burst) go
         first. The samples' messages are serialised in one go and published
-        sample by sample. The true state's 13 values
-        are recomputed only when the state changed (never with the magnet
-        fixed or absent).
+        sample by sample.
         """
         if batch is None:
             return
         n = len(batch)
         if n:
-            stamps = batch.stamps_ns
-            if self._clock_batch is not None:
-                ticks = stamps[batch.indices % self.session.burst == 0]
-                if ticks.size:
-                    no_values = np.empty((ticks.size, 0))
-                    for message in self._clock_batch.serialise(ticks, no_values):
-                        self._publish_clock(message)
-            values = [batch.readings[:, self._columns]]  # each published sensor's x y z
-            if self._state_pub is not None:
-                odometry = np.empty((n, 13))
-                for i, state in enumerate(batch.states):
-                    key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
-                    if key != self._odom_state:
-                        self._odom_cache = odometry_values(state)
-                        self._odom_state = key
-                    odometry[i] = self._odom_cache
-                values.append(odometry)
-            values.append(batch.currents)
-            messages = self._publisher.serialise(stamps, values)
+            for message in self._encoder.clock_messages(batch):
+                self._publish_clock(message)
+            messages = self._encoder.sample_messages(batch)
             for publish, message in zip(self._publish_calls * n, messages, strict=True):
                 publish(message)
         if batch.crashed:
@@ -587,47 +441,20 @@ class SimulatorNode(Node):
         if not self.context.ok():  # a signal is shutting the node down
             return
         self.session.measure_real_time_factor(time.monotonic())
-        sim = self.sim
-        if sim.crashed:
-            level = DiagnosticStatus.ERROR
-            message = f'crashed at t = {sim.crash_time:.4f} s: {sim.reason}; reset to recover'
-        elif self.paused:
-            level, message = DiagnosticStatus.OK, 'paused'
-        elif not self.started:
-            level, message = DiagnosticStatus.OK, 'waiting for the command publisher'
-        else:
-            level, message = DiagnosticStatus.OK, f'running ({self.config.mode})'
-        values = {
-            'mode': self.config.mode,
-            'magnet': self.config.magnet,
-            'parameter set': sim.model.params.name,
-            'simulated time (s)': f'{sim.time:.6f}',
-            'real-time factor': f'{self.real_time_factor:.3f}',
-            'crash reason': sim.reason,
-            'crash time (s)': '' if sim.crash_time is None else f'{sim.crash_time:.6f}',
-            'crash state': (
-                '' if sim.crash_state is None else ' '.join(f'{v:.6g}' for v in sim.crash_state)
-            ),
-        }
-        values.update({name.replace('_', ' '): v for name, v in self.counters.items()})
+        health = session_health(self.session, self.config.magnet)
         self._diag_pub.publish(
             contract.diagnostic_array(
                 self.get_clock().now().nanoseconds,  # the node's clock: sim time under it
                 f'{NODE_NAME}: simulation',
-                level,
-                message,
-                values,
+                health.level,
+                health.message,
+                health.values,
                 hardware_id='simulator',
             )
         )
 
     def _on_crash(self) -> None:
-        sim = self.sim
-        state = ' '.join(f'{v:.4g}' for v in sim.crash_state[:6])
-        self.get_logger().error(
-            f'magnet crashed at t = {sim.crash_time:.4f} s ({sim.reason}); pose {state}; '
-            f'integration stopped: call {SIMULATOR_RESET_SERVICE}'
-        )
+        self.get_logger().error(crash_line(self.session))
         self.publish_diagnostics()
 
     # -- stepping ---------------------------------------------------------------
@@ -661,9 +488,7 @@ class SimulatorNode(Node):
             batch = session.check_timeout(now)
             if batch is not None:
                 self.get_logger().warning(
-                    f'no command for {age:.3f} s > {self.config.command_timeout} s at '
-                    f't = {self.sim.time:.6f} s: holding the last command',
-                    throttle_duration_sec=WARN_THROTTLE_S,
+                    timeout_line(session, age), throttle_duration_sec=WARN_THROTTLE_S
                 )
                 self._publish(batch)
 

@@ -339,14 +339,17 @@ class SimulationSession:
             return None
         self.counters['timeouts'] += 1
         self._step(self._command)
-        self.waiting_since = now
-        return self._take()
+        return self._awaiting_from(now)
 
     def _advance(self, now: float) -> SampleBatch | None:
         """Lockstep: step once per queued command while running."""
         while self._queue and not self.paused and not self.sim.crashed:
             self._command = self._queue.popleft()
             self._step(self._command)
+        return self._awaiting_from(now)
+
+    def _awaiting_from(self, now: float) -> SampleBatch | None:
+        """Lockstep: wait for the next command from ``now``; return the pending samples."""
         self.waiting_since = now
         return self._take()
 
@@ -449,9 +452,7 @@ class SimulationSession:
         n = len(pending)
         indices = np.fromiter((p[0] for p in pending), np.int64, n)
         if n:
-            readings = np.array([p[1] for p in pending])
-            states = np.array([p[2] for p in pending])
-            currents = np.array([p[3] for p in pending])
+            readings, states, currents = (np.array([p[k] for p in pending]) for k in (1, 2, 3))
         else:
             readings = np.empty((0, len(self._first_reading)))
             states, currents = np.empty((0, 12)), np.empty((0, 4))

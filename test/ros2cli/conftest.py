@@ -38,16 +38,16 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import pytest
+from conftest import SAFE_DOMAIN_IDS
 
-# Domain ids whose DDS ports stay out of Linux's ephemeral range (as test/nodes
-# uses), started half-way round from the node tests' counter so that the two
+# Domain ids whose DDS ports stay out of Linux's ephemeral range (test/conftest.py's
+# ids), started half-way round from the node tests' counter so that the two
 # sequences of one session do not meet for ~60 tests each.
-SAFE_DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
 _NEXT = itertools.count((os.getpid() + len(SAFE_DOMAIN_IDS) // 2) % len(SAFE_DOMAIN_IDS))
 
 RUN_TIMEOUT = 120.0  # s, for a ros2 command that should end by itself
@@ -183,15 +183,6 @@ def interrupt(proc: subprocess.Popen, timeout: float = STOP_TIMEOUT) -> tuple[in
         out, _ = proc.communicate()
         return -9, out
     return proc.returncode, out
-
-
-def wait_until(predicate: Callable[[], bool], timeout: float, what: str) -> None:
-    """Poll ``predicate`` every 0.5 s until true; fail naming ``what`` after ``timeout`` s."""
-    end = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > end:
-            pytest.fail(f'timed out after {timeout} s waiting for {what}')
-        time.sleep(0.5)
 
 
 @pytest.fixture(scope='session')

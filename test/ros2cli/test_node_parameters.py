@@ -15,8 +15,9 @@ import subprocess
 
 import pytest
 import yaml
+from waiting import wait_for
 
-from .conftest import interrupt, wait_until
+from .conftest import interrupt
 
 NODES = {  # executable: (node name, module)
     'simulator': ('maglev_simulator', 'maglev_ros.nodes.simulator'),
@@ -101,7 +102,7 @@ def test_integers_for_doubles_run_and_param_dump_is_complete(
             dumped.update(yaml.safe_load(out.stdout))
             return True
 
-        wait_until(dump, 300, f'ros2 param dump /{node}')
+        wait_for(dump, 300, f'ros2 param dump /{node}', period=0.5)
     finally:
         status, output = interrupt(proc)
     params = dumped[f'/{node}']['ros__parameters']

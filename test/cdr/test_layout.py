@@ -1,15 +1,6 @@
 import numpy as np
 import pytest
-from nav_msgs.msg import Odometry
-from rclpy.serialization import serialize_message
-from std_msgs.msg import Float64MultiArray, MultiArrayDimension
-
-from maglev_ros.bags import BagReader, parse_channel
-from maglev_ros.bags.extraction import read_topics
-from maglev_ros.bags.typestore import cdr_deserializer, jazzy_typestore
-from maglev_ros.cdr.layout import cdr_layout, decode_columns
-
-from .recordings import (
+from bags.recordings import (
     COMMAND,
     CURRENTS,
     SENSOR,
@@ -18,6 +9,14 @@ from .recordings import (
     lockstep_data,
     write_lockstep_bag,
 )
+from nav_msgs.msg import Odometry
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Float64MultiArray, MultiArrayDimension
+
+from maglev_ros.bags import BagReader, parse_channel
+from maglev_ros.bags.extraction import read_topics
+from maglev_ros.bags.typestore import cdr_deserializer, jazzy_typestore
+from maglev_ros.cdr.layout import cdr_layout, decode_columns
 
 STORE = jazzy_typestore()
 

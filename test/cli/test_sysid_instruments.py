@@ -5,10 +5,9 @@ import json
 import numpy as np
 import pytest
 from scipy.io import savemat
+from sysid.closed_loop import THETA_CL, simulate_loop
 
 from maglev_ros.cli.sysid import main
-
-from .closed_loop import THETA_CL, simulate_loop
 
 
 @pytest.fixture(scope='module')

@@ -1,4 +1,4 @@
-"""The one polling helper of the node tests: wait until a condition holds, or fail."""
+"""The one polling helper of the tests: wait until a condition holds, or fail."""
 
 from __future__ import annotations
 
@@ -9,9 +9,12 @@ TIMEOUT = 30.0  # s, generous: the machine is shared
 
 
 def wait_for(
-    predicate: Callable[[], object], timeout: float = TIMEOUT, what: str = 'condition'
+    predicate: Callable[[], object],
+    timeout: float = TIMEOUT,
+    what: str = 'condition',
+    period: float = 0.005,
 ) -> None:
-    """Poll ``predicate`` every 5 ms until it is true; fail naming ``what`` after ``timeout`` s.
+    """Poll ``predicate`` every ``period`` s until true; fail naming ``what`` after ``timeout`` s.
 
     Parameters
     ----------
@@ -21,8 +24,10 @@ def wait_for(
         s to wait at most.
     what : str
         What is waited for, for the failure message.
+    period : float
+        s between polls (longer for a predicate that runs a command).
     """
     deadline = time.monotonic() + timeout
     while not predicate():
         assert time.monotonic() < deadline, f'timed out waiting for {what}'
-        time.sleep(0.005)
+        time.sleep(period)

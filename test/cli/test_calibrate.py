@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import pytest
+from greybox.plant import write_bag
 
 from maglev_ros.cli.calibrate import main
 from maglev_ros.physics import load_parameters
-
-from .plant import write_bag
 
 
 @pytest.fixture(scope='module')
@@ -121,8 +120,8 @@ def test_magnet_from_the_recorder_metadata(tmp_path, capsys):
 
 def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
     """The ROS-free loop's levitation record (1.2 s) as the recorder writes it, end to end."""
-    from .levitation import TRUTH, levitation_record
-    from .plant import write_record
+    from greybox.levitation import TRUTH, levitation_record
+    from greybox.plant import write_record
 
     exp, _ = levitation_record()
     n = 6000

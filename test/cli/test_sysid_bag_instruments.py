@@ -4,10 +4,9 @@ import json
 from dataclasses import replace
 
 import numpy as np
+from bags.recordings import COMMAND, SENSOR, lockstep_data, write_lockstep_bag
 
 from maglev_ros.cli.sysid import main
-
-from .recordings import COMMAND, SENSOR, lockstep_data, write_lockstep_bag
 
 THETA_CL = np.array([-1.5, 0.7, 0.5, 0.2])  # ARX 2 2 1: a1 a2 b1 b2
 

@@ -1,0 +1,137 @@
+"""The board driver's configuration, ROS-free: validated settings and their defaults.
+
+The driver node's parameter table checks each parameter on its own;
+:func:`driver_config` then applies the rules that join several (frames per
+sensor, the scaling, the back-off bounds, the firmware's default baud rate)
+and builds the frozen :class:`DriverConfig`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+from ..topics import sensor_frame
+from .scaling import CurrentScaling
+
+__all__ = [
+    'DEFAULT_BAUD',
+    'MAX_READ_INTERVAL_S',
+    'DriverConfig',
+    'DriverConfigError',
+    'driver_config',
+]
+
+DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
+MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
+
+
+class DriverConfigError(ValueError):
+    """Driver settings do not fit together (the message names the value)."""
+
+
+@dataclass(frozen=True)
+class DriverConfig:
+    """Validated driver parameters (meanings: the driver node's module docstring).
+
+    Attributes
+    ----------
+    port : str
+        Serial device path.
+    firmware : str
+        ``'v2x'`` or ``'v4x'``.
+    baudrate : int
+        Baud rate.
+    n_sensors : int
+        Sensors per record or line.
+    sensor_frames : tuple of str
+        Frame id of each sensor's field messages.
+    scaling : CurrentScaling
+        Current to PWM map (V2x).
+    current_limit : float
+        Largest commanded current magnitude in A.
+    command_timeout : float
+        s without a valid command before zero currents are sent.
+    start_enabled : bool
+        Enable state at start-up.
+    reconnect_min_delay, reconnect_max_delay : float
+        Back-off bounds in s for reopening the port.
+    diagnostics_period : float
+        s between diagnostics messages.
+    confirm_records : bool
+        Hold the newest V2x record of each read until the next record
+        confirms its boundary (see ``hardware.v2x_stream``).
+    read_interval : float
+        Shortest time in s between reads of the port (0: read as soon as data
+        arrives, every burst).
+    """
+
+    port: str
+    firmware: str
+    baudrate: int
+    n_sensors: int
+    sensor_frames: tuple[str, ...]
+    scaling: CurrentScaling
+    current_limit: float
+    command_timeout: float
+    start_enabled: bool
+    reconnect_min_delay: float
+    reconnect_max_delay: float
+    diagnostics_period: float
+    confirm_records: bool = True
+    read_interval: float = 0.0
+
+
+def driver_config(v: Mapping[str, object]) -> DriverConfig:
+    """Build a ``DriverConfig`` from parameter values checked one by one.
+
+    Parameters
+    ----------
+    v : mapping
+        Every driver parameter by name (the node's table: ``port``,
+        ``firmware``, ``baudrate`` (0: the firmware's default),
+        ``n_sensors``, ``sensor_frames`` (empty: the default frames),
+        ``supply_voltage``, ``coil_resistance``, ``counts_per_ampere`` (0: from
+        voltage and resistance), ``current_limit`` (0: full duty), ...).
+
+    Returns
+    -------
+    DriverConfig
+        The validated configuration.
+
+    Raises
+    ------
+    DriverConfigError
+        Frames not one per sensor, or a back-off maximum below its minimum.
+    """
+    n_sensors = v['n_sensors']
+    frames = v['sensor_frames'] or tuple(sensor_frame(k) for k in range(n_sensors))
+    if len(frames) != n_sensors:
+        raise DriverConfigError(
+            f'sensor_frames must name {n_sensors} frames (n_sensors), got {list(frames)}'
+        )
+    if v['counts_per_ampere']:
+        scaling = CurrentScaling(v['counts_per_ampere'])
+    else:
+        scaling = CurrentScaling.from_supply(v['supply_voltage'], v['coil_resistance'])
+    min_delay, max_delay = v['reconnect_min_delay'], v['reconnect_max_delay']
+    if max_delay < min_delay:
+        raise DriverConfigError(
+            f'reconnect_max_delay must be >= reconnect_min_delay ({min_delay}), got {max_delay}'
+        )
+    return DriverConfig(
+        port=v['port'],
+        firmware=v['firmware'],
+        baudrate=v['baudrate'] or DEFAULT_BAUD[v['firmware']],
+        n_sensors=n_sensors,
+        sensor_frames=frames,
+        scaling=scaling,
+        current_limit=v['current_limit'] or scaling.max_current,
+        command_timeout=v['command_timeout'],
+        start_enabled=v['start_enabled'],
+        reconnect_min_delay=min_delay,
+        reconnect_max_delay=max_delay,
+        diagnostics_period=v['diagnostics_period'],
+        confirm_records=v['confirm_records'],
+        read_interval=v['read_interval'],
+    )

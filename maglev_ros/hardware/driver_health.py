@@ -1,0 +1,103 @@
+"""What the board driver reports on ``/diagnostics``, ROS-free: counters, rates, state."""
+
+from __future__ import annotations
+
+from ..health import ERROR, OK, WARN, Health
+from .board_link import BoardLink
+from .command_guard import CommandGuard
+
+__all__ = ['COUNTERS', 'DriverHealth', 'driver_counters']
+
+COUNTERS = (  # as /diagnostics lists them
+    'records',
+    'commands_sent',
+    'commands_rejected',
+    'commands_clamped',
+    'commands_unsent',
+    'commands_ignored',
+    'timeouts',
+    'reconnects',
+    'io_errors',
+    'info_messages',
+    'resyncs',
+    'dropped_bytes',
+)
+
+
+def driver_counters(link: BoardLink, guard: CommandGuard) -> dict[str, int]:
+    """Every driver counter by name, in ``COUNTERS`` order.
+
+    Parameters
+    ----------
+    link : BoardLink
+        Records, packets sent and unsent, link events.
+    guard : CommandGuard
+        Commands rejected, clamped, ignored; timeouts.
+
+    Returns
+    -------
+    dict of str to int
+        The link's, the guard's and the stream's counters (resyncs, dropped bytes).
+    """
+    merged = link.counts | guard.counters
+    merged['resyncs'], merged['dropped_bytes'] = link.stream.resyncs, link.stream.dropped_bytes
+    return {name: merged[name] for name in COUNTERS}
+
+
+class DriverHealth:
+    """The driver's ``/diagnostics`` status, with rates over the interval between reports.
+
+    Parameters
+    ----------
+    firmware : str
+        ``'v2x'`` or ``'v4x'`` (V4x fields are after the board's baseline removal).
+    now : float
+        Monotonic time, s: the start of the first rate interval.
+    """
+
+    def __init__(self, firmware: str, now: float) -> None:
+        self.firmware = firmware
+        self._mark = (now, 0, 0)
+
+    def report(self, link: BoardLink, guard: CommandGuard, now: float) -> Health:
+        """Link state, rates and counters since the previous report.
+
+        Parameters
+        ----------
+        link : BoardLink
+            The board link.
+        guard : CommandGuard
+            The command guard.
+        now : float
+            Monotonic time, s.
+
+        Returns
+        -------
+        Health
+            ERROR while the link is not connected; WARN during a command
+            timeout (zero currents); else OK.
+        """
+        counters = driver_counters(link, guard)
+        then, records, sent = self._mark
+        span = max(now - then, 1e-9)
+        self._mark = (now, counters['records'], counters['commands_sent'])
+        if link.state != 'connected':
+            level, message = ERROR, f'board link {link.state}'
+        elif guard.timed_out:
+            level, message = WARN, 'command timeout: zero currents'
+        else:
+            level, message = OK, 'connected'
+        values = {
+            'link state': link.state,
+            'firmware': self.firmware,
+            'field kind': (
+                'raw' if self.firmware == 'v2x' else 'baseline and feedthrough removed (V4x)'
+            ),
+            'enabled': str(guard.enabled),
+            'records/s': f'{(counters["records"] - records) / span:.1f}',
+            'command rate (1/s)': f'{(counters["commands_sent"] - sent) / span:.1f}',
+            'applied PWM (counts)': ' '.join(str(int(c)) for c in link.applied),
+            'last board message': link.last_info,
+        }
+        values.update({name.replace('_', ' '): str(v) for name, v in counters.items()})
+        return Health(level, message, values)

@@ -1,0 +1,121 @@
+"""The simulator's samples as CDR messages, ROS-free.
+
+:class:`SampleEncoder` turns a :class:`~maglev_ros.physics.session.SampleBatch`
+into the serialised messages the simulator node publishes, in publishing
+order, with the compiled burst serialiser of :mod:`maglev_ros.cdr.batch`.
+Per sample: ``/clock`` when it goes with every sample (lockstep), the field of
+each published sensor, the true state, the currents (last: the currents mark
+a complete sample). ``/clock`` once per burst (real time) comes separately.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..cdr import clock_layout, currents_layout, field_layout, odometry_layout
+from ..cdr.batch import RawMessageBatch, SampleSerialiser
+from ..topics import CLOCK_TOPIC, CURRENTS_TOPIC, TRUE_STATE_TOPIC, field_topic, sensor_frame
+from .kernels import odometry_values
+from .session import SampleBatch
+
+__all__ = ['CLOCK_MODES', 'SampleEncoder']
+
+#: ``/clock``: not published, with every sample, or once per burst.
+CLOCK_MODES = ('none', 'sample', 'burst')
+
+
+class SampleEncoder:
+    """Serialise batches of simulated samples into their messages.
+
+    Parameters
+    ----------
+    sensors : sequence of int
+        Indices of the published sensors (their readings' columns 3k .. 3k+2).
+    state : bool
+        Publish the true state (Odometry).
+    clock : {'none', 'sample', 'burst'}
+        ``/clock`` with none, every sample, or each sample whose index is a
+        multiple of ``burst``.
+    burst : int, optional
+        Samples per real-time burst (``clock='burst'``).
+
+    Attributes
+    ----------
+    topics : tuple of str
+        The topic of each message of one sample, in publishing order.
+    """
+
+    def __init__(self, sensors: Sequence[int], state: bool, clock: str, burst: int = 1) -> None:
+        if clock not in CLOCK_MODES:
+            raise ValueError(f'clock must be one of {", ".join(CLOCK_MODES)}, got {clock!r}')
+        layouts = [field_layout(sensor_frame(k)) for k in sensors]
+        topics = [field_topic(k) for k in sensors]
+        if state:
+            layouts.append(odometry_layout())
+            topics.append(TRUE_STATE_TOPIC)
+        layouts.append(currents_layout())
+        topics.append(CURRENTS_TOPIC)
+        if clock == 'sample':
+            layouts.insert(0, clock_layout())
+            topics.insert(0, CLOCK_TOPIC)
+        self.topics = tuple(topics)
+        self.state = bool(state)
+        self.burst = int(burst)
+        self._clock_batch = RawMessageBatch(clock_layout()) if clock == 'burst' else None
+        self._columns = np.array([3 * k + j for k in sensors for j in range(3)])
+        self._odom_cache = np.zeros(13)
+        self._odom_state = b''  # bytes of the state _odom_cache was computed for
+        self._serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
+        # load the compiled kernel now, not in the stepping thread (up to 1 s the first time)
+        self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, self._serialiser.n_values)))
+
+    def clock_messages(self, batch: SampleBatch) -> list[bytes]:
+        """``/clock`` of a batch when it goes once per burst (else none).
+
+        Parameters
+        ----------
+        batch : SampleBatch
+            Samples stepped, at least one.
+
+        Returns
+        -------
+        list of bytes
+            One Clock message per sample index that starts a burst.
+        """
+        if self._clock_batch is None:
+            return []
+        ticks = batch.stamps_ns[batch.indices % self.burst == 0]
+        if not ticks.size:
+            return []
+        return self._clock_batch.serialise(ticks, np.empty((ticks.size, 0)))
+
+    def sample_messages(self, batch: SampleBatch) -> list[bytes]:
+        """Serialise each sample of a batch, sample after sample (``topics`` order).
+
+        The true state's 13 odometry values are recomputed only when the state
+        changed (never with the magnet fixed or absent).
+
+        Parameters
+        ----------
+        batch : SampleBatch
+            Samples stepped, at least one.
+
+        Returns
+        -------
+        list of bytes
+            ``len(batch) * len(topics)`` messages.
+        """
+        values = [batch.readings[:, self._columns]]  # each published sensor's x y z
+        if self.state:
+            odometry = np.empty((len(batch), 13))
+            for i, state in enumerate(batch.states):
+                key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
+                if key != self._odom_state:
+                    self._odom_cache = odometry_values(state)
+                    self._odom_state = key
+                odometry[i] = self._odom_cache
+            values.append(odometry)
+        values.append(batch.currents)
+        return self._serialiser.serialise(batch.stamps_ns, values)

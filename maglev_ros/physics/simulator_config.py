@@ -1,0 +1,144 @@
+"""The simulator's configuration and the physics simulator it builds, ROS-free.
+
+:class:`SimulatorConfig` holds the simulator node's validated parameters
+(the node's parameter table validates them one by one);
+:func:`make_simulator` builds the :class:`~maglev_ros.physics.Simulator`,
+with the checks that need the parameter set (sensor indices, initial state).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from .model import make_model
+from .parameters import ParameterError
+from .simulation import CoilDynamics, SensorEffects, Simulator
+
+__all__ = ['SimulatorConfig', 'SimulatorConfigError', 'make_simulator']
+
+
+class SimulatorConfigError(ValueError):
+    """A configuration does not fit its parameter set (the message names the value)."""
+
+
+@dataclass(frozen=True)
+class SimulatorConfig:
+    """Validated simulator parameters (meanings: the simulator node's parameter table).
+
+    Attributes
+    ----------
+    params : str
+        Parameter set: ``maggy_v2``, ``maggy_v4`` or a YAML path.
+    field_model, torque, kinematics : str
+        Model options.
+    sample_rate : float
+        Hz.
+    substeps : int
+        RK4 steps per sample.
+    magnet : str
+        ``free``, ``fixed`` or ``absent``.
+    initial_state : tuple of float or None
+        12 numbers, or None for the first equilibrium.
+    coil_dynamics : bool
+        Coil L/R electrics with the supply limit.
+    sensor_noise, sensor_quantization : float
+        T rms and T per LSB.
+    sensor_delay : int
+        Samples of sensor delay.
+    seed : int
+        Noise seed.
+    mode : str
+        ``realtime`` or ``lockstep``.
+    command_timeout : float
+        Lockstep: s to wait for a sample's command.
+    pace_period : float
+        Real time: s of wall time between bursts of samples.
+    start_paused : bool
+        Start paused (resume with the pause service).
+    start_subscribers : int
+        Lockstep: subscribers of ``maglev/currents`` to wait for.
+    sensors : tuple of int
+        Indices of the parameter set's sensors to publish.
+    publish_state, publish_clock : bool
+        Publish the true state and ``/clock``.
+    marker_rate : float
+        Hz of wall time (0: no markers).
+    diagnostics_period : float
+        s between diagnostics messages.
+    """
+
+    params: str
+    field_model: str
+    torque: str
+    kinematics: str
+    sample_rate: float
+    substeps: int
+    magnet: str
+    initial_state: tuple[float, ...] | None
+    coil_dynamics: bool
+    sensor_noise: float
+    sensor_quantization: float
+    sensor_delay: int
+    seed: int
+    mode: str
+    command_timeout: float
+    pace_period: float
+    start_paused: bool
+    start_subscribers: int
+    sensors: tuple[int, ...]
+    publish_state: bool
+    publish_clock: bool
+    marker_rate: float
+    diagnostics_period: float
+
+
+def make_simulator(cfg: SimulatorConfig) -> Simulator:
+    """Build the physics simulator of a configuration.
+
+    Parameters
+    ----------
+    cfg : SimulatorConfig
+        The validated parameters.
+
+    Returns
+    -------
+    Simulator
+        At its initial state.
+
+    Raises
+    ------
+    SimulatorConfigError
+        If the parameter set cannot be loaded or the options do not fit it.
+    """
+    try:
+        model = make_model(
+            cfg.params, field=cfg.field_model, torque=cfg.torque, kinematics=cfg.kinematics
+        )
+    except (ParameterError, OSError, ValueError) as err:
+        raise SimulatorConfigError(f'params {cfg.params!r}: {err}') from err
+    n_sensors = len(model.params.sensors)
+    bad = [k for k in cfg.sensors if k >= n_sensors]
+    if bad:
+        raise SimulatorConfigError(
+            f'sensors must be indices below {n_sensors} ({model.params.name} has {n_sensors} '
+            f'sensors), got {list(cfg.sensors)}'
+        )
+    coil = CoilDynamics.from_parameters(model.params) if cfg.coil_dynamics else None
+    sensor = SensorEffects(
+        noise_rms=cfg.sensor_noise,
+        quantization=cfg.sensor_quantization,
+        delay_samples=cfg.sensor_delay,
+    )
+    try:
+        return Simulator(
+            model,
+            cfg.sample_rate,
+            substeps=cfg.substeps,
+            coil=coil,
+            sensor=sensor,
+            seed=cfg.seed,
+            x0=cfg.initial_state,
+            magnet=cfg.magnet,
+        )
+    except ValueError as err:
+        raise SimulatorConfigError(f'initial_state / model: {err}') from err

@@ -1,0 +1,61 @@
+"""The driver's settings joined into one configuration, without ROS."""
+
+import pytest
+
+from maglev_ros.hardware.driver_config import DriverConfigError, driver_config
+from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE
+
+VALUES = {
+    'port': '/dev/ttyACM0',
+    'firmware': 'v2x',
+    'baudrate': 0,
+    'n_sensors': 2,
+    'sensor_frames': (),
+    'supply_voltage': BOARD_SUPPLY_VOLTAGE,
+    'coil_resistance': BOARD_COIL_RESISTANCE,
+    'counts_per_ampere': 0.0,
+    'current_limit': 0.0,
+    'command_timeout': 0.1,
+    'start_enabled': False,
+    'reconnect_min_delay': 0.2,
+    'reconnect_max_delay': 5.0,
+    'diagnostics_period': 1.0,
+    'confirm_records': True,
+    'read_interval': 0.0,
+}
+
+
+def test_defaults_fill_frames_baud_scaling_and_limit():
+    config = driver_config(VALUES)
+    assert config.sensor_frames == ('maglev_sensor_0', 'maglev_sensor_1')
+    assert config.baudrate == 9600
+    assert config.scaling.counts_per_ampere == pytest.approx(
+        4096 * BOARD_COIL_RESISTANCE / BOARD_SUPPLY_VOLTAGE
+    )
+    assert config.current_limit == pytest.approx(config.scaling.max_current)
+    assert driver_config(VALUES | {'firmware': 'v4x'}).baudrate == 115200
+
+
+def test_explicit_values_win():
+    config = driver_config(
+        VALUES
+        | {'baudrate': 57600, 'counts_per_ampere': 1000.0, 'current_limit': 0.5}
+        | {'sensor_frames': ('a', 'b')}
+    )
+    assert config.baudrate == 57600 and config.sensor_frames == ('a', 'b')
+    assert config.scaling.counts_per_ampere == 1000.0 and config.current_limit == 0.5
+
+
+@pytest.mark.parametrize(
+    ('changes', 'match'),
+    [
+        (
+            {'sensor_frames': ('a',)},
+            r"sensor_frames must name 2 frames \(n_sensors\), got \['a'\]",
+        ),
+        ({'reconnect_max_delay': 0.1}, r'reconnect_max_delay must be >= reconnect_min_delay'),
+    ],
+)
+def test_settings_that_do_not_fit_together(changes, match):
+    with pytest.raises(DriverConfigError, match=match):
+        driver_config(VALUES | changes)

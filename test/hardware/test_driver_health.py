@@ -1,0 +1,63 @@
+"""The driver's /diagnostics status, without ROS: level, rates, counters."""
+
+import numpy as np
+import pytest
+
+from maglev_ros.hardware.board_link import BoardLink
+from maglev_ros.hardware.board_stream import BoardStream
+from maglev_ros.hardware.command_guard import CommandGuard
+from maglev_ros.hardware.driver_health import COUNTERS, DriverHealth, driver_counters
+from maglev_ros.hardware.scaling import CurrentScaling
+from maglev_ros.hardware.serial_link import Backoff, SerialLink
+from maglev_ros.health import ERROR, OK, WARN
+
+
+class Log:
+    def info(self, text, **_):
+        pass
+
+    warning = error = info
+
+
+def parts(tmp_path):
+    scaling = CurrentScaling(1000.0)
+    link = BoardLink(
+        SerialLink(str(tmp_path / 'port'), 9600),
+        BoardStream('v2x', 1, scaling),
+        Backoff(0.1, 0.2),
+        Log(),
+        writes=True,
+    )
+    return link, CommandGuard(scaling, 1.0, 0.1, enabled=True)
+
+
+def test_levels_follow_link_and_timeout(tmp_path):
+    link, guard = parts(tmp_path)
+    health = DriverHealth('v2x', now=0.0)
+    report = health.report(link, guard, now=1.0)
+    assert (report.level, report.message) == (ERROR, 'board link connecting')
+    link.state = 'connected'
+    assert health.report(link, guard, now=2.0).level == OK
+    guard.command([0.1, 0.1, 0.1, 0.1], now_ns=0)
+    assert guard.check_timeout(now_ns=200_000_000) == pytest.approx(0.2)
+    report = health.report(link, guard, now=3.0)
+    assert (report.level, report.message) == (WARN, 'command timeout: zero currents')
+
+
+def test_rates_over_the_interval_and_every_counter(tmp_path):
+    link, guard = parts(tmp_path)
+    health = DriverHealth('v4x', now=10.0)
+    link.counts['records'] = 500
+    link.counts['commands_sent'] = 50
+    link.applied = np.array([1, -2, 3, -4])
+    link.last_info = 'hello'
+    values = health.report(link, guard, now=10.5).values
+    assert values['records/s'] == '1000.0' and values['command rate (1/s)'] == '100.0'
+    assert values['applied PWM (counts)'] == '1 -2 3 -4'
+    assert values['last board message'] == 'hello' and values['enabled'] == 'True'
+    assert values['field kind'] == 'baseline and feedthrough removed (V4x)'
+    assert list(values)[-len(COUNTERS) :] == [c.replace('_', ' ') for c in COUNTERS]
+    assert values['records'] == '500'
+    link.counts['records'] = 600
+    assert health.report(link, guard, now=11.5).values['records/s'] == '100.0'
+    assert list(driver_counters(link, guard)) == list(COUNTERS)
