@@ -16,19 +16,13 @@ estimator and controller (a slower cross-check).
 """
 
 from .closed_loop_fit import ClosedLoopFit, LoopSetup, calibrate_closed_loop
-from .dynamic import (
-    DynamicCalibration,
-    GreyBoxSystem,
-    LevitationExperiment,
-    LinearGreyBoxProblem,
-    calibrate_dynamic,
-    noise_level,
-)
+from .dynamic import DynamicCalibration, calibrate_dynamic
 from .errors import GreyBoxError
 from .export import parameters_to_mapping, write_parameters
 from .identifiability import Identifiability, Unidentified, analyse, correlated_pairs
 from .nonlinear import NonlinearGreyBoxProblem
 from .parameters import POSE_NAMES, ParameterSpec, ParameterVector, parameter_vector
+from .predictor import GreyBoxSystem, LevitationExperiment, LinearGreyBoxProblem, noise_level
 from .static import (
     MAGNET_STATES,
     AffineStatistics,

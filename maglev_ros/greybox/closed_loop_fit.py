@@ -33,9 +33,9 @@ import numpy as np
 from scipy.optimize import least_squares
 
 from ..physics.parameters import MaggyParameters
-from .dynamic import LevitationExperiment, noise_level
 from .errors import GreyBoxError
 from .parameters import ParameterVector
+from .predictor import LevitationExperiment, noise_level
 
 __all__ = ['LoopSetup', 'ClosedLoopFit', 'calibrate_closed_loop']
 

@@ -37,8 +37,8 @@ from numba import njit
 from ..physics.kernels import fast_dynamics, fast_measurement
 from ..physics.linearization import REDUCED_STATES
 from ..physics.model import MaggyModel
-from .dynamic import LinearGreyBoxProblem
 from .errors import GreyBoxError
+from .predictor import LinearGreyBoxProblem
 
 __all__ = ['NonlinearGreyBoxProblem', 'DIVERGED']
 

@@ -91,7 +91,7 @@ def test_nonlinear_predictor_recovers_mass_and_polarization():
 def test_nonlinear_predictor_is_the_plant_model():
     """Noise-free loop, true parameters: the predictor reproduces the plant's readings."""
     from maglev_ros.greybox import NonlinearGreyBoxProblem
-    from maglev_ros.greybox.dynamic import LinearGreyBoxProblem
+    from maglev_ros.greybox.predictor import LinearGreyBoxProblem
 
     from .levitation import excitation
 
