@@ -10,6 +10,7 @@ Usage::
 
     python benchmarks/closed_loop.py                  # everything (several minutes)
     python benchmarks/closed_loop.py --hold 10 --only hold
+    python benchmarks/closed_loop.py --only ekf ukf --ekf-hold 60 --ukf-hold 60   # 60 s holds
 """
 
 from __future__ import annotations
@@ -111,24 +112,36 @@ def faults(name, model, lin):
 
 
 def mismatch(name, model, lin, seconds):
-    """Run the plant with polarisation and mass +-10 %, from rest."""
+    """Run the plant with polarisation and mass +-10 %, from rest.
+
+    Estimators: bias states (what the test uses), none, and the magnet-strength
+    state. Printed: hold from 1 s, and the commands that hit the limit.
+    """
     p = load_parameters(name)
+    estimators = {
+        'bias states': EstimatorConfig(bias_states=True),
+        'no offset states': EstimatorConfig(),
+        'magnet strength': EstimatorConfig(magnet_strength=True),
+    }
     for fj, fm in ((1.1, 1.1), (0.9, 0.9), (1.1, 0.9), (0.9, 1.1)):
         magnet = dataclasses.replace(
             p.magnet, polarization=p.magnet.polarization * fj, mass=p.magnet.mass * fm
         )
         plant = make_model(p.replace(magnet=magnet, solenoid_radius_correction=model.correction))
-        for bias in (True, False):
-            loop = make_closed_loop(
-                model, plant=plant, linear=lin, estimator=EstimatorConfig(bias_states=bias)
-            )
+        for label, config in estimators.items():
+            loop = make_closed_loop(model, plant=plant, linear=lin, estimator=config)
             r, _ = run(loop, seconds, x0=start(loop, name, 0.0))
+            head = f'{name} J x{fj} m x{fm} {label}:'
             if r.crashed:
-                print(f'{name} J x{fj} m x{fm} bias {bias}: CRASHED {r.reason}', flush=True)
+                print(f'{head} CRASHED {r.reason}', flush=True)
                 continue
             rms, worst = r.hold(1.0)
+            extra = ''
+            if config.magnet_strength:
+                extra = f'; strength estimate {loop.estimator.strength:+.3f}'
             print(
-                f'{name} J x{fj} m x{fm} bias {bias}: RMS {um(rms)} um, max {um(worst)} um',
+                f'{head} RMS {um(rms)} um, max {um(worst)} um; '
+                f'{loop.controller.saturated} commands at the limit{extra}',
                 flush=True,
             )
 
@@ -153,6 +166,8 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--hold', type=float, default=60.0, help='KF hold, s')
     parser.add_argument('--mismatch', type=float, default=10.0, help='mismatch runs, s')
+    parser.add_argument('--ekf-hold', type=float, default=10.0, help='EKF hold (V2), s')
+    parser.add_argument('--ukf-hold', type=float, default=2.0, help='UKF hold (V2), s')
     parser.add_argument(
         '--only', nargs='+', default=['hold', 'step', 'faults', 'mismatch', 'ekf', 'ukf', 'pd']
     )
@@ -170,9 +185,9 @@ def main(argv=None) -> int:
             mismatch(name, model, lin, args.mismatch)
         if name == 'maggy_v2':
             if 'ekf' in args.only:
-                hold(name, model, lin, 10.0, 'ekf')
+                hold(name, model, lin, args.ekf_hold, 'ekf')
             if 'ukf' in args.only:
-                hold(name, model, lin, 2.0, 'ukf')
+                hold(name, model, lin, args.ukf_hold, 'ukf')
             if 'pd' in args.only:
                 pd(model, lin)
     return 0

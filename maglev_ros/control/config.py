@@ -59,6 +59,11 @@ class ControllerConfig:
     rearm_samples : int
         After a timeout the controller re-arms by itself once this many fresh
         inputs arrived in a row (integrators and pending command cleared).
+    loss_distance : float
+        LQR: an estimate farther than this from the equilibrium means the
+        magnet is lost (no recovery from there: the largest recovered offset is
+        0.6-0.8 mm): zero currents and an ERROR, latched until the controller
+        is enabled again (or reset), m.
     pd_kp : float
         PD proportional gain, A per T of horizontal field.
     pd_kd : float
@@ -90,6 +95,7 @@ class ControllerConfig:
     integral_scale: float = 2.0e-5
     input_timeout: float = 0.005
     rearm_samples: int = 10
+    loss_distance: float = 3.0e-3
     pd_kp: float = 15000.0
     pd_kd: float = 250.0
     pd_cutoff: float = 30.0
@@ -126,6 +132,7 @@ class ControllerConfig:
             'current_scale',
             'integral_scale',
             'input_timeout',
+            'loss_distance',
             'pd_cutoff',
         )
         non_negative = ('pd_kp', 'pd_kd', 'magnet_threshold')

@@ -33,6 +33,9 @@ class LqrController:
     holds it, ``A dx + B u = 0``, gives the feedforward currents ``u_ss``.
     Commands are clipped at ``current_limit``; with integral action the
     integrators hold while any coil is clipped (conditional integration).
+    An estimate farther than ``loss_distance`` from the equilibrium latches
+    *lost*: zero currents and an ERROR until :meth:`set_enabled` (True) or
+    :meth:`reset`.
     """
 
     def __init__(self, model, config: ControllerConfig | None = None, linear=None):
@@ -76,6 +79,7 @@ class LqrController:
         self.saturated = 0
         self.active = False
         self.last_command = np.zeros(self.n_inputs)
+        self.lost = ''
 
     def set_enabled(self, enabled: bool) -> None:
         """Enable or disable (disabled: zero currents, integrators cleared).
@@ -87,6 +91,8 @@ class LqrController:
         self.enabled = bool(enabled)
         if not self.enabled:
             self._e[:] = 0.0
+        else:
+            self.lost = ''  # enabling is the operator's go-ahead after a loss
 
     def set_reference(self, position=None) -> None:
         """Set-point of the magnet's centre, world frame, m (None: the equilibrium).
@@ -139,11 +145,19 @@ class LqrController:
             return self.last_command.copy()  # one missing estimate: hold (ZOH)
         was_safe = self.watchdog.safe
         armed = self.watchdog.feed(t)
-        if not armed or not self.enabled:
+        if not armed or not self.enabled or self.lost:
             return self._zero()
         if was_safe:  # just re-armed: start clean
             self._e[:] = 0.0
         x = np.asarray(state, dtype=float)
+        off = float(np.linalg.norm(x[:3] - self.x_eq[:3]))
+        if not off <= self.config.loss_distance:  # also NaN
+            self.lost = (
+                f'magnet lost: estimate {1e3 * off:.1f} mm from the equilibrium '
+                f'(loss_distance {1e3 * self.config.loss_distance:.1f} mm) at t = {t:.4f} s'
+            )
+            self._e[:] = 0.0
+            return self._zero()
         i = self._c_prev if currents is None or not self._has_i else currents
         clipped, saturated = lqr_law(
             x,
@@ -175,7 +189,15 @@ class LqrController:
     def status(self) -> ControllerStatus:
         """Level and message for the diagnostics."""
         w = self.watchdog
-        if w.safe:
+        if self.lost:
+            level, message = (
+                'ERROR',
+                (
+                    f'{self.lost}; coils at zero current; put the magnet back, then enable '
+                    '(or disable and enable) to levitate again'
+                ),
+            )
+        elif w.safe:
             level, message = 'ERROR', f'input stale: {w.reason}; coils at zero current'
             if w.fresh:
                 message += f'; re-arming ({w.fresh}/{w.rearm} fresh estimates)'

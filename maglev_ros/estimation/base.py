@@ -72,6 +72,11 @@ class EstimatorStatus:
         Degrees of freedom of that sum (3 per accepted reading).
     nis_band : tuple of float
         Its two-sided 99 % chi-square band.
+    restarts : int
+        Times the filter restarted from its prior after ``lost_samples``
+        samples without an accepted reading (a lost magnet, a dead link).
+    unaccepted : int
+        Samples since a reading was last accepted.
     """
 
     samples: int
@@ -82,6 +87,8 @@ class EstimatorStatus:
     nis_window: float
     nis_dof: int
     nis_band: tuple
+    restarts: int = 0
+    unaccepted: int = 0
 
     @property
     def nis_ok(self) -> bool:
@@ -119,7 +126,10 @@ class Estimator:
         self.n_outputs = self.model.n_outputs
         self.n_inputs = self.model.n_inputs
         self.n_sensors = self.n_outputs // 3
-        self.n_states = self.n_reduced + (self.n_outputs if self.config.bias_states else 0)
+        #: index of the magnet-strength state (None without it), then the bias states
+        self.strength_index = self.n_reduced if self.config.magnet_strength else None
+        self.bias_start = self.n_reduced + (1 if self.config.magnet_strength else 0)
+        self.n_states = self.bias_start + (self.n_outputs if self.config.bias_states else 0)
         self.dt = self.config.dt
         self.r_diag = np.full(self.n_outputs, self.config.measurement_variance)
         self.gate = (
@@ -137,7 +147,8 @@ class Estimator:
         c = self.config
         std = [c.initial_position] * 3 + [c.initial_angle] * 2
         std += [c.initial_velocity] * 3 + [c.initial_rate] * 2
-        std += [c.initial_bias] * (self.n_states - self.n_reduced)
+        std += [c.initial_strength] * (self.bias_start - self.n_reduced)
+        std += [c.initial_bias] * (self.n_states - self.bias_start)
         return np.diag(np.square(std))
 
     def disturbance_matrix(self) -> np.ndarray:
@@ -162,7 +173,7 @@ class Estimator:
         )
 
     def process_noise(self, gd: np.ndarray) -> np.ndarray:
-        """Q from the discretised disturbance matrix ``gd`` (10, 9), bias walk added.
+        """Q from the discretised disturbance matrix ``gd`` (10, 9), strength and bias walks added.
 
         Parameters
         ----------
@@ -172,7 +183,9 @@ class Estimator:
         q = np.zeros((self.n_states, self.n_states))
         std = self.disturbance_std()
         q[: self.n_reduced, : self.n_reduced] = (gd * std**2) @ gd.T
-        for i in range(self.n_reduced, self.n_states):
+        for i in range(self.n_reduced, self.bias_start):
+            q[i, i] = self.config.strength_walk**2
+        for i in range(self.bias_start, self.n_states):
             q[i, i] = self.config.bias_walk**2
         return 0.5 * (q + q.T)
 
@@ -202,6 +215,8 @@ class Estimator:
         self.samples = 0
         self.rejected = np.zeros(self.n_sensors, dtype=np.int64)
         self.missing = np.zeros(self.n_sensors, dtype=np.int64)
+        self.restarts = 0
+        self.unaccepted = 0
         w = self.config.nis_window
         self._nis_ring = np.zeros(w)
         self._dof_ring = np.zeros(w, dtype=np.int64)
@@ -273,7 +288,18 @@ class Estimator:
         self.last_accepted, self.last_nis_sensor = accepted, nis_sensor
         self._prev_currents = currents
         self.samples += 1
+        self.unaccepted = 0 if dof else self.unaccepted + 1
+        if self.unaccepted >= self.config.lost_samples:
+            self._restart()
         return self._out_x
+
+    def _restart(self) -> None:
+        """Start again from the prior at the equilibrium (counts kept; see ``lost_samples``)."""
+        self._set_state(np.zeros(self.n_states), self.initial_covariance())
+        self._out_x = self.x_eq.copy()
+        self._out_p = self.covariance
+        self.restarts += 1
+        self.unaccepted = 0
 
     def _sample(self, y, held, across, available, delayed):
         """Update with ``y`` (currents ``held``), predict with ``across``, publish.
@@ -338,4 +364,6 @@ class Estimator:
             nis_window=float(self._nis_ring[:filled].sum()),
             nis_dof=dof,
             nis_band=self._band_cache[dof],
+            restarts=self.restarts,
+            unaccepted=self.unaccepted,
         )

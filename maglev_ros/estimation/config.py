@@ -44,6 +44,14 @@ class EstimatorConfig:
         Unmodelled force per mass, m/s^2 rms held over each sample.
     angular_acceleration_noise : float
         Unmodelled torque per inertia, rad/s^2 rms held over each sample.
+        The default (50) covers the tilt mode's uncertainty: its stiffness
+        (the base magnets' torque per inertia, 8,000 s^-2 on V2, 24,000 s^-2
+        on V4) scales with the magnet's polarisation and inertia, and with a
+        trusted model (0.5) the KF left that mode nearly undamped (its poles
+        0.2 s^-1 inside the stability limit), so a 10 % weaker tilt mode made
+        the loop unstable (V2, lost at 6 s); with 50 the loop's slowest
+        oscillation decays at 4.4-8.1 s^-1 for +-10 % polarisation and mass
+        (``benchmarks/mismatch_margins.py``) and the nominal hold is unchanged.
     bias_states : bool
         Estimate a constant offset per sensor axis (9 random-walk states);
         False assumes a calibrated board (offsets removed by the driver).
@@ -51,6 +59,18 @@ class EstimatorConfig:
         Random walk of the bias states, T rms per sample.
     initial_bias : float
         Initial standard deviation of the bias states, T.
+    magnet_strength : bool
+        Estimate the levitating magnet's strength (its polarisation relative to
+        the parameter set's) as one state ``s``: the magnet's own field at the
+        sensors is ``(1 + s)`` times the model's, ``y = y_base + (1 + s)
+        y_magnet(x) + D u`` (bilinear: the update uses its Jacobian). KF only.
+        One state, not nine: with 5 position and tilt states it is observable
+        from the readings alone, where nine bias states let a static tilt pass
+        for a sensor offset.
+    initial_strength : float
+        Initial standard deviation of ``s`` (relative).
+    strength_walk : float
+        Random walk of ``s``, relative, rms per sample.
     gate_probability : float
         Per-sensor chi-square gate: a sensor's 3-axis innovation is rejected
         when its NIS exceeds the chi-square(3) quantile of this probability.
@@ -60,6 +80,13 @@ class EstimatorConfig:
         it changes (the firmware resets a sensor after 20 identical samples).
     nis_window : int
         Samples in the diagnostics' NIS window.
+    lost_samples : int
+        No reading accepted (all missing, frozen or gated out) for this many
+        samples in a row: the estimate is worthless (the x and y modes grow
+        e-fold in 18-34 ms) and its covariance would grow without bound (after
+        a lost magnet the gate rejects every reading), so the filter restarts
+        from its prior at the equilibrium and counts a restart (default 500:
+        0.1 s at 5 kHz).
     initial_position, initial_angle, initial_velocity, initial_rate : float
         Initial standard deviations: m, rad, m/s, rad/s.
     """
@@ -71,13 +98,17 @@ class EstimatorConfig:
     quantization: float = 0.098e-3
     current_noise: float = 0.003
     acceleration_noise: float = 0.1
-    angular_acceleration_noise: float = 0.5
+    angular_acceleration_noise: float = 50.0
     bias_states: bool = False
     bias_walk: float = 1.0e-8
     initial_bias: float = 1.0e-3
+    magnet_strength: bool = False
+    initial_strength: float = 0.2
+    strength_walk: float = 1.0e-7
     gate_probability: float = 0.99999
     freeze_samples: int = 4
     nis_window: int = 500
+    lost_samples: int = 500
     initial_position: float = 1.0e-3
     initial_angle: float = 0.03
     initial_velocity: float = 0.02
@@ -90,11 +121,16 @@ class EstimatorConfig:
             )
         if self.sensor_delay not in (0, 1) or isinstance(self.sensor_delay, bool):
             raise EstimatorConfigError(f'sensor_delay must be 0 or 1, got {self.sensor_delay!r}')
-        if not isinstance(self.bias_states, bool):
+        for name in ('bias_states', 'magnet_strength'):
+            if not isinstance(getattr(self, name), bool):
+                raise EstimatorConfigError(
+                    f'{name} must be true or false, got {getattr(self, name)!r}'
+                )
+        if self.magnet_strength and self.filter != 'kf':
             raise EstimatorConfigError(
-                f'bias_states must be true or false, got {self.bias_states!r}'
+                f'magnet_strength is supported by the kf filter only, got filter {self.filter!r}'
             )
-        for name in ('freeze_samples', 'nis_window'):
+        for name in ('freeze_samples', 'nis_window', 'lost_samples'):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 2:
                 raise EstimatorConfigError(f'{name} must be an integer >= 2, got {value!r}')
@@ -106,6 +142,7 @@ class EstimatorConfig:
             'initial_velocity',
             'initial_rate',
             'initial_bias',
+            'initial_strength',
         )
         non_negative = (
             'quantization',
@@ -113,6 +150,7 @@ class EstimatorConfig:
             'acceleration_noise',
             'angular_acceleration_noise',
             'bias_walk',
+            'strength_walk',
         )
         for name in positive + non_negative:
             value = getattr(self, name)

@@ -21,7 +21,14 @@ class KalmanEstimator(Estimator):
 
     The readings enter as ``z = y - y_eq - D (i - u_eq)``, so the update is the
     plain ``z = H x`` form of filterpy's ``KalmanFilter`` (H = C, or [C I] with
-    bias states) and the two agree to round-off on the same data. Process
+    bias states) and the two agree to round-off on the same data.
+
+    With ``magnet_strength`` a state ``s`` scales the magnet's own field,
+    ``y = y_eq + (1 + s) (g + C dx) - g + D (i - u_eq)`` with ``g`` the
+    magnet's field at the sensors at the equilibrium (the base magnets' and
+    the coils' field do not depend on the magnet). Each update uses this
+    model's Jacobian at the prior, ``[(1 + s) C, g + C dx]`` (an extended
+    update of that one bilinear term; the prediction stays linear). Process
     noise: ``Q = Gd diag(s^2) Gd'`` with ``Gd`` the ZOH input matrix of the coil
     currents and of unit accelerations (see :meth:`Estimator.disturbance_matrix`).
 
@@ -47,8 +54,14 @@ class KalmanEstimator(Estimator):
         B[:nr] = gd[:, : self.n_inputs]
         H = np.zeros((self.n_outputs, n))
         H[:, :nr] = lin.C
-        if n > nr:
-            H[:, nr:] = np.eye(self.n_outputs)
+        if n > self.bias_start:
+            H[:, self.bias_start :] = np.eye(self.n_outputs)
+        self.C = np.ascontiguousarray(lin.C, dtype=float)
+        self.magnet_field = self.y_eq - self.model.measurement(
+            self.x_eq, self.u_eq, with_magnet=False
+        )
+        if self.strength_index is not None:
+            H[:, self.strength_index] = self.magnet_field
         self.F = np.ascontiguousarray(F)
         self.B = np.ascontiguousarray(B)
         self.H = np.ascontiguousarray(H)
@@ -83,8 +96,29 @@ class KalmanEstimator(Estimator):
         """
         return y - self.y_eq - self.D @ (currents - self.u_eq)
 
+    def _linearize_strength(self) -> np.ndarray:
+        """Set H to the strength model's Jacobian at the prior; return its y_eq term, T.
+
+        The kernel's residual ``y - y_eq' - D du - H x`` then equals
+        ``y - h(x)`` of the bilinear model: ``y_eq' = y_eq - s C dx``.
+        """
+        if self.strength_index is None:
+            return self.y_eq
+        nr, j = self.n_reduced, self.strength_index
+        s = self._x[j]
+        cdx = self.C @ self._x[:nr]
+        self.H[:, :nr] = (1.0 + s) * self.C
+        self.H[:, j] = self.magnet_field + cdx
+        return self.y_eq - s * cdx
+
+    @property
+    def strength(self) -> float:
+        """Estimated magnet strength ``s`` (relative; 0 without the state)."""
+        return 0.0 if self.strength_index is None else float(self._x[self.strength_index])
+
     def _update(self, y, currents, available):
-        z = self.measurement(y, currents)
+        y_eq = self._linearize_strength()
+        z = y - y_eq - self.D @ (currents - self.u_eq)
         nu = z - self.H @ self._x
         nu = np.where(np.isfinite(nu), nu, 0.0)
         x, P, accepted, nis_sensor, nis, dof = gated_update(
@@ -95,6 +129,7 @@ class KalmanEstimator(Estimator):
 
     def _sample(self, y, held, across, available, delayed):
         """Run the whole sample in one compiled call (:func:`kernels.kf_sample`)."""
+        y_eq = self._linearize_strength()
         x_out, p_out, self._x, self._P, accepted, nis_sensor, nis, dof = kf_sample(
             self._x,
             self._P,
@@ -106,7 +141,7 @@ class KalmanEstimator(Estimator):
             self.B,
             self.H,
             self.D,
-            self.y_eq,
+            y_eq,
             self.u_eq,
             self.r_diag,
             self.Q,

@@ -110,3 +110,27 @@ def test_bad_settings_name_the_value_and_the_file(tmp_path):
     with pytest.raises(ControllerConfigError, match=r'c\.yaml: unknown controller setting'):
         load_controller_config(bad)
     assert load_controller_config(CONFIG, current_limit=0.8).current_limit == 0.8
+
+
+def test_lqr_latches_a_lost_magnet_until_enabled(v2, v2_linear):
+    ctrl = LqrController(v2, ControllerConfig(), v2_linear)
+    x = v2_linear.x_eq.copy()
+    x[1] += 1e-5
+    assert np.any(ctrl.command(0.0, x, np.zeros(4)) != 0)
+    far = x.copy()
+    far[1] += 3.5e-3  # beyond loss_distance (3 mm): no controller brings it back
+    assert np.array_equal(ctrl.command(2e-4, far, np.zeros(4)), np.zeros(4))
+    status = ctrl.status()
+    assert status.level == 'ERROR' and not status.active
+    assert 'magnet lost: estimate 3.5 mm from the equilibrium' in status.message
+    assert 'coils at zero current' in status.message and 'enable' in status.message
+    # latched: a good estimate alone does not re-arm it
+    for k in range(20):
+        assert np.array_equal(ctrl.command(4e-4 + 2e-4 * k, x, np.zeros(4)), np.zeros(4))
+    assert ctrl.status().level == 'ERROR'
+    nan = np.full(12, np.nan)
+    ctrl.set_enabled(True)  # the operator's go-ahead
+    assert np.any(ctrl.command(0.005, x, np.zeros(4)) != 0) and ctrl.status().level == 'OK'
+    assert np.array_equal(ctrl.command(0.0052, nan, np.zeros(4)), np.zeros(4))  # NaN: lost
+    ctrl.reset()
+    assert np.any(ctrl.command(0.0054, x, np.zeros(4)) != 0)

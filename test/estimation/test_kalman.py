@@ -1,5 +1,7 @@
 """The linear KF against filterpy, gating, freezes, missing samples, covariance health."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 from filterpy.kalman import KalmanFilter
@@ -11,6 +13,7 @@ from maglev_ros.estimation import (
     KalmanEstimator,
     make_estimator,
 )
+from maglev_ros.physics import CoilDynamics, SensorEffects, Simulator, make_model
 
 
 def _filterpy_twin(est):
@@ -135,3 +138,52 @@ def test_bad_settings_name_the_value(changes, match):
         EstimatorConfig(**changes)
     with pytest.raises(ValueError, match='unknown estimator setting'):
         EstimatorConfig.from_mapping({'sensor_nois': 1e-4})
+
+
+@pytest.mark.parametrize('strength', [1.1, 0.9])
+def test_the_magnet_strength_state_finds_a_polarisation_error(v2, v2_linear, strength):
+    # the plant's magnet is stronger or weaker (and heavier or lighter: same equilibrium)
+    p = v2.params
+    magnet = dataclasses.replace(
+        p.magnet, polarization=p.magnet.polarization * strength, mass=p.magnet.mass * strength
+    )
+    plant = make_model(p.replace(magnet=magnet, solenoid_radius_correction=v2.correction))
+    sim = Simulator(
+        plant,
+        5000.0,
+        coil=CoilDynamics.from_parameters(plant.params),
+        sensor=SensorEffects(1e-4, 0.098e-3, 0.0, 1),
+        seed=3,
+    )
+    x0 = v2_linear.x_eq.copy()
+    x0[:3] += [2e-5, -1e-5, 3e-5]
+    rng = np.random.default_rng(4)
+    y = sim.reset(x0)
+    est = KalmanEstimator(v2, EstimatorConfig(magnet_strength=True), linear=v2_linear)
+    errors = []
+    for _ in range(750):
+        errors.append(est.step(y, sim.currents)[:3] - sim.state[:3])
+        y = sim.step(rng.normal(scale=0.05, size=4))
+    assert not sim.crashed
+    assert abs(est.strength - (strength - 1.0)) < 0.005, est.strength
+    late = np.array(errors[375:])
+    assert np.all(np.sqrt(np.mean(late**2, axis=0)) < 2.5 * est.state_std()[:3])
+    with pytest.raises(EstimatorConfigError, match='magnet_strength is supported by the kf'):
+        EstimatorConfig(filter='ekf', magnet_strength=True)
+
+
+@pytest.mark.parametrize('kind', ['kf', 'ekf'])
+def test_a_lost_magnet_restarts_the_filter_instead_of_diverging(v2, v2_linear, kind):
+    # the magnet lies on the base: every reading is far from the prediction and gated out
+    lying = v2_linear.x_eq.copy()
+    lying[[0, 1, 2, 3]] = [2e-3, 19e-3, 25e-3, -0.47]
+    rng = np.random.default_rng(0)
+    est = make_estimator(v2, EstimatorConfig(filter=kind, lost_samples=100), linear=v2_linear)
+    for _ in range(1000):  # 0.2 s: predict-only, P grows e-fold every ~17 ms
+        y = v2.measurement(lying, np.zeros(4)) + rng.normal(scale=1e-4, size=9)
+        est.step(y, np.zeros(4))
+        assert np.all(np.isfinite(est.state_covariance))
+    status = est.status()
+    assert status.restarts == 10 and status.unaccepted == 0
+    assert sum(status.rejected) == 3000
+    assert np.allclose(est.state_std()[:3], 1e-3)  # bounded: restarted from the prior

@@ -14,12 +14,18 @@ from functools import lru_cache
 import numpy as np
 
 from maglev_ros.control.closed_loop import make_closed_loop
+from maglev_ros.estimation import EstimatorConfig
 from maglev_ros.excitation.signals import random_binary
 from maglev_ros.greybox import LevitationExperiment, parameter_vector
 from maglev_ros.physics import load_parameters
 
 TS = 2e-4  # s (5 kHz, the controller's default rate)
 TRUTH = {'magnet.mass': 0.077 * 1.04, 'magnet.polarization': -1.0 * 0.97}
+#: The loop's estimator, part of the experiment: these records and the fits' bounds were
+#: made with the tilt noise of 0.5 rad/s^2 (the estimator's default until the model
+#: mismatch fix of issue 9 raised it to 50; the output-error fit's 3 % bound on 0.4 s is
+#: sensitive to the loop's noise-driven motion: 3.2 % on the mass with 50)
+RECORD_ESTIMATOR = EstimatorConfig(angular_acceleration_noise=0.5)
 
 
 @lru_cache(maxsize=1)
@@ -43,7 +49,9 @@ def excitation(duration: float, amplitude: float = 0.05, seed: int = 0) -> np.nd
 @lru_cache(maxsize=2)
 def levitation_record(duration: float = 2.0, seed: int = 1):
     """Run the loop; return (LevitationExperiment, LoopResult)."""
-    loop = make_closed_loop(nominal_vector().base, plant=plant_parameters(), seed=seed)
+    loop = make_closed_loop(
+        nominal_vector().base, plant=plant_parameters(), seed=seed, estimator=RECORD_ESTIMATOR
+    )
     result = loop.run(duration, excitation=excitation(duration, seed=10 * seed))
     assert not result.crashed, result.reason
     exp = LevitationExperiment(result.currents, result.readings, 'simulated levitation', TS)

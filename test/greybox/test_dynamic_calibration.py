@@ -121,10 +121,10 @@ def test_nonlinear_closed_loop_simulation_recovers_mass_and_polarization():
     """The nlgreyest-like form: the full plant inside the known loop, 0.4 s of data."""
     from maglev_ros.greybox import LoopSetup, calibrate_closed_loop
 
-    from .levitation import excitation
+    from .levitation import RECORD_ESTIMATOR, excitation
 
     exp, _ = levitation_record(0.4)
-    setup = LoopSetup(nominal_vector().base, excitation(0.4, seed=10))
+    setup = LoopSetup(nominal_vector().base, excitation(0.4, seed=10), estimator=RECORD_ESTIMATOR)
     fit = calibrate_closed_loop(nominal_vector().with_free(FREE), exp, setup)
     # output error with the noise-driven motion left in the residual, on a loop
     # whose trajectory itself moves with rounding (BLAS threads change the
