@@ -22,6 +22,7 @@ from collections import Counter
 from pathlib import Path
 
 import pytest
+import yaml
 
 from maglev_ros.bags import BagReader
 
@@ -125,3 +126,18 @@ def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
         ['/maglev/sensor_0/field', '/maglev/currents', '/maglev/currents/command'],
         'maglev_driver',
     )
+
+
+def test_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
+    launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml')
+    launch.wait_for(r'\[maglev_simulator\]: .* realtime at', START_TIMEOUT)
+    launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
+    echo = ros2.run('topic', 'echo', '--once', '/maglev/state/estimate', timeout=START_TIMEOUT)
+    assert echo.returncode == 0 and 'pose' in echo.stdout, echo.stdout + echo.stderr
+    time.sleep(RUN_S)
+    state = ros2.run('topic', 'echo', '--once', '/maglev/state/true', timeout=START_TIMEOUT)
+    assert state.returncode == 0, state.stdout + state.stderr
+    position = yaml.safe_load(state.stdout.split('---')[0])['pose']['pose']['position']
+    assert abs(position['x']) < 1e-3 and abs(position['y']) < 1e-3, position  # still held
+    assert position['z'] > 0.03, position
+    stop_like_terminal(launch)
