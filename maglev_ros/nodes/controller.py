@@ -11,14 +11,20 @@ the raw fields; every setting of
 One command per sample (the lockstep contract of
 :mod:`maglev_ros.physics.session`):
 
-* LQR: one command per estimate, computed with the estimate and the measured
-  currents of the same stamp (``maglev/currents``, which the simulator or the
-  driver publish before the estimator has the sample). A sample whose
-  estimate never came (noticed when the next sample's currents arrive) gets
-  the core's answer to a missing estimate: the last command held, and once no
-  estimate came for ``input_timeout`` s (of sample stamps) zero currents;
-* PD: one command per sample, when its ``maglev/currents`` arrives (the
-  fields of the same stamp first).
+* LQR: a sample is its ``maglev/currents`` (published by the simulator or
+  the driver) and its estimate (``maglev/state/estimate``, same stamp); they
+  are handled in any order. The command is computed once both arrived, with
+  the estimate and the measured currents of that stamp. A sample whose
+  estimate never comes -- an estimate of a later stamp arrived, or currents
+  more than ``input_timeout`` s (of stamps) later did -- gets the core's
+  answer to a missing estimate: the last command held, and once no estimate
+  came for ``input_timeout`` zero currents;
+* PD: a sample is the field of every sensor and the currents, handled in any
+  order; one command once it is complete (or a part is known lost, as for
+  the estimator, :mod:`maglev_ros.nodes.sample_assembly`).
+
+Samples are answered in stamp order, exactly one command each, never
+depending on the order the callbacks ran in.
 
 The lockstep simulator applies the command of sample k over k -> k+1; the
 board applies it about one sample later, and the LQR's ``command_delay: 1``
@@ -36,7 +42,10 @@ board driver's own ``command_timeout`` zeroes the coils, and the
 diagnostics (every ``diagnostics_period`` s of the node's clock) report
 ERROR. ``start_enabled`` (default true) and the service
 ``maglev/controller/enable`` (std_srvs/SetBool) switch the controller; while
-disabled it commands zero currents. ``maglev/reference``
+disabled it commands zero currents. The response says from which command
+on (numbered from 0, the diagnostics' ``commands``) the new state holds:
+after a disable that command and all later ones are zero, including one held
+back by ``delay_commands``. ``maglev/reference``
 (geometry_msgs/PoseStamped, frame ``maglev_base`` or empty) moves the
 set-point (LQR); a bad one is refused with an error log.
 """
@@ -60,6 +69,7 @@ from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, c
 from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.nodes.sample_assembly import SampleAssembler
 from maglev_ros.nodes.state_messages import odometry_state
 from maglev_ros.topics import (
     BASE_FRAME,
@@ -242,13 +252,14 @@ class ControllerNode(Node):
         self.n_sensors = model.n_outputs // 3
         self.commands = 0  # commands published
         self.last_command = np.zeros(model.n_inputs)
-        self._currents: dict[int, np.ndarray] = {}  # stamp -> measured currents
-        self._fields: dict[int, np.ndarray] = {}  # PD: stamp -> readings
-        self._prev_tick: int | None = None  # stamp of the previous sample
-        self._last_estimate: int | None = None  # stamp of the last estimate used
-        self._answered: int = -1  # stamp of the last sample a command was published for
+        # the parts of each sample (LQR: currents, estimate; PD: each field, currents),
+        # released in stamp order whatever order the callbacks run in
+        self._currents_part = 0 if self.lqr else self.n_sensors
+        self._samples = SampleAssembler(
+            2 if self.lqr else self.n_sensors + 1, round(cfg.controller.input_timeout * 1e9)
+        )
         self._last_level = 'OK'
-        self._last_input_ns: int | None = None  # node clock at the last input
+        self._last_sample_ns: int | None = None  # node clock at the last sample message
         self._pending = np.zeros(model.n_inputs)  # delay_commands: computed, not yet sent
         self._msg = Float64MultiArray()
         self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
@@ -272,8 +283,7 @@ class ControllerNode(Node):
         )
 
     # ------------------------------------------------------------------ inputs
-    def _publish(self, stamp: int, command: np.ndarray) -> None:
-        self._answered = stamp
+    def _publish(self, command: np.ndarray) -> None:
         if self.config.delay_commands:
             command, self._pending = self._pending, command
         self.last_command = command
@@ -287,50 +297,51 @@ class ControllerNode(Node):
                 self.get_logger().warning(status.message)
             self.publish_diagnostics()  # an ERROR (stale input) is reported at once
 
-    def _on_currents(self, msg: JointState) -> None:
-        stamp = _stamp_ns(msg)
-        currents = np.asarray(msg.effort, dtype=float)
+    def _valid_currents(self, msg: JointState):
+        currents = np.array(msg.effort, dtype=float)
         if currents.shape != (self.controller.n_inputs,) or not np.all(np.isfinite(currents)):
             self.get_logger().error(
                 f'{CURRENTS_TOPIC}: expected {self.controller.n_inputs} finite currents, '
                 f'got {list(msg.effort)}',
                 throttle_duration_sec=1.0,
             )
-            return
-        self._currents[stamp] = currents
-        if len(self._currents) > 64:
-            for old in sorted(self._currents)[:-32]:
-                del self._currents[old]
-        if self.lqr:
-            prev = self._prev_tick
-            if prev is not None and self._answered < prev:
-                # the previous sample's estimate never came: the core's missing-input answer
-                self._publish(prev, self.controller.command(prev * 1e-9))
-        else:
-            y = self._fields.pop(stamp, None)
-            for old in [s for s in self._fields if s < stamp]:
-                del self._fields[old]
-            self._last_input_ns = self.get_clock().now().nanoseconds
-            self._publish(stamp, self.controller.command(stamp * 1e-9, y, currents))
-        self._prev_tick = stamp
+            return None
+        return currents
+
+    def _on_currents(self, msg: JointState) -> None:
+        self._last_sample_ns = self.get_clock().now().nanoseconds
+        currents = self._valid_currents(msg)
+        if currents is not None:
+            self._answer(self._samples.add(self._currents_part, _stamp_ns(msg), currents))
 
     def _on_estimate(self, msg: Odometry) -> None:
-        stamp = _stamp_ns(msg)
-        if stamp <= self._answered:
-            return  # late: that sample was answered already
-        x = odometry_state(msg)
-        currents = self._currents.get(stamp)
-        self._last_estimate = stamp
-        self._last_input_ns = self.get_clock().now().nanoseconds
-        self._publish(stamp, self.controller.command(stamp * 1e-9, x, currents))
+        self._answer(self._samples.add(1, _stamp_ns(msg), odometry_state(msg)))
 
     def _on_field(self, k: int, msg: MagneticField) -> None:
-        stamp = _stamp_ns(msg)
-        row = self._fields.get(stamp)
-        if row is None:
-            row = self._fields[stamp] = np.full(3 * self.n_sensors, np.nan)
         f = msg.magnetic_field
-        row[3 * k : 3 * k + 3] = f.x, f.y, f.z
+        self._answer(self._samples.add(k, _stamp_ns(msg), (f.x, f.y, f.z)))
+
+    def _answer(self, samples) -> None:
+        """Publish one command per released sample, in stamp order."""
+        for sample in samples:
+            t = sample.stamp * 1e-9
+            parts = sample.parts
+            if self.lqr:
+                currents, x = parts
+                if x is None:  # no estimate for this sample: the core's missing-input answer
+                    command = self.controller.command(t)
+                else:
+                    command = self.controller.command(t, x, currents)
+            else:
+                fields_, currents = parts[:-1], parts[-1]
+                y = None
+                if any(f is not None for f in fields_):
+                    y = np.full(3 * self.n_sensors, np.nan)
+                    for k, f in enumerate(fields_):
+                        if f is not None:
+                            y[3 * k : 3 * k + 3] = f
+                command = self.controller.command(t, y, currents)
+            self._publish(command)
 
     def _on_reference(self, msg: PoseStamped) -> None:
         if not self.lqr:
@@ -351,9 +362,23 @@ class ControllerNode(Node):
         self.get_logger().info(f'reference {p.x:.6g} {p.y:.6g} {p.z:.6g} m')
 
     def _on_enable(self, request, response):
-        self.controller.set_enabled(request.data)
+        """Switch the controller; the response names the first command it governs.
+
+        Contract: commands are numbered from 0 in publishing order (the
+        diagnostics' ``commands`` count). A response ``... from command N on``
+        means that command N and every later one follow the new state: all
+        zero after a disable, including a command computed before it and held
+        back by ``delay_commands`` (dropped). Commands before N may still be
+        in flight, and a lockstep simulator may still apply commands it
+        queued before N.
+        """
+        enable = bool(request.data)
+        self.controller.set_enabled(enable)
+        if not enable:
+            self._pending = np.zeros(self.controller.n_inputs)  # computed while enabled
         response.success = True
-        response.message = 'enabled' if request.data else 'disabled: coils at zero current'
+        state = 'enabled' if enable else 'disabled: zero currents'
+        response.message = f'{state} from command {self.commands} on'
         self.get_logger().info(f'controller {response.message}')
         self.publish_diagnostics()
         return response
@@ -367,12 +392,13 @@ class ControllerNode(Node):
         level, message = _LEVELS.get(s.level, DiagnosticStatus.ERROR), s.message
         now_ns = self.get_clock().now().nanoseconds
         timeout_ns = self.config.controller.input_timeout * 1e9
-        if self._last_input_ns is not None and now_ns - self._last_input_ns > max(
+        # the graph stopped (no sample at all): no command is sent, whatever the core says
+        if self._last_sample_ns is not None and now_ns - self._last_sample_ns > max(
             timeout_ns, 2e9 * self.config.diagnostics_period
         ):
             level = DiagnosticStatus.ERROR
             message = (
-                f'no input for {(now_ns - self._last_input_ns) * 1e-9:.2f} s: no commands '
+                f'no sample for {(now_ns - self._last_sample_ns) * 1e-9:.2f} s: no commands '
                 "sent (the driver's command_timeout zeroes the coils)"
             )
         values = {

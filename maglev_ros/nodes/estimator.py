@@ -4,12 +4,18 @@ Runs the ROS-free :class:`~maglev_ros.estimation.Estimator` (``filter``: kf,
 ekf or ukf; :class:`~maglev_ros.estimation.EstimatorConfig` for the other
 parameters) on the samples of the simulator or the board driver.
 
-Sample completeness (the lockstep contract of
-:mod:`maglev_ros.physics.session`): the fields ``maglev/sensor_<k>/field``
-of a sample come first, ``maglev/currents`` is published last and marks the
-sample complete. On each currents message the estimator steps once with the
-fields of the same stamp (a sensor without a message of that stamp is
-missing: NaN, counted) and publishes ``maglev/state/estimate``
+Sample completeness: a sample (one stamp) is its ``maglev/currents`` and
+the field ``maglev/sensor_<k>/field`` of every sensor of the parameter set.
+The messages of one sample may be handled in any order (distinct topics);
+a :class:`~maglev_ros.nodes.sample_assembly.SampleAssembler` collects them
+and the estimator steps once per sample, in stamp order, once it is complete
+-- or once a sensor is known lost: that sensor's field of a later stamp
+arrived, a later sample is complete, or samples more than ``sample_wait``
+later arrived (a silent sensor). Only then is the sensor missing (NaN,
+counted), never because of callback order, so a lockstep graph estimates
+exactly as the ROS-free :class:`~maglev_ros.control.ClosedLoop`. A sample
+whose currents never came is not estimated (counted as ``lost samples``).
+Each step publishes ``maglev/state/estimate``
 (nav_msgs/Odometry, frames and angle convention of ``maglev/state/true``,
 pose and twist covariance; yaw and yaw rate are unobservable and carry
 :data:`~maglev_ros.nodes.state_messages.UNOBSERVED_VARIANCE`) stamped with
@@ -38,6 +44,7 @@ from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, c
 from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.nodes.sample_assembly import ReleasedSample, SampleAssembler
 from maglev_ros.nodes.state_messages import estimate_message
 from maglev_ros.topics import CURRENTS_TOPIC, DIAGNOSTICS_TOPIC, ESTIMATE_TOPIC, field_topic
 
@@ -70,11 +77,14 @@ class EstimatorNodeConfig:
         The filter's settings.
     diagnostics_period : float
         s of the node's clock between diagnostics.
+    sample_wait : int
+        Samples a sample waits for the field of a silent sensor.
     """
 
     params: str
     estimator: EstimatorConfig
     diagnostics_period: float
+    sample_wait: int = 10
 
 
 def _parameter_set(name: str, value: str) -> str:
@@ -153,6 +163,11 @@ PARAMETERS = ParameterTable(
         'diagnostics_period': Param(
             1.0, 's of the node clock between diagnostics', check=number(0, above=True)
         ),
+        'sample_wait': Param(
+            10,
+            'samples of later stamps a sample waits for a silent sensor before it is missing',
+            check=integer_rule(0),
+        ),
     },
 )
 
@@ -180,11 +195,12 @@ def build_config(values: dict) -> EstimatorNodeConfig:
     v = PARAMETERS.validate(values)
     params = v.pop('params')
     period = v.pop('diagnostics_period')
+    wait = v.pop('sample_wait')
     try:
         config = EstimatorConfig.from_mapping(v)
     except EstimatorConfigError as err:
         raise EstimatorParameterError(str(err)) from None
-    return EstimatorNodeConfig(params, config, period)
+    return EstimatorNodeConfig(params, config, period, wait)
 
 
 def _stamp_ns(msg) -> int:
@@ -216,7 +232,10 @@ class EstimatorNode(Node):
             raise EstimatorParameterError(f'params {cfg.params!r}: {err}') from None
         self.estimator = make_estimator(model, cfg.estimator)
         self.n_sensors = self.estimator.n_sensors
-        self._fields: dict[int, np.ndarray] = {}  # stamp -> (3 k,) readings of that sample
+        period_ns = 1e9 / cfg.estimator.sample_rate
+        # parts 0 .. k-1: the sensors' fields; part k: the currents
+        self._samples = SampleAssembler(self.n_sensors + 1, round(cfg.sample_wait * period_ns))
+        self.lost_samples = 0  # released without their currents: not estimated
         self.published = 0
         self.last_stamp: int | None = None
         self._pub = self.create_publisher(Odometry, ESTIMATE_TOPIC, SENSOR_QOS)
@@ -236,21 +255,25 @@ class EstimatorNode(Node):
         )
 
     def _on_field(self, k: int, msg: MagneticField) -> None:
-        stamp = _stamp_ns(msg)
-        row = self._fields.get(stamp)
-        if row is None:
-            row = self._fields[stamp] = np.full(3 * self.n_sensors, np.nan)
         f = msg.magnetic_field
-        row[3 * k : 3 * k + 3] = f.x, f.y, f.z
+        for sample in self._samples.add(k, _stamp_ns(msg), (f.x, f.y, f.z)):
+            self._estimate(sample)
 
     def _on_currents(self, msg: JointState) -> None:
-        stamp = _stamp_ns(msg)
-        y = self._fields.pop(stamp, None)
-        if y is None:
-            y = np.full(3 * self.n_sensors, np.nan)
-        for old in [s for s in self._fields if s < stamp]:
-            del self._fields[old]  # never completed: a lost currents message
-        currents = np.asarray(msg.effort, dtype=float)
+        for sample in self._samples.add(self.n_sensors, _stamp_ns(msg), tuple(msg.effort)):
+            self._estimate(sample)
+
+    def _estimate(self, sample: ReleasedSample) -> None:
+        """Step the estimator with one released sample and publish its estimate."""
+        stamp, parts = sample.stamp, sample.parts
+        if parts[-1] is None:
+            self.lost_samples += 1  # no currents: the sample cannot be estimated
+            return
+        y = np.full(3 * self.n_sensors, np.nan)
+        for k, field in enumerate(parts[:-1]):
+            if field is not None:
+                y[3 * k : 3 * k + 3] = field
+        currents = np.asarray(parts[-1], dtype=float)
         try:
             x = self.estimator.step(y, currents)
         except ValueError as err:  # a malformed message: say so, keep running
@@ -289,6 +312,8 @@ class EstimatorNode(Node):
             'missing per sensor': ' '.join(str(v) for v in s.missing),
             'frozen sensors': ' '.join(s.frozen_names()),
             'freeze events per sensor': ' '.join(str(v) for v in s.freeze_events),
+            'lost samples (no currents)': self.lost_samples,
+            'late messages': self._samples.late,
         }
         now_ns = self.get_clock().now().nanoseconds
         self._diag_pub.publish(

@@ -8,8 +8,6 @@ magnet frame (nav_msgs puts the twist in the child frame), body rates.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 from nav_msgs.msg import Odometry
 
@@ -76,16 +74,8 @@ def odometry_state(msg: Odometry) -> np.ndarray:
     ndarray, shape (12,)
         Position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
     """
-    pose, twist = msg.pose.pose, msg.twist.twist
-    q = pose.orientation
-    qx, qy, qz, qw = q.x, q.y, q.z, q.w
-    alpha = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
-    beta = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
-    gamma = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
-    v_body = np.array([twist.linear.x, twist.linear.y, twist.linear.z])
-    x = np.empty(12)
-    x[0:3] = pose.position.x, pose.position.y, pose.position.z
-    x[3:6] = alpha, beta, gamma
-    x[6:9] = _rotation(alpha, beta, gamma) @ v_body
-    x[9:12] = twist.angular.x, twist.angular.y, twist.angular.z
-    return x
+    from maglev_ros.physics.kernels import odometry_state_values
+
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    v, w = msg.twist.twist.linear, msg.twist.twist.angular
+    return odometry_state_values((p.x, p.y, p.z, q.x, q.y, q.z, q.w, v.x, v.y, v.z, w.x, w.y, w.z))
