@@ -3,7 +3,7 @@
 The three nodes run on one executor with the issue's simulated board (V2,
 magnet free, sensor noise 1e-4 T, quantisation, one sample of sensor delay,
 coil electrics). From a 0.5 mm x offset the magnet must settle within 1 s
-and hold (RMS from ``maglev/state/true``); the true states, the estimates
+(RMS of the last 200 ms from ``maglev/state/true``); the true states, the estimates
 and the commands must be those of the ROS-free
 :class:`~maglev_ros.control.ClosedLoop` on the same seed, sample by sample,
 for the whole run (whatever order the callbacks ran in). Cutting the
@@ -120,7 +120,9 @@ def _start(sim, spinner_nodes, ctx, est=None, ctrl=None):
 
 
 def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx):
-    duration = 1.5  # s of simulated time: settled by 1 s, then held
+    # s of simulated time: the settling; the 60 s hold runs on the ROS-free loop
+    # (test/controller), which these nodes equal sample by sample
+    duration = 1.0
     n = int(duration * RATE)
     sim, est, ctrl = _graph(ctx, command_timeout=120.0)  # first sample: JIT
     peer = _Peer(ctx)
@@ -139,15 +141,15 @@ def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx):
     x = np.array([peer.true[s] for s in stamps])
     z_eq = find_equilibria(make_model('maggy_v2'))[0].z
     err = x[:, :3] - np.array([0.0, 0.0, z_eq])
-    hold = t >= 1.0
+    hold = t >= 0.8
     rms = np.sqrt(np.mean(err[hold] ** 2, axis=0))
-    assert np.all(rms < 1e-4), rms  # settled within 1 s and held
+    assert np.all(rms < 1e-4), rms  # the last 200 ms: settled
     assert ctrl.controller.status().level == 'OK'
     assert ctrl.commands >= n - 1  # one command per sample
     # the ROS-free loop on the same seed: the same numbers
     loop = make_closed_loop('maggy_v2', noise=1e-4, quantization=0.098e-3, seed=SEED)
     ref = loop.run(duration, x0=np.array(_x0()))
-    assert not ref.crashed
+    assert not ref.crashed and ref.settle_time() < duration
     published = np.array([odometry_state(peer.estimates[s]) for s in stamps])
     # the same samples, sample by sample, for the whole run: the nodes step as the
     # ROS-free loop whatever order their callbacks ran in
@@ -241,7 +243,7 @@ def test_enable_service_switches_to_zero_currents_and_back(ctx):
 def test_pd_node_steps_exactly_as_the_ros_free_loop(ctx):
     from maglev_ros.control import ControllerConfig
 
-    duration = 1.0
+    duration = 0.5
     n = int(duration * RATE)
     sim, est, ctrl = _graph(ctx, command_timeout=120.0, mode='pd')
     peer = _Peer(ctx)
