@@ -26,6 +26,8 @@ NODES: dict[str, str] = {
     'recorder': 'maglev_ros.nodes.recorder:main',
     'player': 'maglev_ros.nodes.player:main',
     'identifier': 'maglev_ros.nodes.identifier:main',
+    'estimator': 'maglev_ros.nodes.estimator:main',
+    'controller': 'maglev_ros.nodes.controller:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]

@@ -37,6 +37,7 @@ __all__ = [
     'CLOCK_TOPIC',
     'COIL_NAMES',
     'COMMAND_TOPIC',
+    'CONTROLLER_ENABLE_SERVICE',
     'CURRENTS_TOPIC',
     'DIAGNOSTICS_TOPIC',
     'ENABLE_SERVICE',
@@ -91,6 +92,7 @@ METADATA_TOPIC = '/maglev/metadata'
 SIMULATOR_RESET_SERVICE = 'maglev/simulator/reset'  # std_srvs/Trigger
 SIMULATOR_PAUSE_SERVICE = 'maglev/simulator/pause'  # std_srvs/SetBool: true pauses
 ENABLE_SERVICE = 'maglev/enable'  # std_srvs/SetBool: the driver's enable
+CONTROLLER_ENABLE_SERVICE = 'maglev/controller/enable'  # std_srvs/SetBool: the controller
 IDENTIFIER_RESET_SERVICE = 'maglev/identifier/reset'  # std_srvs/Trigger: restart the estimate
 
 

@@ -51,6 +51,17 @@ def test_lab_launch_exists(name):
     assert (LAUNCH / name).is_file()
 
 
+@pytest.mark.parametrize(
+    'name, source',
+    [('closed_loop.launch.xml', 'simulator'), ('closed_loop_board.launch.xml', 'driver')],
+)
+def test_closed_loop_launch_files_run_source_estimator_and_controller(name, source):
+    root = ET.parse(LAUNCH / name).getroot()
+    executables = [node.get('exec') for node in root.findall('.//node')]
+    assert {source, 'estimator', 'controller'} <= set(executables), executables
+    assert executables.count('controller') == 1  # the only command publisher
+
+
 CONFIG = LAUNCH.parent / 'config'
 NODE_MODULES = {
     'maglev_simulator': 'maglev_ros.nodes.simulator',

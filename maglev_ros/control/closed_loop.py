@@ -5,7 +5,10 @@ The very objects the nodes use (:class:`~maglev_ros.physics.Simulator`, an
 :class:`PdController`) are stepped in the order of the lockstep graph: the
 simulator's sample k (readings, one sample old on the board, and the coil
 currents) goes to the estimator, its estimate to the controller, and the
-command drives the coils from sample k + ``command_delay``.
+command drives the coils from sample k + ``command_delay``. The controller
+gets the estimate as the nodes carry it (``maglev/state/estimate``, an
+Odometry: :func:`~maglev_ros.physics.kernels.odometry_round_trip`), so a
+lockstep graph of the nodes steps to the same numbers.
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..estimation.base import nis_band
+from ..physics.kernels import odometry_round_trip
 from .pd import PdController
 
 __all__ = ['ClosedLoop', 'LoopResult', 'make_closed_loop', 'moving_rms']
@@ -322,7 +326,8 @@ class ClosedLoop:
                             f'estimator: frozen {", ".join(names)}'
                         ):
                             messages.append(text)
-                    command = ctrl.command(t, x_hat, currents)
+                    # the controller node reads the estimate from its Odometry
+                    command = ctrl.command(t, odometry_round_trip(x_hat), currents)
             cmd_arr[k] = command
             if excitation is not None and k < len(excitation):
                 command = command + excitation[k]

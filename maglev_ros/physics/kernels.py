@@ -37,6 +37,8 @@ from .loop import FASTMATH, LOOP_WORK_ROWS, loop_batch
 
 __all__ = [
     'euler_to_quaternion',
+    'odometry_round_trip',
+    'odometry_state_values',
     'odometry_values',
     'rotation_matrix',
     'WORK_ROWS',
@@ -157,6 +159,54 @@ def odometry_values(x: np.ndarray) -> np.ndarray:
     out[7:10] = rot.T @ np.asarray(x[6:9], dtype=float)
     out[10:13] = x[9:12]
     return out
+
+
+def odometry_state_values(values) -> np.ndarray:
+    """Return the 12-state that the 13 Odometry numbers of :func:`odometry_values` carry.
+
+    The inverse of :func:`odometry_values` up to rounding: ZYX Euler angles
+    from the quaternion, world velocity from the magnet-frame one.
+
+    Parameters
+    ----------
+    values : sequence of float, length 13
+        Position (3), quaternion x y z w (4), magnet-frame velocity (3), body rates (3).
+
+    Returns
+    -------
+    ndarray, shape (12,)
+        Position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    """
+    qx, qy, qz, qw = (float(v) for v in values[3:7])
+    alpha = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
+    beta = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
+    gamma = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    x = np.empty(12)
+    x[0:3] = values[0:3]
+    x[3:6] = alpha, beta, gamma
+    x[6:9] = rotation_matrix(alpha, beta, gamma) @ np.asarray(values[7:10], dtype=float)
+    x[9:12] = values[10:13]
+    return x
+
+
+def odometry_round_trip(x: np.ndarray) -> np.ndarray:
+    """Return state ``x`` as a node reads it back from its Odometry (rounding included).
+
+    A consumer of ``maglev/state/estimate`` gets the state through the
+    quaternion and the magnet-frame velocity, which round the Euler angles and
+    the world velocity by about 1e-16 relative; the ROS-free closed loop passes
+    its estimate through this so that it steps exactly as the nodes do.
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        Position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+
+    Returns
+    -------
+    ndarray, shape (12,)
+    """
+    return odometry_state_values(odometry_values(x))
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')

@@ -123,7 +123,18 @@ def test_table_needs_a_node_parameter_error():
 
 
 @pytest.mark.parametrize(
-    'module', ['simulator', 'driver', 'excitation', 'recorder', 'player', 'identifier'], ids=str
+    'module',
+    [
+        'simulator',
+        'driver',
+        'excitation',
+        'recorder',
+        'player',
+        'identifier',
+        'estimator',
+        'controller',
+    ],
+    ids=str,
 )
 def test_every_node_has_one_table_and_one_error_base(module):
     mod = importlib.import_module(f'maglev_ros.nodes.{module}')

@@ -26,6 +26,8 @@ NODES = {  # executable: (node name, module)
     'recorder': ('maglev_recorder', 'maglev_ros.nodes.recorder'),
     'player': ('maglev_player', 'maglev_ros.nodes.player'),
     'identifier': ('maglev_identifier', 'maglev_ros.nodes.identifier'),
+    'estimator': ('maglev_estimator', 'maglev_ros.nodes.estimator'),
+    'controller': ('maglev_controller', 'maglev_ros.nodes.controller'),
 }
 
 
@@ -71,6 +73,8 @@ def _start_overrides(executable, tmp_path):
         'recorder': [f'path:={tmp_path / "bag"}', "metadata_node:=''", 'depth:=100'],
         'player': [f'path:={_bag(tmp_path)}', 'rate:=1', 'loop:=true', 'start_delay:=0'],
         'identifier': ['forgetting:=1', 'initial_covariance:=10000', 'publish_rate:=2'],
+        'estimator': ['sample_rate:=5000', 'gate_probability:=1', 'diagnostics_period:=1'],
+        'controller': ['sample_rate:=5000', 'current_limit:=1', 'input_timeout:=1'],
     }[executable]
 
 
@@ -126,6 +130,10 @@ def test_integers_for_doubles_run_and_param_dump_is_complete(
             "command_timeout must be at most the firmware's 1 s watchdog",
         ),
         ('identifier', 'forgetting:=1.5', 'forgetting must be a finite number > 0 and <= 1'),
+        ('estimator', 'filter:=pf', "filter must be one of kf, ekf, ukf, got 'pf'"),
+        ('estimator', 'nis_window:=1', 'nis_window must be an integer >= 2, got 1'),
+        ('controller', 'current_limit:=-1', 'current_limit must be a finite number > 0'),
+        ('controller', 'start_enabled:=1', 'start_enabled must be true or false, got 1'),
         ('identifier', 'na:=[1,2]', 'na must have 1 or 1*1 = 1 values, got [1, 2]'),
         (
             'identifier',

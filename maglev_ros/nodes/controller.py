@@ -1,0 +1,437 @@
+"""Levitation controller node: ``ros2 run maglev_ros controller``.
+
+Runs the ROS-free controller of :mod:`maglev_ros.control` (``mode``: ``lqr``
+state feedback on ``maglev/state/estimate``, or ``pd``, the firmware's PD on
+the raw fields; every setting of
+:class:`~maglev_ros.control.ControllerConfig` is a parameter, defaults as
+``config/controller.yaml``) and publishes ``maglev/currents/command``
+(std_msgs/Float64MultiArray, 4 currents in A, x+ x- y+ y-, clipped at
+``current_limit``).
+
+One command per sample (the lockstep contract of
+:mod:`maglev_ros.physics.session`):
+
+* LQR: a sample is its ``maglev/currents`` (published by the simulator or
+  the driver) and its estimate (``maglev/state/estimate``, same stamp); they
+  are handled in any order. The command is computed once both arrived, with
+  the estimate and the measured currents of that stamp. A sample whose
+  estimate never comes -- an estimate of a later stamp arrived, or currents
+  more than ``input_timeout`` s (of stamps) later did -- gets the core's
+  answer to a missing estimate: the last command held, and once no estimate
+  came for ``input_timeout`` zero currents;
+* PD: a sample is the field of every sensor and the currents, handled in any
+  order; one command once it is complete (or a part is known lost, as for
+  the estimator, :mod:`maglev_ros.nodes.sample_assembly`).
+
+Samples are answered in stamp order, exactly one command each, never
+depending on the order the callbacks ran in.
+
+The lockstep simulator applies the command of sample k over k -> k+1; the
+board applies it about one sample later, and the LQR's ``command_delay: 1``
+designs for that. ``delay_commands: true`` (the simulation launch file sets
+it) publishes for sample k the command computed at k - 1, so a lockstep
+graph has the board's timing and steps exactly as
+:class:`~maglev_ros.control.ClosedLoop` with ``command_delay`` 1.
+
+Safety. Stale input (no estimate / sample for ``input_timeout``): zero
+currents and an ERROR on ``/diagnostics`` at once. The controller re-arms by
+itself once ``rearm_samples`` fresh inputs arrived in a row (integrators and
+pending command cleared), as :class:`~maglev_ros.control.Watchdog` does. A
+graph that stops completely (no sample at all) gets no more commands: the
+board driver's own ``command_timeout`` zeroes the coils, and the
+diagnostics (every ``diagnostics_period`` s of the node's clock) report
+ERROR. ``start_enabled`` (default true) and the service
+``maglev/controller/enable`` (std_srvs/SetBool) switch the controller; while
+disabled it commands zero currents. The response says from which command
+on (numbered from 0, the diagnostics' ``commands``) the new state holds:
+after a disable that command and all later ones are zero, including one held
+back by ``delay_commands``. ``maglev/reference``
+(geometry_msgs/PoseStamped, frame ``maglev_base`` or empty) moves the
+set-point (LQR); a bad one is refused with an error log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import PoseStamped
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from sensor_msgs.msg import JointState, MagneticField
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import SetBool
+
+from maglev_ros.control import MODES, ControllerConfig, ControllerConfigError, make_controller
+from maglev_ros.nodes.messages import diagnostic_array
+from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
+from maglev_ros.nodes.params import integer as integer_rule
+from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
+from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.nodes.sample_assembly import SampleAssembler
+from maglev_ros.nodes.state_messages import odometry_state
+from maglev_ros.topics import (
+    BASE_FRAME,
+    COMMAND_TOPIC,
+    CONTROLLER_ENABLE_SERVICE,
+    CURRENTS_TOPIC,
+    DIAGNOSTICS_TOPIC,
+    ESTIMATE_TOPIC,
+    REFERENCE_TOPIC,
+    field_topic,
+)
+
+__all__ = [
+    'PARAMETERS',
+    'ControllerNode',
+    'ControllerNodeConfig',
+    'ControllerParameterError',
+    'build_config',
+    'main',
+]
+
+NODE_NAME = 'maglev_controller'
+_DEFAULT = ControllerConfig()
+_LEVELS = {
+    'OK': DiagnosticStatus.OK,
+    'WARN': DiagnosticStatus.WARN,
+    'ERROR': DiagnosticStatus.ERROR,
+}
+
+
+class ControllerParameterError(NodeParameterError):
+    """A controller parameter has an invalid value."""
+
+
+@dataclass(frozen=True)
+class ControllerNodeConfig:
+    """Validated controller-node parameters.
+
+    Attributes
+    ----------
+    params : str
+        Parameter set the controller believes.
+    controller : ControllerConfig
+        The control law's settings.
+    delay_commands : bool
+        Publish the command of sample k - 1 for sample k (lockstep simulation).
+    start_enabled : bool
+        Enabled at start.
+    diagnostics_period : float
+        s of the node's clock between diagnostics.
+    """
+
+    params: str
+    controller: ControllerConfig
+    delay_commands: bool
+    start_enabled: bool
+    diagnostics_period: float
+
+
+def _parameter_set(name: str, value: str) -> str:
+    if not value:
+        raise ControllerParameterError(f'{name} must name a parameter set, got an empty string')
+    return value
+
+
+_DESCRIPTIONS = {
+    'mode': ('lqr (state feedback on the estimate) or pd (firmware PD on the field)', None),
+    'sample_rate': ('control rate, Hz (one command per sample)', number(0, above=True)),
+    'command_delay': ('samples before a command drives the coils (0 or 1)', integer_rule(0, 1)),
+    'sensor_delay': ('samples of reading delay (0 or 1)', integer_rule(0, 1)),
+    'coil_dynamics': ("LQR models the coils' L/R lag", None),
+    'current_limit': ('largest command per coil, A', number(0, above=True)),
+    'position_scale': ('Bryson scale of x y z, m', number(0, above=True)),
+    'angle_scale': ('Bryson scale of alpha beta, rad', number(0, above=True)),
+    'velocity_scale': ('Bryson scale of the velocity, m/s', number(0, above=True)),
+    'rate_scale': ('Bryson scale of wx wy, rad/s', number(0, above=True)),
+    'current_scale': ('Bryson scale of the commands, A', number(0, above=True)),
+    'integral': ('integral action on x y z (anti-windup at the limit)', None),
+    'integral_scale': ('Bryson scale of the integrated error, m s', number(0, above=True)),
+    'input_timeout': ('s without input -> zero currents, ERROR', number(0, above=True)),
+    'rearm_samples': ('fresh inputs in a row that re-arm after a timeout', integer_rule(1)),
+    'pd_kp': ('PD proportional gain, A/T', number(0)),
+    'pd_kd': ('PD derivative gain, A/(T/s)', number(0)),
+    'pd_cutoff': ('PD field filter cut-off, Hz', number(0, above=True)),
+    'pd_sensor': ('sensor the PD reads', integer_rule(0)),
+    'pd_feedthrough': ("PD removes the coils' direct field", None),
+    'magnet_threshold': ('PD active while |Bz - Bz without magnet| exceeds it, T', number(0)),
+}
+
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    ControllerParameterError,
+    {
+        'params': Param(
+            'maggy_v2', 'parameter set: maggy_v2, maggy_v4 or a YAML path', check=_parameter_set
+        ),
+        **{
+            f.name: Param(
+                getattr(_DEFAULT, f.name),
+                _DESCRIPTIONS[f.name][0],
+                check=choice(*MODES) if f.name == 'mode' else _DESCRIPTIONS[f.name][1],
+            )
+            for f in fields(ControllerConfig)
+        },
+        'delay_commands': Param(
+            False,
+            'publish each command one sample late (lockstep simulation: the one-sample '
+            'command latency of the board that command_delay designs for)',
+        ),
+        'start_enabled': Param(True, f'enabled at start (then {CONTROLLER_ENABLE_SERVICE})'),
+        'diagnostics_period': Param(
+            0.5, 's of the node clock between diagnostics', check=number(0, above=True)
+        ),
+    },
+)
+
+
+_PARAMETERS = PARAMETERS  # the name test_launch uses
+
+
+def build_config(values: dict) -> ControllerNodeConfig:
+    """Validate raw parameter values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name to value (a missing name takes its default).
+
+    Returns
+    -------
+    ControllerNodeConfig
+
+    Raises
+    ------
+    ControllerParameterError
+        Naming the first invalid parameter and its value.
+    """
+    v = PARAMETERS.validate(values)
+    params = v.pop('params')
+    delay = v.pop('delay_commands')
+    start_enabled = v.pop('start_enabled')
+    period = v.pop('diagnostics_period')
+    try:
+        config = ControllerConfig.from_mapping(v)
+    except ControllerConfigError as err:
+        raise ControllerParameterError(str(err)) from None
+    return ControllerNodeConfig(params, config, delay, start_enabled, period)
+
+
+def _stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+class ControllerNode(Node):
+    """The levitation controller (see the module docstring).
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Raises
+    ------
+    ControllerParameterError
+        If a parameter is invalid (or the parameter set cannot be read).
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.config = cfg = build_config(PARAMETERS.declare(self))
+        from maglev_ros.physics import make_model
+
+        try:
+            model = make_model(cfg.params)
+            self.controller = make_controller(model, cfg.controller)
+        except (ValueError, OSError) as err:
+            raise ControllerParameterError(f'params {cfg.params!r}: {err}') from None
+        self.controller.set_enabled(cfg.start_enabled)
+        self.lqr = cfg.controller.mode == 'lqr'
+        self.n_sensors = model.n_outputs // 3
+        self.commands = 0  # commands published
+        self.last_command = np.zeros(model.n_inputs)
+        # the parts of each sample (LQR: currents, estimate; PD: each field, currents),
+        # released in stamp order whatever order the callbacks run in
+        self._currents_part = 0 if self.lqr else self.n_sensors
+        self._samples = SampleAssembler(
+            2 if self.lqr else self.n_sensors + 1, round(cfg.controller.input_timeout * 1e9)
+        )
+        self._last_level = 'OK'
+        self._last_sample_ns: int | None = None  # node clock at the last sample message
+        self._pending = np.zeros(model.n_inputs)  # delay_commands: computed, not yet sent
+        self._msg = Float64MultiArray()
+        self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        self.create_subscription(JointState, CURRENTS_TOPIC, self._on_currents, SENSOR_QOS)
+        if self.lqr:
+            self.create_subscription(Odometry, ESTIMATE_TOPIC, self._on_estimate, SENSOR_QOS)
+        else:
+            for k in range(self.n_sensors):
+                self.create_subscription(
+                    MagneticField, field_topic(k), lambda m, k=k: self._on_field(k, m), SENSOR_QOS
+                )
+        self.create_subscription(PoseStamped, REFERENCE_TOPIC, self._on_reference, 10)
+        self.create_service(SetBool, CONTROLLER_ENABLE_SERVICE, self._on_enable)
+        self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
+        c = cfg.controller
+        self.get_logger().info(
+            f'{c.mode} on {cfg.params}, {c.sample_rate:g} Hz, limit {c.current_limit:g} A, '
+            f'input timeout {1e3 * c.input_timeout:g} ms, '
+            f'{"enabled" if cfg.start_enabled else "disabled"}'
+        )
+
+    # ------------------------------------------------------------------ inputs
+    def _publish(self, command: np.ndarray) -> None:
+        if self.config.delay_commands:
+            command, self._pending = self._pending, command
+        self.last_command = command
+        self._msg.data = [float(v) for v in command]
+        self._pub.publish(self._msg)
+        self.commands += 1
+        status = self.controller.status()
+        if status.level != self._last_level:
+            self._last_level = status.level
+            if status.level == 'ERROR':
+                self.get_logger().warning(status.message)
+            self.publish_diagnostics()  # an ERROR (stale input) is reported at once
+
+    def _valid_currents(self, msg: JointState):
+        currents = np.array(msg.effort, dtype=float)
+        if currents.shape != (self.controller.n_inputs,) or not np.all(np.isfinite(currents)):
+            self.get_logger().error(
+                f'{CURRENTS_TOPIC}: expected {self.controller.n_inputs} finite currents, '
+                f'got {list(msg.effort)}',
+                throttle_duration_sec=1.0,
+            )
+            return None
+        return currents
+
+    def _on_currents(self, msg: JointState) -> None:
+        self._last_sample_ns = self.get_clock().now().nanoseconds
+        currents = self._valid_currents(msg)
+        if currents is not None:
+            self._answer(self._samples.add(self._currents_part, _stamp_ns(msg), currents))
+
+    def _on_estimate(self, msg: Odometry) -> None:
+        self._answer(self._samples.add(1, _stamp_ns(msg), odometry_state(msg)))
+
+    def _on_field(self, k: int, msg: MagneticField) -> None:
+        f = msg.magnetic_field
+        self._answer(self._samples.add(k, _stamp_ns(msg), (f.x, f.y, f.z)))
+
+    def _answer(self, samples) -> None:
+        """Publish one command per released sample, in stamp order."""
+        for sample in samples:
+            t = sample.stamp * 1e-9
+            parts = sample.parts
+            if self.lqr:
+                currents, x = parts
+                if x is None:  # no estimate for this sample: the core's missing-input answer
+                    command = self.controller.command(t)
+                else:
+                    command = self.controller.command(t, x, currents)
+            else:
+                fields_, currents = parts[:-1], parts[-1]
+                y = None
+                if any(f is not None for f in fields_):
+                    y = np.full(3 * self.n_sensors, np.nan)
+                    for k, f in enumerate(fields_):
+                        if f is not None:
+                            y[3 * k : 3 * k + 3] = f
+                command = self.controller.command(t, y, currents)
+            self._publish(command)
+
+    def _on_reference(self, msg: PoseStamped) -> None:
+        if not self.lqr:
+            self.get_logger().error(f'{REFERENCE_TOPIC} ignored: the PD holds the equilibrium')
+            return
+        frame = msg.header.frame_id
+        if frame not in ('', BASE_FRAME):
+            self.get_logger().error(
+                f'{REFERENCE_TOPIC} refused: frame {frame!r}, expected {BASE_FRAME!r}'
+            )
+            return
+        p = msg.pose.position
+        try:
+            self.controller.set_reference([p.x, p.y, p.z])
+        except ValueError as err:
+            self.get_logger().error(f'{REFERENCE_TOPIC} refused: {err}')
+            return
+        self.get_logger().info(f'reference {p.x:.6g} {p.y:.6g} {p.z:.6g} m')
+
+    def _on_enable(self, request, response):
+        """Switch the controller; the response names the first command it governs.
+
+        Contract: commands are numbered from 0 in publishing order (the
+        diagnostics' ``commands`` count). A response ``... from command N on``
+        means that command N and every later one follow the new state: all
+        zero after a disable, including a command computed before it and held
+        back by ``delay_commands`` (dropped). Commands before N may still be
+        in flight, and a lockstep simulator may still apply commands it
+        queued before N.
+        """
+        enable = bool(request.data)
+        self.controller.set_enabled(enable)
+        if not enable:
+            self._pending = np.zeros(self.controller.n_inputs)  # computed while enabled
+        response.success = True
+        state = 'enabled' if enable else 'disabled: zero currents'
+        response.message = f'{state} from command {self.commands} on'
+        self.get_logger().info(f'controller {response.message}')
+        self.publish_diagnostics()
+        return response
+
+    # ------------------------------------------------------------------ diagnostics
+    def publish_diagnostics(self) -> None:
+        """Publish the controller's level, message, timeouts and saturations."""
+        if not self.context.ok():
+            return
+        s = self.controller.status()
+        level, message = _LEVELS.get(s.level, DiagnosticStatus.ERROR), s.message
+        now_ns = self.get_clock().now().nanoseconds
+        timeout_ns = self.config.controller.input_timeout * 1e9
+        # the graph stopped (no sample at all): no command is sent, whatever the core says
+        if self._last_sample_ns is not None and now_ns - self._last_sample_ns > max(
+            timeout_ns, 2e9 * self.config.diagnostics_period
+        ):
+            level = DiagnosticStatus.ERROR
+            message = (
+                f'no sample for {(now_ns - self._last_sample_ns) * 1e-9:.2f} s: no commands '
+                "sent (the driver's command_timeout zeroes the coils)"
+            )
+        values = {
+            'mode': self.config.controller.mode,
+            'enabled': str(self.controller.enabled).lower(),
+            'active': str(s.active).lower(),
+            'commands': self.commands,
+            'last command (A)': ' '.join(f'{v:.6g}' for v in self.last_command),
+            'timeouts': s.timeouts,
+            'saturated commands': s.saturated,
+        }
+        if self.lqr:
+            values['reference (m)'] = ' '.join(f'{v:.6g}' for v in self.controller.reference)
+        self._diag_pub.publish(
+            diagnostic_array(now_ns, f'{NODE_NAME}: levitation', level, message, values)
+        )
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the controller until SIGINT or SIGTERM.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS arguments included).
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 2 for invalid parameters.
+    """
+    return run_nodes([ControllerNode], args, NODE_NAME, (ControllerParameterError,), PARAMETERS)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())

@@ -1,0 +1,341 @@
+"""State estimator node: ``ros2 run maglev_ros estimator``.
+
+Runs the ROS-free :class:`~maglev_ros.estimation.Estimator` (``filter``: kf,
+ekf or ukf; :class:`~maglev_ros.estimation.EstimatorConfig` for the other
+parameters) on the samples of the simulator or the board driver.
+
+Sample completeness: a sample (one stamp) is its ``maglev/currents`` and
+the field ``maglev/sensor_<k>/field`` of every sensor of the parameter set.
+The messages of one sample may be handled in any order (distinct topics);
+a :class:`~maglev_ros.nodes.sample_assembly.SampleAssembler` collects them
+and the estimator steps once per sample, in stamp order, once it is complete
+-- or once a sensor is known lost: that sensor's field of a later stamp
+arrived, a later sample is complete, or samples more than ``sample_wait``
+later arrived (a silent sensor). Only then is the sensor missing (NaN,
+counted), never because of callback order, so a lockstep graph estimates
+exactly as the ROS-free :class:`~maglev_ros.control.ClosedLoop`. A sample
+whose currents never came is not estimated (counted as ``lost samples``).
+Each step publishes ``maglev/state/estimate``
+(nav_msgs/Odometry, frames and angle convention of ``maglev/state/true``,
+pose and twist covariance; yaw and yaw rate are unobservable and carry
+:data:`~maglev_ros.nodes.state_messages.UNOBSERVED_VARIANCE`) stamped with
+that sample's stamp: exactly one estimate per sample, in the order the
+ROS-free :class:`~maglev_ros.control.ClosedLoop` steps it.
+
+Every ``diagnostics_period`` s of the node's clock it publishes on
+``/diagnostics``: the NIS over the last ``nis_window`` samples against its
+99 % band (WARN outside), readings rejected by the gate and missing per
+sensor, frozen sensors (WARN), samples estimated.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from nav_msgs.msg import Odometry
+from rclpy.node import Node
+from sensor_msgs.msg import JointState, MagneticField
+
+from maglev_ros.estimation import FILTERS, EstimatorConfig, EstimatorConfigError, make_estimator
+from maglev_ros.nodes.messages import diagnostic_array
+from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
+from maglev_ros.nodes.params import integer as integer_rule
+from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, SENSOR_QOS
+from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.nodes.sample_assembly import ReleasedSample, SampleAssembler
+from maglev_ros.nodes.state_messages import estimate_message
+from maglev_ros.topics import CURRENTS_TOPIC, DIAGNOSTICS_TOPIC, ESTIMATE_TOPIC, field_topic
+
+__all__ = [
+    'PARAMETERS',
+    'EstimatorNode',
+    'EstimatorNodeConfig',
+    'EstimatorParameterError',
+    'build_config',
+    'main',
+]
+
+NODE_NAME = 'maglev_estimator'
+_DEFAULT = EstimatorConfig()
+
+
+class EstimatorParameterError(NodeParameterError):
+    """An estimator parameter has an invalid value."""
+
+
+@dataclass(frozen=True)
+class EstimatorNodeConfig:
+    """Validated estimator-node parameters.
+
+    Attributes
+    ----------
+    params : str
+        Parameter set the estimator believes (maggy_v2, maggy_v4 or a YAML path).
+    estimator : EstimatorConfig
+        The filter's settings.
+    diagnostics_period : float
+        s of the node's clock between diagnostics.
+    sample_wait : int
+        Samples a sample waits for the field of a silent sensor.
+    """
+
+    params: str
+    estimator: EstimatorConfig
+    diagnostics_period: float
+    sample_wait: int = 10
+
+
+def _parameter_set(name: str, value: str) -> str:
+    if not value:
+        raise EstimatorParameterError(f'{name} must name a parameter set, got an empty string')
+    return value
+
+
+PARAMETERS = ParameterTable(
+    NODE_NAME,
+    EstimatorParameterError,
+    {
+        'params': Param(
+            'maggy_v2', 'parameter set: maggy_v2, maggy_v4 or a YAML path', check=_parameter_set
+        ),
+        'filter': Param(
+            _DEFAULT.filter, 'kf (linear, default), ekf or ukf', check=choice(*FILTERS)
+        ),
+        'sample_rate': Param(
+            _DEFAULT.sample_rate, 'samples per second, Hz', check=number(0, above=True)
+        ),
+        'sensor_delay': Param(
+            _DEFAULT.sensor_delay,
+            'samples of reading delay (the board: 1)',
+            check=integer_rule(0, 1),
+        ),
+        'sensor_noise': Param(
+            _DEFAULT.sensor_noise, 'Hall noise, T rms per axis', check=number(0, above=True)
+        ),
+        'quantization': Param(
+            _DEFAULT.quantization, 'Hall resolution, T per LSB', check=number(0)
+        ),
+        'current_noise': Param(
+            _DEFAULT.current_noise, 'current held over a sample, A rms', check=number(0)
+        ),
+        'acceleration_noise': Param(
+            _DEFAULT.acceleration_noise, 'unmodelled force per mass, m/s^2 rms', check=number(0)
+        ),
+        'angular_acceleration_noise': Param(
+            _DEFAULT.angular_acceleration_noise,
+            'unmodelled torque per inertia, rad/s^2 rms',
+            check=number(0),
+        ),
+        'bias_states': Param(_DEFAULT.bias_states, 'estimate a field offset per sensor axis'),
+        'bias_walk': Param(
+            _DEFAULT.bias_walk, 'random walk of the bias states, T rms per sample', check=number(0)
+        ),
+        'initial_bias': Param(
+            _DEFAULT.initial_bias, 'initial std of the bias states, T', check=number(0, above=True)
+        ),
+        'gate_probability': Param(
+            _DEFAULT.gate_probability,
+            'per-sensor chi-square gate probability',
+            check=number(0.5, above=True, high=1.0),
+        ),
+        'freeze_samples': Param(
+            _DEFAULT.freeze_samples,
+            'identical readings in a row that mark a sensor frozen',
+            check=integer_rule(2),
+        ),
+        'nis_window': Param(
+            _DEFAULT.nis_window, 'samples of the diagnostics NIS window', check=integer_rule(2)
+        ),
+        'initial_position': Param(
+            _DEFAULT.initial_position, 'initial position std, m', check=number(0, above=True)
+        ),
+        'initial_angle': Param(
+            _DEFAULT.initial_angle, 'initial angle std, rad', check=number(0, above=True)
+        ),
+        'initial_velocity': Param(
+            _DEFAULT.initial_velocity, 'initial velocity std, m/s', check=number(0, above=True)
+        ),
+        'initial_rate': Param(
+            _DEFAULT.initial_rate, 'initial body-rate std, rad/s', check=number(0, above=True)
+        ),
+        'diagnostics_period': Param(
+            1.0, 's of the node clock between diagnostics', check=number(0, above=True)
+        ),
+        'sample_wait': Param(
+            10,
+            'samples of later stamps a sample waits for a silent sensor before it is missing',
+            check=integer_rule(0),
+        ),
+    },
+)
+
+
+_PARAMETERS = PARAMETERS  # the name test_launch uses
+
+
+def build_config(values: dict) -> EstimatorNodeConfig:
+    """Validate raw parameter values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name to value (a missing name takes its default).
+
+    Returns
+    -------
+    EstimatorNodeConfig
+
+    Raises
+    ------
+    EstimatorParameterError
+        Naming the first invalid parameter and its value.
+    """
+    v = PARAMETERS.validate(values)
+    params = v.pop('params')
+    period = v.pop('diagnostics_period')
+    wait = v.pop('sample_wait')
+    try:
+        config = EstimatorConfig.from_mapping(v)
+    except EstimatorConfigError as err:
+        raise EstimatorParameterError(str(err)) from None
+    return EstimatorNodeConfig(params, config, period, wait)
+
+
+def _stamp_ns(msg) -> int:
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+
+
+class EstimatorNode(Node):
+    """The state estimator (see the module docstring).
+
+    Parameters
+    ----------
+    **kwargs
+        Passed to ``rclpy.node.Node``.
+
+    Raises
+    ------
+    EstimatorParameterError
+        If a parameter is invalid (or the parameter set cannot be read).
+    """
+
+    def __init__(self, **kwargs) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self.config = cfg = build_config(PARAMETERS.declare(self))
+        from maglev_ros.physics import make_model
+
+        try:
+            model = make_model(cfg.params)
+        except (ValueError, OSError) as err:
+            raise EstimatorParameterError(f'params {cfg.params!r}: {err}') from None
+        self.estimator = make_estimator(model, cfg.estimator)
+        self.n_sensors = self.estimator.n_sensors
+        period_ns = 1e9 / cfg.estimator.sample_rate
+        # parts 0 .. k-1: the sensors' fields; part k: the currents
+        self._samples = SampleAssembler(self.n_sensors + 1, round(cfg.sample_wait * period_ns))
+        self.lost_samples = 0  # released without their currents: not estimated
+        self.published = 0
+        self.last_stamp: int | None = None
+        self._pub = self.create_publisher(Odometry, ESTIMATE_TOPIC, SENSOR_QOS)
+        self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        for k in range(self.n_sensors):
+            self.create_subscription(
+                MagneticField,
+                field_topic(k),
+                lambda msg, k=k: self._on_field(k, msg),
+                SENSOR_QOS,
+            )
+        self.create_subscription(JointState, CURRENTS_TOPIC, self._on_currents, SENSOR_QOS)
+        self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
+        self.get_logger().info(
+            f'{cfg.estimator.filter} on {cfg.params}, {self.n_sensors} sensors, '
+            f'{cfg.estimator.sample_rate:g} Hz, sensor delay {cfg.estimator.sensor_delay}'
+        )
+
+    def _on_field(self, k: int, msg: MagneticField) -> None:
+        f = msg.magnetic_field
+        for sample in self._samples.add(k, _stamp_ns(msg), (f.x, f.y, f.z)):
+            self._estimate(sample)
+
+    def _on_currents(self, msg: JointState) -> None:
+        for sample in self._samples.add(self.n_sensors, _stamp_ns(msg), tuple(msg.effort)):
+            self._estimate(sample)
+
+    def _estimate(self, sample: ReleasedSample) -> None:
+        """Step the estimator with one released sample and publish its estimate."""
+        stamp, parts = sample.stamp, sample.parts
+        if parts[-1] is None:
+            self.lost_samples += 1  # no currents: the sample cannot be estimated
+            return
+        y = np.full(3 * self.n_sensors, np.nan)
+        for k, field in enumerate(parts[:-1]):
+            if field is not None:
+                y[3 * k : 3 * k + 3] = field
+        currents = np.asarray(parts[-1], dtype=float)
+        try:
+            x = self.estimator.step(y, currents)
+        except ValueError as err:  # a malformed message: say so, keep running
+            self.get_logger().error(
+                f'sample {stamp} ns not estimated: {err}', throttle_duration_sec=1.0
+            )
+            return
+        self._pub.publish(estimate_message(stamp, x, self.estimator.state_covariance))
+        self.published += 1
+        self.last_stamp = stamp
+
+    def publish_diagnostics(self) -> None:
+        """Publish the NIS window, rejected/missing readings and frozen sensors."""
+        if not self.context.ok():
+            return
+        s = self.estimator.status()
+        if s.samples == 0:
+            level, message = DiagnosticStatus.OK, f'waiting for samples on {CURRENTS_TOPIC}'
+        elif s.frozen:
+            level = DiagnosticStatus.WARN
+            message = f'frozen: {", ".join(s.frozen_names())} (readings ignored until they change)'
+        elif not s.nis_ok:
+            level = DiagnosticStatus.WARN
+            message = (
+                f'NIS {s.nis_window:.1f} outside its 99 % band '
+                f'[{s.nis_band[0]:.1f}, {s.nis_band[1]:.1f}]: check sensor_noise and the model'
+            )
+        else:
+            level, message = DiagnosticStatus.OK, f'estimating ({self.config.estimator.filter})'
+        values = {
+            'samples': s.samples,
+            'NIS window': f'{s.nis_window:.6g}',
+            'NIS dof': s.nis_dof,
+            'NIS 99 % band': f'{s.nis_band[0]:.6g} {s.nis_band[1]:.6g}',
+            'rejected per sensor': ' '.join(str(v) for v in s.rejected),
+            'missing per sensor': ' '.join(str(v) for v in s.missing),
+            'frozen sensors': ' '.join(s.frozen_names()),
+            'freeze events per sensor': ' '.join(str(v) for v in s.freeze_events),
+            'lost samples (no currents)': self.lost_samples,
+            'late messages': self._samples.late,
+        }
+        now_ns = self.get_clock().now().nanoseconds
+        self._diag_pub.publish(
+            diagnostic_array(now_ns, f'{NODE_NAME}: state estimate', level, message, values)
+        )
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run the estimator until SIGINT or SIGTERM.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS arguments included).
+
+    Returns
+    -------
+    int
+        Exit status: 0, or 2 for invalid parameters.
+    """
+    return run_nodes([EstimatorNode], args, NODE_NAME, (EstimatorParameterError,), PARAMETERS)
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
