@@ -157,6 +157,11 @@ _DESCRIPTIONS = {
     'pd_sensor': ('sensor the PD reads', integer_rule(0)),
     'pd_feedthrough': ("PD removes the coils' direct field", None),
     'magnet_threshold': ('PD active while |Bz - Bz without magnet| exceeds it, T', number(0)),
+    'loss_distance': (
+        'LQR: estimate this far from the equilibrium = magnet lost: zero currents, '
+        'ERROR, latched until enabled again, m',
+        number(0, above=True),
+    ),
 }
 
 PARAMETERS = ParameterTable(

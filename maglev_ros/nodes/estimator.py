@@ -135,6 +135,25 @@ PARAMETERS = ParameterTable(
         'initial_bias': Param(
             _DEFAULT.initial_bias, 'initial std of the bias states, T', check=number(0, above=True)
         ),
+        'magnet_strength': Param(
+            _DEFAULT.magnet_strength,
+            "estimate the magnet's strength as one state (kf only)",
+        ),
+        'initial_strength': Param(
+            _DEFAULT.initial_strength,
+            'initial std of the strength state, relative',
+            check=number(0, above=True),
+        ),
+        'strength_walk': Param(
+            _DEFAULT.strength_walk,
+            'random walk of the strength state, relative rms per sample',
+            check=number(0),
+        ),
+        'lost_samples': Param(
+            _DEFAULT.lost_samples,
+            'samples without an accepted reading before the filter restarts from its prior',
+            check=integer_rule(1),
+        ),
         'gate_probability': Param(
             _DEFAULT.gate_probability,
             'per-sensor chi-square gate probability',
