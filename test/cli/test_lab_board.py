@@ -51,10 +51,7 @@ def test_virtual_board_session_is_identified_from_the_bag(domain, tmp_path, capf
     assert summary['alignment']['base'] == 'stamps', printed
     assert set(summary['alignment']['methods'].values()) == {'exact'}, printed
     run = summary['run']
-    # real time: the board sets the pace, and the bag holds every record the driver
-    # published in the window; an emulated board on a loaded CI machine runs at
-    # 0.4-1.0x real time (measured), so only a floor that says the run ran
-    assert run['samples'] >= 0.2 * 2 * 5000
+    assert run['samples'] >= 0.5 * 2 * 5000  # real time: the board sets the pace
     assert run['driver']['resyncs'] == 0 and run['driver']['dropped_bytes'] == 0
     meta = summary['metadata']
     assert meta['maglev_driver.n_sensors'] == 3 and meta['maglev_driver.start_enabled'] is True
