@@ -81,7 +81,6 @@ __all__ = [
 PROG = 'maglev-lab'
 WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
 BOARD_TS = 200e-6  # s, the board's sample period (V2x and V4x)
-BOARD_DRAIN_S = 30.0  # s the recorder may take, after the window, to catch up
 BOARD_READ_INTERVAL = 0.002  # s between port reads in board runs (open loop: latency is free)
 DEFAULT_SAMPLES = 25000  # the lab's record: 5 s at 5 kHz, split 12500 / 12500
 
@@ -625,9 +624,7 @@ def run_board_experiment(
                 path=str(bag), storage=args.storage, topics=topics, metadata_node='maglev_driver'
             ),
         )
-        # destroyed last: finalises the bag; its own executor thread: under load its
-        # backlog of 5 kHz records must not hold up the excitation's commands
-        lab.add(recorder, own_executor=True)
+        lab.add(recorder)  # destroyed last: finalises the bag
         # an open-loop recording: latency does not matter, so the driver reads the port
         # every 2 ms (two bursts per read), which roughly halves its CPU time
         driver = DriverNode(
@@ -674,17 +671,7 @@ def run_board_experiment(
             'the excitation',
             stop=stop,
         )
-        # on a loaded PC the recorder runs seconds behind the board: the window opens
-        # once it has the excitation's first command, not when the excitation was
-        # discovered (else it could close before any command was recorded)
-        command_topic = '/' + COMMAND_TOPIC
-        lab.wait_until(
-            lambda: recorder.counts[command_topic] > 0,
-            'the first excitation command in the bag',
-            stop=stop,
-        )
         start = recorder.counts[currents_topic]
-        first_record = driver.counters['records']
         wall = time.monotonic()
         end = wall + args.duration
         with progress_bar(args.duration, 'recording', 's', args.quiet) as bar:
@@ -695,19 +682,6 @@ def run_board_experiment(
                 return now >= end
 
             lab.wait_until(done, 'the recording', timeout=args.duration + 1, stop=stop)
-        # and it closes once the records the driver published in the window are in
-        # the bag (the recorder's backlog: up to seconds under load; a record lost
-        # on the way only ends this wait at its deadline)
-        published = driver.counters['records'] - first_record
-        drained = time.monotonic() + BOARD_DRAIN_S
-        lab.wait_until(
-            lambda: (
-                recorder.counts[currents_topic] - start >= published or time.monotonic() > drained
-            ),
-            "the recorder to catch up with the driver's records",
-            timeout=BOARD_DRAIN_S + 1,
-            stop=stop,
-        )
         recorder.close()  # finalised; the driver zeroes the currents when destroyed
         wall = time.monotonic() - wall
         samples = recorder.counts[currents_topic] - start

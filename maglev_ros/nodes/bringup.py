@@ -55,11 +55,9 @@ class Bringup:
         self.context = context
         self.nodes: list = []
         self._spinner: Spinner | None = None
-        self._own: list = []  # nodes spun on an executor thread of their own
-        self._own_spinners: list[Spinner] = []
         self._closed = False
 
-    def add(self, node, *, destroy_last: bool = False, own_executor: bool = False):
+    def add(self, node, *, destroy_last: bool = False):
         """Add a node (to the executor too once spinning) and return it.
 
         Parameters
@@ -69,10 +67,6 @@ class Bringup:
         destroy_last : bool
             Destroy it after every node added so far (e.g. a recorder: the bag
             is finalised once the nodes writing to it are gone).
-        own_executor : bool
-            Spin it on an executor thread of its own (e.g. a recorder in real
-            time: when the machine is loaded its backlog of callbacks then
-            does not delay the other nodes' commands and timers).
 
         Returns
         -------
@@ -83,20 +77,14 @@ class Bringup:
             self.nodes.insert(0, node)
         else:
             self.nodes.append(node)
-        if own_executor:
-            self._own.append(node)
-            if self._spinner is not None:
-                self._own_spinners.append(Spinner(self.context, [node]))
-        elif self._spinner is not None:
+        if self._spinner is not None:
             self._spinner.add_node(node)
         return node
 
     def start(self) -> None:
         """Start spinning the nodes added so far in a background thread (once)."""
         if self._spinner is None:
-            shared = [node for node in self.nodes if node not in self._own]
-            self._spinner = Spinner(self.context, shared)
-            self._own_spinners = [Spinner(self.context, [node]) for node in self._own]
+            self._spinner = Spinner(self.context, self.nodes)
 
     def wait_until(self, predicate, what: str, timeout: float = WAIT_S, stop=None) -> None:
         """Wait (polling every 10 ms) until ``predicate()`` is true.
@@ -137,9 +125,8 @@ class Bringup:
             return
         self._closed = True
         try:
-            for spinner in [self._spinner, *self._own_spinners]:
-                if spinner is not None:
-                    spinner.close()
+            if self._spinner is not None:
+                self._spinner.close()
             for node in reversed(self.nodes):
                 node.destroy_node()
         finally:

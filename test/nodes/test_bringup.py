@@ -70,23 +70,3 @@ def test_a_stop_request_or_a_shut_down_context_ends_the_wait(ctx):
         bringup.close()
         with pytest.raises(KeyboardInterrupt):
             bringup.wait_until(lambda: False, 'nothing')
-
-
-def test_a_node_on_its_own_executor_is_not_held_up_by_a_busy_one(ctx):
-    # a callback of the shared executor blocks it; the node on its own executor still
-    # gets its commands, whether added before or after the start
-    destroyed, release = [], threading.Event()
-    with Bringup(ctx) as bringup:
-        busy = bringup.add(Node('busy', context=ctx))
-        busy.create_timer(0.01, lambda: release.wait(30.0))
-        own = bringup.add(Listener('own', destroyed, context=ctx), own_executor=True)
-        bringup.start()
-        late = bringup.add(Listener('late', destroyed, context=ctx), own_executor=True)
-        excite = bringup.add(ExcitationNode(context=ctx), own_executor=True)
-        bringup.wait_until(lambda: excite.command_subscribers >= 2, 'discovery', timeout=30.0)
-        excite.publish_next()
-        bringup.wait_until(
-            lambda: own.received == 1 and late.received == 1, 'the command', timeout=30.0
-        )
-        release.set()
-    assert destroyed == ['late', 'own']  # last added first
