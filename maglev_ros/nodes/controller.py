@@ -64,7 +64,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
 from maglev_ros.control import MODES, ControllerConfig, ControllerConfigError, make_controller
-from maglev_ros.nodes.messages import diagnostic_array
+from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
 from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
@@ -224,10 +224,6 @@ def build_config(values: dict) -> ControllerNodeConfig:
     return ControllerNodeConfig(params, config, delay, start_enabled, period)
 
 
-def _stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
 class ControllerNode(Node):
     """The levitation controller (see the module docstring).
 
@@ -317,14 +313,14 @@ class ControllerNode(Node):
         self._last_sample_ns = self.get_clock().now().nanoseconds
         currents = self._valid_currents(msg)
         if currents is not None:
-            self._answer(self._samples.add(self._currents_part, _stamp_ns(msg), currents))
+            self._answer(self._samples.add(self._currents_part, stamp_ns(msg), currents))
 
     def _on_estimate(self, msg: Odometry) -> None:
-        self._answer(self._samples.add(1, _stamp_ns(msg), odometry_state(msg)))
+        self._answer(self._samples.add(1, stamp_ns(msg), odometry_state(msg)))
 
     def _on_field(self, k: int, msg: MagneticField) -> None:
         f = msg.magnetic_field
-        self._answer(self._samples.add(k, _stamp_ns(msg), (f.x, f.y, f.z)))
+        self._answer(self._samples.add(k, stamp_ns(msg), (f.x, f.y, f.z)))
 
     def _answer(self, samples) -> None:
         """Publish one command per released sample, in stamp order."""

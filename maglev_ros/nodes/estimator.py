@@ -39,7 +39,7 @@ from rclpy.node import Node
 from sensor_msgs.msg import JointState, MagneticField
 
 from maglev_ros.estimation import FILTERS, EstimatorConfig, EstimatorConfigError, make_estimator
-from maglev_ros.nodes.messages import diagnostic_array
+from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
 from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, SENSOR_QOS
@@ -222,10 +222,6 @@ def build_config(values: dict) -> EstimatorNodeConfig:
     return EstimatorNodeConfig(params, config, period, wait)
 
 
-def _stamp_ns(msg) -> int:
-    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
-
-
 class EstimatorNode(Node):
     """The state estimator (see the module docstring).
 
@@ -275,11 +271,11 @@ class EstimatorNode(Node):
 
     def _on_field(self, k: int, msg: MagneticField) -> None:
         f = msg.magnetic_field
-        for sample in self._samples.add(k, _stamp_ns(msg), (f.x, f.y, f.z)):
+        for sample in self._samples.add(k, stamp_ns(msg), (f.x, f.y, f.z)):
             self._estimate(sample)
 
     def _on_currents(self, msg: JointState) -> None:
-        for sample in self._samples.add(self.n_sensors, _stamp_ns(msg), tuple(msg.effort)):
+        for sample in self._samples.add(self.n_sensors, stamp_ns(msg), tuple(msg.effort)):
             self._estimate(sample)
 
     def _estimate(self, sample: ReleasedSample) -> None:

@@ -59,7 +59,7 @@ from std_srvs.srv import Trigger
 
 from maglev_ros.bags.errors import BagError
 from maglev_ros.bags.live import ChannelIdentifier, StampAligner
-from maglev_ros.nodes.messages import diagnostic_array
+from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer, number
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
@@ -350,9 +350,7 @@ class IdentifierNode(Node):
         return self.identifier.arx.samples
 
     def _on_message(self, topic: str, msg, stamped: bool) -> None:
-        stamp = None
-        if stamped:
-            stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        stamp = stamp_ns(msg) if stamped else None
         for name, message in self.aligner.add(topic, stamp, message=msg):
             try:
                 error = self.identifier.add(name, message)

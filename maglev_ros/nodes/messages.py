@@ -23,6 +23,7 @@ __all__ = [
     'field_message',
     'odometry_message',
     'split_stamp',
+    'stamp_ns',
 ]
 
 
@@ -35,6 +36,17 @@ def split_stamp(t_ns: int) -> tuple[int, int]:
         Time, ns.
     """
     return t_ns // 1_000_000_000, t_ns % 1_000_000_000
+
+
+def stamp_ns(msg) -> int:
+    """Return a stamped message's header stamp in ns (the inverse of :func:`split_stamp`).
+
+    Parameters
+    ----------
+    msg : message with a ``std_msgs/Header`` ``header``
+        E.g. MagneticField, JointState, Odometry.
+    """
+    return msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
 
 
 def _set_field(msg: MagneticField, values: Sequence[float]) -> None:
