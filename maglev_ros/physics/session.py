@@ -373,7 +373,8 @@ class SimulationSession:
         batch : SampleBatch or None
             The samples stepped (None: none due, paused or crashed).
         wait : float
-            s to wait before the next call (0: call again at once).
+            s from ``now`` to the next burst (after a burst too: stepping
+            takes part of it; 0 when behind: call again at once).
         """
         if self.paused or self.sim.crashed:
             self._pace = None  # pacing restarts on resume
@@ -389,8 +390,9 @@ class SimulationSession:
             base, done = now - dt, 0
             due = 1
         batch = self._burst(due)
-        self._pace = (base, done + len(batch) + batch.crashed)
-        return batch, 0.0
+        done += len(batch) + batch.crashed
+        self._pace = (base, done)
+        return batch, max(base + (done + self.burst) * dt - now, 0.0)
 
     def _burst(self, count: int) -> SampleBatch:
         """Step up to ``count`` samples with the held command (fewer on a crash)."""
