@@ -57,13 +57,21 @@ _SIM = [
     ('sensor_noise', 1e-4),
     ('sensor_quantization', 0.098e-3),
     ('seed', 0),
+    ('wait_for_controller', True),
+    ('start_subscribers', 1),
 ]
 _EST = [('params', 'maggy_v2'), ('sensor_noise', 1e-4), ('quantization', 0.098e-3)]
 _CTRL = [('params', 'maggy_v2'), ('mode', 'lqr')]
 
 
-def composed_child() -> int:
-    """Run simulator, estimator and controller in this process until SIGINT."""
+def composed_child(control_rate: float) -> int:
+    """Run simulator, estimator and controller in this process until SIGINT.
+
+    Parameters
+    ----------
+    control_rate : float
+        Estimates and commands per second, Hz (the launch file's ``control_rate``).
+    """
     from rclpy.parameter import Parameter
 
     from maglev_ros.nodes.controller import ControllerNode, ControllerParameterError
@@ -74,8 +82,15 @@ def composed_child() -> int:
     def build(cls, values):
         return lambda: cls(parameter_overrides=[Parameter(k, value=v) for k, v in values])
 
+    est = [*_EST, ('publish_rate', control_rate)]
+    ctrl = [
+        *_CTRL,
+        ('sample_rate', control_rate),
+        ('trigger', 'estimate'),
+        ('input_timeout', 0.02),
+    ]
     return run_nodes(
-        [build(SimulatorNode, _SIM), build(EstimatorNode, _EST), build(ControllerNode, _CTRL)],
+        [build(SimulatorNode, _SIM), build(EstimatorNode, est), build(ControllerNode, ctrl)],
         [sys.argv[0]],
         'closed_loop_realtime',
         (SimulatorParameterError, EstimatorParameterError, ControllerParameterError),
@@ -185,6 +200,10 @@ def run_setup(label: str, argv: list[str], env: dict, seconds: float, z_eq: floa
             proc.wait()
         observer.close()
     pos = observer.positions()[n0:n1]
+    if not len(pos):
+        print(f'{label}: no sample in the {seconds:g} s window; output:\n' + ''.join(lines[-20:]))
+        nan = np.full(3, np.nan)
+        return {'rms': nan, 'worst': nan, 'crashed': True, 'cpu': 0.0}
     err = pos - np.array([0.0, 0.0, z_eq])
     crashed = any('magnet crashed' in line for line in lines)
     rms = np.sqrt(np.mean(err**2, axis=0))
@@ -208,10 +227,16 @@ def main() -> int:
     ap.add_argument('--seconds', type=float, default=60.0, help='s of wall time per set-up')
     ap.add_argument('--only', choices=('composed', 'launch'), help='one set-up only')
     ap.add_argument('--install', type=Path, help='colcon install prefix of maglev_ros')
+    ap.add_argument(
+        '--control-rate',
+        type=float,
+        default=1000.0,
+        help='estimates and commands per second, Hz (default 1000: one per 1 ms burst)',
+    )
     ap.add_argument('--composed-child', action='store_true', help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.composed_child:
-        return composed_child()
+        return composed_child(args.control_rate)
     if not args.seconds > 0:
         print(f'closed_loop_realtime: error: --seconds must be > 0, got {args.seconds}')
         return 2
@@ -229,7 +254,13 @@ def main() -> int:
     results = {}
     print(f'load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs', flush=True)
     if args.only in (None, 'composed'):
-        argv = [sys.executable, __file__, '--composed-child']
+        argv = [
+            sys.executable,
+            __file__,
+            '--composed-child',
+            '--control-rate',
+            str(args.control_rate),
+        ]
         results['composed'] = run_setup('composed', argv, env, args.seconds, z_eq)
     if args.only in (None, 'launch'):
         launch_env = dict(env)
@@ -248,6 +279,7 @@ def main() -> int:
             )
             launch_env['PATH'] = os.pathsep.join([str(Path(sys.executable).parent), env['PATH']])
         argv = ['ros2', 'launch', 'maglev_ros', 'closed_loop.launch.xml']
+        argv.append(f'control_rate:={args.control_rate}')
         results['launch'] = run_setup('launch', argv, launch_env, args.seconds, z_eq)
     if len(results) == 2:
         c, s = results['composed'], results['launch']

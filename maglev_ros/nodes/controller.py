@@ -63,6 +63,8 @@ from sensor_msgs.msg import JointState, MagneticField
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
+from maglev_ros.cdr import ODOMETRY_VALUES
+from maglev_ros.cdr.reader import RawFieldReader
 from maglev_ros.control import MODES, ControllerConfig, ControllerConfigError, make_controller
 from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
@@ -71,6 +73,7 @@ from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_Q
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.nodes.sample_assembly import SampleAssembler
 from maglev_ros.nodes.state_messages import odometry_state
+from maglev_ros.physics.kernels import odometry_state_values
 from maglev_ros.topics import (
     BASE_FRAME,
     COMMAND_TOPIC,
@@ -92,6 +95,7 @@ __all__ = [
 ]
 
 NODE_NAME = 'maglev_controller'
+TRIGGERS = ('sample', 'estimate')
 _DEFAULT = ControllerConfig()
 _LEVELS = {
     'OK': DiagnosticStatus.OK,
@@ -120,6 +124,9 @@ class ControllerNodeConfig:
         Enabled at start.
     diagnostics_period : float
         s of the node's clock between diagnostics.
+    trigger : {'sample', 'estimate'}
+        What a command answers: each sample (the lockstep contract) or each
+        estimate message (real time at the estimator's ``publish_rate``).
     """
 
     params: str
@@ -127,6 +134,7 @@ class ControllerNodeConfig:
     delay_commands: bool
     start_enabled: bool
     diagnostics_period: float
+    trigger: str = 'sample'
 
 
 def _parameter_set(name: str, value: str) -> str:
@@ -188,6 +196,13 @@ PARAMETERS = ParameterTable(
         'diagnostics_period': Param(
             0.5, 's of the node clock between diagnostics', check=number(0, above=True)
         ),
+        'trigger': Param(
+            'sample',
+            'sample: one command per sample (currents + estimate of a stamp; lockstep), '
+            'estimate: one command per estimate (LQR in real time at the estimator '
+            'publish_rate; sample_rate is then that rate)',
+            check=choice(*TRIGGERS),
+        ),
     },
 )
 
@@ -217,11 +232,16 @@ def build_config(values: dict) -> ControllerNodeConfig:
     delay = v.pop('delay_commands')
     start_enabled = v.pop('start_enabled')
     period = v.pop('diagnostics_period')
+    trigger = v.pop('trigger')
     try:
         config = ControllerConfig.from_mapping(v)
     except ControllerConfigError as err:
         raise ControllerParameterError(str(err)) from None
-    return ControllerNodeConfig(params, config, delay, start_enabled, period)
+    if trigger == 'estimate' and config.mode != 'lqr':
+        raise ControllerParameterError(
+            f"trigger 'estimate' needs mode 'lqr' (the PD reads the fields), got {config.mode!r}"
+        )
+    return ControllerNodeConfig(params, config, delay, start_enabled, period, trigger)
 
 
 class ControllerNode(Node):
@@ -265,14 +285,26 @@ class ControllerNode(Node):
         self._msg = Float64MultiArray()
         self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
-        self.create_subscription(JointState, CURRENTS_TOPIC, self._on_currents, SENSOR_QOS)
-        if self.lqr:
-            self.create_subscription(Odometry, ESTIMATE_TOPIC, self._on_estimate, SENSOR_QOS)
+        self.per_estimate = cfg.trigger == 'estimate'
+        if self.per_estimate:  # no pairing: the estimate alone (its currents: the last command)
+            self._last_estimate_ns: int | None = None
+            self._estimate_reader = RawFieldReader('nav_msgs/msg/Odometry', ODOMETRY_VALUES)
+            self.create_subscription(
+                Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS, raw=True
+            )
+            self.create_timer(cfg.controller.input_timeout, self._check_stale)
         else:
-            for k in range(self.n_sensors):
-                self.create_subscription(
-                    MagneticField, field_topic(k), lambda m, k=k: self._on_field(k, m), SENSOR_QOS
-                )
+            self.create_subscription(JointState, CURRENTS_TOPIC, self._on_currents, SENSOR_QOS)
+            if self.lqr:
+                self.create_subscription(Odometry, ESTIMATE_TOPIC, self._on_estimate, SENSOR_QOS)
+            else:
+                for k in range(self.n_sensors):
+                    self.create_subscription(
+                        MagneticField,
+                        field_topic(k),
+                        lambda m, k=k: self._on_field(k, m),
+                        SENSOR_QOS,
+                    )
         self.create_subscription(PoseStamped, REFERENCE_TOPIC, self._on_reference, 10)
         self.create_service(SetBool, CONTROLLER_ENABLE_SERVICE, self._on_enable)
         self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
@@ -317,6 +349,40 @@ class ControllerNode(Node):
 
     def _on_estimate(self, msg: Odometry) -> None:
         self._answer(self._samples.add(1, stamp_ns(msg), odometry_state(msg)))
+
+    def _on_estimate_only(self, raw: bytes) -> None:
+        """``trigger: estimate``: one command per estimate, with its own stamp."""
+        self._last_sample_ns = self._last_estimate_ns = self.get_clock().now().nanoseconds
+        read = self._estimate_reader.read(raw)
+        if read is None:
+            self.get_logger().error(
+                f'{ESTIMATE_TOPIC}: message not read: expected a nav_msgs/Odometry '
+                '(little-endian CDR)',
+                throttle_duration_sec=1.0,
+            )
+            return
+        stamp, values = read
+        self._publish(self.controller.command(stamp * 1e-9, odometry_state_values(values)))
+
+    def _check_stale(self) -> None:
+        """``trigger: estimate``: no estimate for ``input_timeout`` of the node's clock.
+
+        The core's watchdog sees only the stamps of the estimates that come;
+        when they stop, this timer commands zero currents (once) and reports
+        the ERROR. The first estimate after it re-arms the core's way
+        (``rearm_samples`` in a row).
+        """
+        last = self._last_estimate_ns
+        if last is None or not self.context.ok():
+            return
+        now = self.get_clock().now().nanoseconds
+        if now - last > self.config.controller.input_timeout * 1e9:
+            self._last_estimate_ns = None  # one zero command per silence
+            last_t = self.controller.watchdog.last_input or 0.0
+            # the core's answer to a missing input, input_timeout after the last one
+            self._publish(
+                self.controller.command(last_t + 2 * self.config.controller.input_timeout)
+            )
 
     def _on_field(self, k: int, msg: MagneticField) -> None:
         f = msg.magnetic_field

@@ -111,6 +111,15 @@ class SampleAssembler:
             self._newest_part[part] = stamp
         if stamp > self._newest:
             self._newest = stamp
+        if len(self._pending) == 1:
+            # the usual case, one sample in flight: it goes once complete; incomplete,
+            # no part of a later stamp can have come (that sample would be pending)
+            for v in row:  # (not `None in row`: == on numpy parts)
+                if v is None:
+                    return []
+            del self._pending[stamp]
+            self.released = stamp
+            return [ReleasedSample(stamp, tuple(row))]
         return self._release()
 
     def _release(self) -> list[ReleasedSample]:

@@ -192,8 +192,14 @@ PARAMETERS = ParameterTable(
         ),
         'start_subscribers': Param(
             0,
-            f'lockstep: subscribers of {contract.CURRENTS_TOPIC} to wait for at start',
+            f'subscribers of {contract.CURRENTS_TOPIC} to wait for at start (lockstep; '
+            'real time with wait_for_controller)',
             check=integer(0),
+        ),
+        'wait_for_controller': Param(
+            False,
+            f'realtime: start only once a {contract.COMMAND_TOPIC} publisher and '
+            'start_subscribers subscribers exist (a free magnet waits for its controller)',
         ),
         'sensors': Param(
             [],
@@ -324,7 +330,8 @@ class SimulatorNode(Node):
         if cfg.mode == 'lockstep':
             self.create_timer(min(0.05, cfg.command_timeout / 4), self._lockstep_watch)
         else:
-            self._publish(self.session.start(time.monotonic()))
+            if not cfg.wait_for_controller:
+                self._publish(self.session.start(time.monotonic()))
             self._thread = threading.Thread(
                 target=self._realtime_loop, name='maglev-simulator', daemon=True
             )
@@ -478,10 +485,7 @@ class SimulatorNode(Node):
                 return
             now = time.monotonic()
             if not session.started:
-                if (
-                    self.count_publishers(contract.COMMAND_TOPIC) >= 1
-                    and self.currents_subscribers >= self.config.start_subscribers
-                ):
+                if self._graph_ready():
                     self._publish(session.start(now))
                 return
             age = now - session.waiting_since
@@ -492,7 +496,28 @@ class SimulatorNode(Node):
                 )
                 self._publish(batch)
 
+    def _graph_ready(self) -> bool:
+        """Return True once a command publisher and the currents subscribers exist."""
+        return (
+            self.count_publishers(contract.COMMAND_TOPIC) >= 1
+            and self.currents_subscribers >= self.config.start_subscribers
+        )
+
     def _realtime_loop(self) -> None:
+        if not self.session.started:  # wait_for_controller
+            self.get_logger().info(f'waiting for a {contract.COMMAND_TOPIC} publisher')
+            while not self._stop.wait(0.01):
+                try:
+                    ready = self._graph_ready()
+                except Exception:  # the context shut down (signal) while waiting
+                    if self.context.ok() and not self._stop.is_set():
+                        raise
+                    return
+                if ready:
+                    with self._lock:
+                        self._publish(self.session.start(time.monotonic()))
+                    self.get_logger().info('controller found: stepping in real time')
+                    break
         while not self._stop.is_set():
             now = time.monotonic()
             try:

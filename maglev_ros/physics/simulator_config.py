@@ -65,6 +65,10 @@ class SimulatorConfig:
         Hz of wall time (0: no markers).
     diagnostics_period : float
         s between diagnostics messages.
+    wait_for_controller : bool
+        Real time: step from the first sample on only once a command publisher
+        and ``start_subscribers`` subscribers of ``maglev/currents`` exist (the
+        lockstep rule), so a free magnet does not fall before the controller is up.
     """
 
     params: str
@@ -90,6 +94,7 @@ class SimulatorConfig:
     publish_clock: bool
     marker_rate: float
     diagnostics_period: float
+    wait_for_controller: bool = False
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:

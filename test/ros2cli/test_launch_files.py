@@ -179,17 +179,24 @@ def test_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2, tmp_path
     the one ERROR line tolerated.
     """
     bag = tmp_path / 'closed_loop_bag'
+    # listening before the launch (types given: no discovery needed): the simulator
+    # starts with its controller, and a magnet lost on a loaded machine stops the samples
+    estimates = ros2.start('topic', 'echo', '--once', '/maglev/state/estimate',
+                           'nav_msgs/msg/Odometry')  # fmt: skip
+    commands = ros2.start('topic', 'echo', '--once', '/maglev/currents/command',
+                          'std_msgs/msg/Float64MultiArray')  # fmt: skip
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml', 'record:=true',
                         f'bag:={bag}', 'sample_rate:=1000.0')  # fmt: skip
     launch.wait_for(r'\[maglev_simulator\]: .* realtime at', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
-    echo = echo_once(ros2, '/maglev/state/estimate')
-    assert echo.returncode == 0, echo.stdout + echo.stderr
-    estimate = first_message(echo.stdout)
+    assert estimates.wait(START_TIMEOUT) == 0, estimates.output()
+    estimate = first_message(estimates.output())
     assert estimate['child_frame_id'] == 'maglev_magnet', estimate
     assert len(estimate['pose']['covariance']) == 36
-    a_command(ros2)
+    assert commands.wait(START_TIMEOUT) == 0, commands.output()
+    data = first_message(commands.output())['data']
+    assert len(data) == 4 and all(abs(v) <= 1.0 for v in data), data
     time.sleep(RUN_S)
     stop_like_terminal(launch, tolerate=CRASH)
     assert_bag_complete(
