@@ -18,7 +18,8 @@ Measured by an observer node in this script's process (its own executor
 thread; messages stored raw, with their arrival time):
 
 * **real-time factor**: ``maglev/currents`` messages received over
-  ``--seconds`` of wall time, against 5000/s (``sample_rate``);
+  ``--seconds`` of wall time, against the simulator's ``sample_rate`` (5000 Hz
+  unless overridden);
 * **sensor-to-command latency**: for each command on
   ``maglev/currents/command``, the time from the arrival (at the observer)
   of the ``maglev/currents`` message of the sample it answers to the
@@ -29,8 +30,8 @@ thread; messages stored raw, with their arrival time):
   checks the counts agree;
 * **the baseline, in the same run**: a bare rclpy ping-pong in the same
   layout and executor kind -- a pinger publishing stamped JointState
-  messages at 5 kHz in bursts as the simulator paces them (``pace_period``,
-  1 ms), two echo nodes relaying each message (``bench/ping`` ->
+  messages at the simulator's ``sample_rate`` in bursts as the simulator
+  paces them (``pace_period``, 1 ms), two echo nodes relaying each message (``bench/ping`` ->
   ``bench/echo`` -> ``bench/pong``, as currents -> estimate -> command) --
   with the latency measured the same way (ping arrival to pong arrival,
   matched by stamp). Printed: the ratio of the loop's median and 99th
@@ -67,7 +68,6 @@ from pathlib import Path
 import numpy as np
 from process_cpu import Processes, cpu_seconds, thread_cpu_seconds
 
-RATE = 5000.0
 DOMAIN = 78  # ROS_DOMAIN_ID of the runs (localhost only)
 NODES = ('simulator', 'estimator', 'controller', 'identifier', 'recorder')
 GRAPH_PARAMETERS = {
@@ -188,9 +188,9 @@ def composed_graph_child(values: dict[str, dict]) -> int:
 
 
 class _Pinger:
-    """Publishes stamped JointState pings at ``RATE`` in bursts every ``pace`` s."""
+    """Publishes stamped JointState pings at ``rate`` Hz in bursts every ``pace`` s."""
 
-    def __init__(self, context=None, pace: float = 1e-3) -> None:
+    def __init__(self, rate: float, context=None, pace: float = 1e-3) -> None:
         import rclpy
         from sensor_msgs.msg import JointState
 
@@ -202,6 +202,7 @@ class _Pinger:
         self.msg.effort = [0.0] * 4
         self.sent = 0
         self.start = None
+        self.rate = rate
         self.node.create_timer(pace, self.tick)
 
     def tick(self) -> None:
@@ -212,9 +213,9 @@ class _Pinger:
             if self.pub.get_subscription_count() < 2:  # echo_1 and the observer
                 return
             self.start = now
-        due = int((now - self.start) * RATE) + 1
+        due = int((now - self.start) * self.rate) + 1
         for k in range(self.sent, min(due, self.sent + 50)):
-            sec, nanosec = split_stamp(1_000_000_000 + k * 200_000)
+            sec, nanosec = split_stamp(1_000_000_000 + round(k * 1e9 / self.rate))
             self.msg.header.stamp.sec, self.msg.header.stamp.nanosec = sec, nanosec
             self.pub.publish(self.msg)
             self.sent = k + 1
@@ -232,18 +233,20 @@ def _echo(name: str, source: str, target: str, context=None):
     return node
 
 
-def pingpong_child(which: list[str]) -> int:
+def pingpong_child(which: list[str], rate: float) -> int:
     """Run pinger and/or echo nodes in this process on the package's executor until SIGINT.
 
     Parameters
     ----------
     which : list of str
         Some of ``pinger``, ``echo_1``, ``echo_2``.
+    rate : float
+        Pings per second, Hz.
     """
     from maglev_ros.nodes.runtime import run_nodes
 
     factories = {
-        'pinger': lambda: _Pinger().node,
+        'pinger': lambda: _Pinger(rate).node,
         'echo_1': lambda: _echo('bench_echo_1', PING, ECHO),
         'echo_2': lambda: _echo('bench_echo_2', ECHO, PONG),
     }
@@ -352,7 +355,9 @@ def _window(procs: Processes, seconds: float, observer: Observer):
     return t0, t1, names, cpu, threads
 
 
-def run_graph(label: str, commands: list[list[str]], env: dict, seconds: float) -> dict:
+def run_graph(
+    label: str, commands: list[list[str]], env: dict, seconds: float, rate: float
+) -> dict:
     """Run the graph, resume the simulator once matched, measure; print and return figures.
 
     Parameters
@@ -365,6 +370,8 @@ def run_graph(label: str, commands: list[list[str]], env: dict, seconds: float) 
         Their environment.
     seconds : float
         s of wall time measured.
+    rate : float
+        Samples (pings) per second expected, Hz.
     """
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
@@ -411,7 +418,7 @@ def run_graph(label: str, commands: list[list[str]], env: dict, seconds: float) 
     command_arrival = np.array([t for t, _ in answers], dtype=np.int64)
     crashed = any('crashed' in line for line in procs.lines)
     in_window = (arrival >= t0) & (arrival < t1)
-    rtf = int(in_window.sum()) / (RATE * wall)
+    rtf = int(in_window.sum()) / (rate * wall)
     # command j answers sample j (every node had every sample from the first)
     n = min(arrival.size, command_arrival.size)
     order_ok = bool(np.all(np.diff(stamps) > 0))
@@ -433,7 +440,9 @@ def run_graph(label: str, commands: list[list[str]], env: dict, seconds: float) 
     return {'rtf': rtf, 'median': med, 'p99': p99, 'cpu': total / wall, 'crashed': crashed}
 
 
-def run_pingpong(label: str, commands: list[list[str]], env: dict, seconds: float) -> dict:
+def run_pingpong(
+    label: str, commands: list[list[str]], env: dict, seconds: float, rate: float
+) -> dict:
     """Run the ping-pong, measure; print and return figures.
 
     Parameters
@@ -446,6 +455,8 @@ def run_pingpong(label: str, commands: list[list[str]], env: dict, seconds: floa
         Their environment.
     seconds : float
         s of wall time measured.
+    rate : float
+        Samples (pings) per second expected, Hz.
     """
     from sensor_msgs.msg import JointState
 
@@ -472,7 +483,8 @@ def run_pingpong(label: str, commands: list[list[str]], env: dict, seconds: floa
     n_pings = sum(1 for t, _ in pings if t0 <= t < t1)
     med, p99 = _percentiles(latency)
     print(
-        f'{label}: {n_pings} pings in {wall:.1f} s = {n_pings / (RATE * wall):.3f} of 5 kHz; '
+        f'{label}: {n_pings} pings in {wall:.1f} s = {n_pings / (rate * wall):.3f} of '
+        f'{rate:g} Hz; '
         f'ping-to-pong latency (two echoes) median {med:.0f} us, 99th percentile {p99:.0f} us '
         f'({latency.size} pongs)'
     )
@@ -495,7 +507,7 @@ def main() -> int:
     if args.child == 'graph':
         return composed_graph_child(json.loads(args.values))
     if args.child:
-        return pingpong_child(args.child.split(','))
+        return pingpong_child(args.child.split(','), float(args.values))
     try:
         if not args.seconds > 0:
             raise BenchmarkArgumentError(f'--seconds must be > 0, got {args.seconds}')
@@ -528,19 +540,20 @@ def main() -> int:
             except Exception as err:  # noqa: BLE001 - a YAML value that does not parse
                 print(f'closed_loop_graph: error: --param: {err}', file=sys.stderr)
                 return 2
+            rate = float(values['simulator'].get('sample_rate', 5000.0))
             if layout == 'composed':
                 graph = [[py, me, '--child', 'graph', '--values', json.dumps(values)]]
-                pingpong = [[py, me, '--child', ','.join(_PINGPONG)]]
+                pingpong = [[py, me, '--child', ','.join(_PINGPONG), '--values', str(rate)]]
             else:
                 graph = [
                     [py, '-m', f'maglev_ros.nodes.{node}', '--ros-args']
                     + [a for k, v in values[node].items() for a in ('-p', f'{k}:={_yaml_text(v)}')]
                     for node in NODES
                 ]
-                pingpong = [[py, me, '--child', w] for w in _PINGPONG]
+                pingpong = [[py, me, '--child', w, '--values', str(rate)] for w in _PINGPONG]
             results[layout] = (
-                run_graph(f'graph {layout}', graph, env, args.seconds),
-                run_pingpong(f'ping-pong {layout}', pingpong, env, args.seconds),
+                run_graph(f'graph {layout}', graph, env, args.seconds, rate),
+                run_pingpong(f'ping-pong {layout}', pingpong, env, args.seconds, rate),
             )
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
