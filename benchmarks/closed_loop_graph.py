@@ -20,7 +20,9 @@ thread; messages stored raw, with their arrival time):
 * **real-time factor**: ``maglev/currents`` messages received over
   ``--seconds`` of wall time, against the simulator's ``sample_rate`` (5000 Hz
   unless overridden);
-* **sensor-to-command latency**: for each command on
+* **sensor-to-command latency** (only while the graph keeps up: once more than
+  the 1000 samples the queues keep wait unanswered, nodes may have lost samples
+  and the latency is reported as not valid): for each command on
   ``maglev/currents/command``, the time from the arrival (at the observer)
   of the ``maglev/currents`` message of the sample it answers to the
   command's arrival. The simulator starts paused and is resumed once every
@@ -88,6 +90,8 @@ GRAPH_PARAMETERS = {
     'identifier': {},
     'recorder': {'storage': 'mcap'},  # path: a temporary directory
 }
+DEPTH = 1000  # messages kept by SENSOR_QOS
+_PROFILE_ENV = 'CLOSED_LOOP_GRAPH_PROFILE'  # composed child: cProfile dump path
 PING, ECHO, PONG = 'bench/ping', 'bench/echo', 'bench/pong'
 _PINGPONG = ('pinger', 'echo_1', 'echo_2')
 
@@ -184,7 +188,54 @@ def composed_graph_child(values: dict[str, dict]) -> int:
 
     # the recorder first: destroyed last, once the nodes writing to it are gone
     order = ['recorder', 'simulator', 'estimator', 'controller', 'identifier']
-    return run_nodes([build(n) for n in order], [sys.argv[0]], 'closed_loop_graph', errors)
+    profile_path = os.environ.get(_PROFILE_ENV)
+    if not profile_path:
+        return run_nodes([build(n) for n in order], [sys.argv[0]], 'closed_loop_graph', errors)
+    import cProfile
+
+    profiler = cProfile.Profile()  # the executor's (main) thread only
+    try:
+        return profiler.runcall(
+            run_nodes, [build(n) for n in order], [sys.argv[0]], 'closed_loop_graph', errors
+        )
+    finally:
+        profiler.dump_stats(profile_path)
+
+
+def print_profile(path: Path, top: int = 12) -> None:
+    """Print the executor thread's time per node callback and the top functions by own time.
+
+    Parameters
+    ----------
+    path : Path
+        A ``cProfile`` dump of the composed graph.
+    top : int
+        Functions listed.
+    """
+    import pstats
+
+    stats = pstats.Stats(str(path))
+    total = stats.total_tt
+    print(
+        f'    profile of the executor thread (cProfile, wall time: waiting for the CPU and '
+        f'idle time count; {total:.1f} s, start-up included):'
+    )
+    rows = []
+    for (file, _, func), (_, _, _, cumtime, _) in stats.stats.items():
+        if '/maglev_ros/nodes/' in file and (
+            func.startswith('_on_') or func in ('publish', 'on_message')  # on_message: recorder
+        ):
+            rows.append((cumtime, f'{Path(file).stem}.{func}'))
+    for cumtime, name in sorted(rows, reverse=True)[:top]:
+        print(f'        {name:<40} {100 * cumtime / total:5.1f} % (with callees)')
+    own = sorted(
+        ((tottime, f'{Path(file).name}:{func}') for (file, _, func), (_, _, tottime, _, _)
+         in stats.stats.items()),
+        reverse=True,
+    )[:top]  # fmt: skip
+    print('      own time:')
+    for tottime, name in own:
+        print(f'        {name:<40} {100 * tottime / total:5.1f} %')
 
 
 class _Pinger:
@@ -422,20 +473,27 @@ def run_graph(
     # command j answers sample j (every node had every sample from the first)
     n = min(arrival.size, command_arrival.size)
     order_ok = bool(np.all(np.diff(stamps) > 0))
-    lag = arrival.size - command_arrival.size  # samples not answered yet when stopped
+    # samples received but not answered yet at each command: beyond the queues' depth
+    # (SENSOR_QOS keeps 1000) a node may have lost samples and the pairing is void
+    backlog = np.searchsorted(arrival, command_arrival[:n], side='right') - np.arange(1, n + 1)
     pair = (command_arrival[:n] >= t0) & (command_arrival[:n] < t1)
     latency = command_arrival[:n][pair] - arrival[:n][pair]
-    med, p99 = _percentiles(latency)
+    worst = int(backlog[: int(np.searchsorted(command_arrival[:n], t1))].max(initial=0))
+    valid = order_ok and worst < DEPTH and not (latency.size and latency.min() < 0)
+    med, p99 = _percentiles(latency) if valid else (float('nan'), float('nan'))
     print(
         f'{label}: {int(in_window.sum())} samples in {wall:.1f} s = real-time factor {rtf:.3f}; '
         f'sensor-to-command latency median {med:.0f} us, 99th percentile {p99:.0f} us '
-        f'({latency.size} commands; {command_arrival.size} commands for {arrival.size} samples '
-        f'at the end, stamps increasing {order_ok}); crashed {crashed}'
+        f'({latency.size} commands; largest backlog {worst} samples; stamps increasing '
+        f'{order_ok}); crashed {crashed}'
     )
-    if lag < 0 or not order_ok or (latency.size and latency.min() < 0):
-        print('    WARNING: commands do not pair with samples one to one: latency doubtful')
-    elif lag > 100:
-        print(f'    {lag} samples were not answered yet when stopped: the graph fell behind')
+    if not valid:
+        why = (
+            f'the graph fell behind by {worst} samples, more than the queues keep ({DEPTH})'
+            if worst >= DEPTH
+            else 'commands do not pair with samples one to one'
+        )
+        print(f'    latency not valid: {why}')
     total = _cpu_report(names, cpu, threads, wall)
     return {'rtf': rtf, 'median': med, 'p99': p99, 'cpu': total / wall, 'crashed': crashed}
 
@@ -501,6 +559,11 @@ def main() -> int:
         '--param', action='append', default=[], metavar='NODE:NAME:=VALUE',
         help='override a node parameter (YAML value), e.g. controller:sample_rate:=1000.0',
     )  # fmt: skip
+    ap.add_argument(
+        '--profile', action='store_true',
+        help='composed: profile the executor thread (cProfile; slows it) and print where '
+        'its time goes',
+    )  # fmt: skip
     ap.add_argument('--child', help=argparse.SUPPRESS)
     ap.add_argument('--values', help=argparse.SUPPRESS)
     args = ap.parse_args()
@@ -551,19 +614,29 @@ def main() -> int:
                     for node in NODES
                 ]
                 pingpong = [[py, me, '--child', w, '--values', str(rate)] for w in _PINGPONG]
+            graph_env = env
+            if args.profile and layout == 'composed':
+                graph_env = env | {_PROFILE_ENV: str(tmp / 'composed.prof')}
             results[layout] = (
-                run_graph(f'graph {layout}', graph, env, args.seconds, rate),
+                run_graph(f'graph {layout}', graph, graph_env, args.seconds, rate),
                 run_pingpong(f'ping-pong {layout}', pingpong, env, args.seconds, rate),
             )
+        if args.profile and (tmp / 'composed.prof').exists():
+            print_profile(tmp / 'composed.prof')
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     print('summary (targets: real-time factor >= 1.0, latency within 2x the ping-pong):')
     for layout, (g, p) in results.items():
+        if np.isnan(g['median']):
+            latency = 'latency not valid (the graph fell behind)'
+        else:
+            latency = (
+                f'latency over the ping-pong (baseline, same run): median '
+                f'{g["median"] / p["median"]:.2f}x ({g["median"]:.0f} / {p["median"]:.0f} us), '
+                f'99th percentile {g["p99"] / p["p99"]:.2f}x ({g["p99"]:.0f} / {p["p99"]:.0f} us)'
+            )
         print(
-            f'  {layout:<9} real-time factor {g["rtf"]:.3f}; latency over the ping-pong '
-            f'(baseline, same run): median {g["median"] / p["median"]:.2f}x '
-            f'({g["median"]:.0f} / {p["median"]:.0f} us), 99th percentile '
-            f'{g["p99"] / p["p99"]:.2f}x ({g["p99"]:.0f} / {p["p99"]:.0f} us); graph CPU '
+            f'  {layout:<9} real-time factor {g["rtf"]:.3f}; {latency}; graph CPU '
             f'{100 * g["cpu"]:.0f} % of a core'
         )
     return 0
