@@ -546,6 +546,8 @@ def run_pingpong(
         f'ping-to-pong latency (two echoes) median {med:.0f} us, 99th percentile {p99:.0f} us '
         f'({latency.size} pongs)'
     )
+    if n_pings < 0.99 * rate * wall or latency.size < 0.99 * n_pings:
+        print('    the ping-pong fell behind: its latency is queueing, not transport')
     total = _cpu_report(names, cpu, threads, wall)
     return {'median': med, 'p99': p99, 'cpu': total / wall}
 
