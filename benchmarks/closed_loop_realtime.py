@@ -37,14 +37,12 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import numpy as np
+from process_cpu import Processes, cpu_seconds
 
 RATE = 5000.0
 DOMAIN = 77  # ROS_DOMAIN_ID of the runs (localhost only)
@@ -97,34 +95,6 @@ def composed_child(control_rate: float) -> int:
     )
 
 
-def _cpu_seconds(pid: int) -> float:
-    """Return the CPU time (user + system) of a process, s (0 once it is gone)."""
-    try:
-        fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
-    except OSError:
-        return 0.0
-    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
-
-
-def _processes(root: int) -> dict[int, str]:
-    """Return ``root`` and its descendants: pid -> short name (the node name if any)."""
-    import psutil
-
-    out = {}
-    try:
-        procs = [psutil.Process(root), *psutil.Process(root).children(recursive=True)]
-    except psutil.NoSuchProcess:
-        return out
-    for p in procs:
-        try:
-            cmd = p.cmdline()
-        except psutil.Error:
-            continue
-        name = next((a.split(':=')[1] for a in cmd if a.startswith('__node:=')), None)
-        out[p.pid] = name or ' '.join(Path(a).name for a in cmd[:3])
-    return out
-
-
 class Observer:
     """Stores ``maglev/state/true`` messages raw in a background executor."""
 
@@ -169,35 +139,24 @@ class Observer:
 def run_setup(label: str, argv: list[str], env: dict, seconds: float, z_eq: float) -> dict:
     """Start ``argv`` (own process group), observe for ``seconds``, Ctrl-C it; print figures."""
     observer = Observer()
-    proc = subprocess.Popen(
-        argv, env=env, start_new_session=True, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
-    lines: list[str] = []
-    reader = threading.Thread(target=lambda: lines.extend(proc.stdout), daemon=True)
-    reader.start()
+    procs = Processes([argv], env)
     try:
         deadline = time.monotonic() + 180.0  # the first start compiles numba kernels
-        while not observer.raw and time.monotonic() < deadline and proc.poll() is None:
+        while not observer.raw and time.monotonic() < deadline and procs.running():
             time.sleep(0.1)
         if not observer.raw:
-            raise SystemExit(f'{label}: no maglev/state/true; output:\n' + ''.join(lines[-40:]))
+            raise SystemExit(f'{label}: no maglev/state/true; output:\n' + procs.tail())
         time.sleep(1.0)  # all processes up and steady
-        pids = _processes(proc.pid)
-        cpu0 = {pid: _cpu_seconds(pid) for pid in pids}
+        pids = procs.names()
+        cpu0 = {pid: cpu_seconds(pid) for pid in pids}
         n0, t0 = len(observer.raw), time.monotonic()
         print(f'{label}: running {seconds:g} s ...', flush=True)
         time.sleep(seconds)
         wall = time.monotonic() - t0
-        cpu = {pid: _cpu_seconds(pid) - cpu0[pid] for pid in pids}
+        cpu = {pid: cpu_seconds(pid) - cpu0[pid] for pid in pids}
         n1 = len(observer.raw)
     finally:
-        os.killpg(proc.pid, signal.SIGINT)
-        try:
-            proc.wait(timeout=30.0)
-        except subprocess.TimeoutExpired:
-            os.killpg(proc.pid, signal.SIGKILL)
-            proc.wait()
+        procs.stop()
         observer.close()
     pos = observer.positions()[n0:n1]
     if not len(pos):
@@ -205,7 +164,7 @@ def run_setup(label: str, argv: list[str], env: dict, seconds: float, z_eq: floa
         nan = np.full(3, np.nan)
         return {'rms': nan, 'worst': nan, 'crashed': True, 'cpu': 0.0}
     err = pos - np.array([0.0, 0.0, z_eq])
-    crashed = any('magnet crashed' in line for line in lines)
+    crashed = any('magnet crashed' in line for line in procs.lines)
     rms = np.sqrt(np.mean(err**2, axis=0))
     worst = np.max(np.abs(err), axis=0)
     print(

@@ -1,0 +1,648 @@
+"""The whole closed-loop graph in real time: real-time factor, sensor-to-command latency, CPU.
+
+Issue 10, point 5. The graph: the simulator (``mode: realtime``, 5 kHz, V2,
+magnet free, coil dynamics, 0.1 mT noise, 0.098 mT steps, one sample of
+sensor delay), the estimator (KF), the controller (LQR), the identifier (its
+defaults: ARX 2 2 1 of sensor 0's Bx against ux) and the recorder (its
+default topics, an MCAP bag in a temporary directory, deleted after), in two
+layouts:
+
+``composed``
+    all five nodes in one process on the package's executor
+    (:func:`maglev_ros.nodes.runtime.run_nodes`: one EventsExecutor);
+``separate``
+    one process per node, ``python -m maglev_ros.nodes.<node> --ros-args -p ...``
+    (what ``ros2 run`` starts; no install tree needed).
+
+Measured by an observer node in this script's process (its own executor
+thread; messages stored raw, with their arrival time):
+
+* **real-time factor**: ``maglev/currents`` messages received over
+  ``--seconds`` of wall time, against the simulator's ``sample_rate`` (5000 Hz
+  unless overridden);
+* **sensor-to-command latency** (only while the graph keeps up: once more than
+  the 1000 samples the queues keep wait unanswered, nodes may have lost samples
+  and the latency is reported as not valid): for each command on
+  ``maglev/currents/command``, the time from the arrival (at the observer)
+  of the ``maglev/currents`` message of the sample it answers to the
+  command's arrival. The simulator starts paused and is resumed once every
+  node has matched its topics, so every node gets every sample from the
+  first and the controller answers each sample exactly once, in stamp order
+  (its contract): command ``j`` answers the ``j``-th sample. The script
+  checks the counts agree;
+* **the baseline, in the same run**: a bare rclpy ping-pong in the same
+  layout and executor kind -- a pinger publishing stamped JointState
+  messages at the simulator's ``sample_rate`` in bursts as the simulator
+  paces them (``pace_period``, 1 ms), two echo nodes relaying each message (``bench/ping`` ->
+  ``bench/echo`` -> ``bench/pong``, as currents -> estimate -> command) --
+  with the latency measured the same way (ping arrival to pong arrival,
+  matched by stamp). Printed: the ratio of the loop's median and 99th
+  percentile to the ping-pong's (target: within 2x);
+* **CPU** of each process from ``/proc`` over the window, in % of one core;
+  for the composed process also per thread (the simulator's stepping
+  thread, the executor's, DDS's).
+
+Node parameters can be overridden: ``--param NODE:NAME:=VALUE`` (NODE one of
+simulator, estimator, controller, identifier, recorder; VALUE in YAML, as
+``ros2 run ... -p``), e.g. ``--param controller:sample_rate:=1000.0``.
+
+Usage::
+
+    python benchmarks/closed_loop_graph.py                       # 20 s per set-up
+    python benchmarks/closed_loop_graph.py --seconds 10 --only composed
+    python benchmarks/closed_loop_graph.py --param simulator:pace_period:=0.0005
+
+Run it on a quiet machine: on a loaded 2-core machine the 5 kHz graph falls
+behind real time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+from process_cpu import Processes, cpu_seconds, thread_cpu_seconds
+
+DOMAIN = 78  # ROS_DOMAIN_ID of the runs (localhost only)
+NODES = ('simulator', 'estimator', 'controller', 'identifier', 'recorder')
+GRAPH_PARAMETERS = {
+    'simulator': {
+        'params': 'maggy_v2',
+        'magnet': 'free',
+        'mode': 'realtime',
+        'coil_dynamics': True,
+        'sensor_delay': 1,
+        'sensor_noise': 1e-4,
+        'sensor_quantization': 0.098e-3,
+        'seed': 0,
+        'start_paused': True,  # resumed once every node has matched its topics
+        'marker_rate': 0.0,
+    },
+    'estimator': {'params': 'maggy_v2', 'sensor_noise': 1e-4, 'quantization': 0.098e-3},
+    'controller': {'params': 'maggy_v2', 'mode': 'lqr'},
+    'identifier': {},
+    'recorder': {'storage': 'mcap'},  # path: a temporary directory
+}
+DEPTH = 1000  # messages kept by SENSOR_QOS
+_PROFILE_ENV = 'CLOSED_LOOP_GRAPH_PROFILE'  # composed child: cProfile dump path
+PING, ECHO, PONG = 'bench/ping', 'bench/echo', 'bench/pong'
+_PINGPONG = ('pinger', 'echo_1', 'echo_2')
+
+
+class BenchmarkArgumentError(ValueError):
+    """A command-line value is invalid."""
+
+
+def parse_param(text: str) -> tuple[str, str, str]:
+    """Split ``NODE:NAME:=VALUE``.
+
+    Parameters
+    ----------
+    text : str
+        The ``--param`` argument.
+
+    Returns
+    -------
+    (node, name, value) : tuple of str
+
+    Raises
+    ------
+    BenchmarkArgumentError
+        If the form or the node is wrong.
+    """
+    head, sep, value = text.partition(':=')
+    node, _, name = head.partition(':')
+    if not sep or not name or node not in NODES:
+        raise BenchmarkArgumentError(
+            f'--param {text!r}: expected NODE:NAME:=VALUE with NODE one of {", ".join(NODES)}'
+        )
+    return node, name, value
+
+
+def _yaml_text(value) -> str:
+    """Return a Python parameter value as ``-p name:=VALUE`` text (YAML)."""
+    return json.dumps(value) if not isinstance(value, str) else value
+
+
+def graph_parameters(overrides: list[str], bag: str) -> dict[str, dict]:
+    """Return the graph's parameters with the ``--param`` overrides (values parsed as YAML).
+
+    Parameters
+    ----------
+    overrides : list of str
+        ``NODE:NAME:=VALUE`` texts.
+    bag : str
+        The recorder's bag path.
+    """
+    import yaml
+
+    values = {node: dict(p) for node, p in GRAPH_PARAMETERS.items()}
+    values['recorder']['path'] = bag
+    for text in overrides:
+        node, name, value = parse_param(text)
+        values[node][name] = yaml.safe_load(value)
+    return values
+
+
+# ---------------------------------------------------------------------- children
+def _node_classes():
+    from maglev_ros.nodes import controller, estimator, identifier, recorder, simulator
+
+    errors = (
+        simulator.SimulatorParameterError, estimator.EstimatorParameterError,
+        controller.ControllerParameterError, identifier.IdentifierParameterError,
+        recorder.RecorderParameterError,
+    )  # fmt: skip
+    classes = dict(
+        simulator=simulator.SimulatorNode, estimator=estimator.EstimatorNode,
+        controller=controller.ControllerNode, identifier=identifier.IdentifierNode,
+        recorder=recorder.RecorderNode,
+    )  # fmt: skip
+    return classes, errors
+
+
+def composed_graph_child(values: dict[str, dict]) -> int:
+    """Run the five graph nodes in this process on one executor until SIGINT.
+
+    Parameters
+    ----------
+    values : dict
+        Node -> parameter name -> value.
+    """
+    from rclpy.parameter import Parameter
+
+    from maglev_ros.nodes.runtime import run_nodes
+
+    classes, errors = _node_classes()
+
+    def build(node):
+        overrides = [Parameter(k, value=v) for k, v in values[node].items()]
+        return lambda: classes[node](parameter_overrides=overrides)
+
+    # the recorder first: destroyed last, once the nodes writing to it are gone
+    order = ['recorder', 'simulator', 'estimator', 'controller', 'identifier']
+    profile_path = os.environ.get(_PROFILE_ENV)
+    if not profile_path:
+        return run_nodes([build(n) for n in order], [sys.argv[0]], 'closed_loop_graph', errors)
+    import cProfile
+
+    profiler = cProfile.Profile()  # the executor's (main) thread only
+    try:
+        return profiler.runcall(
+            run_nodes, [build(n) for n in order], [sys.argv[0]], 'closed_loop_graph', errors
+        )
+    finally:
+        profiler.dump_stats(profile_path)
+
+
+def print_profile(path: Path, top: int = 12) -> None:
+    """Print the executor thread's time per node callback and the top functions by own time.
+
+    Parameters
+    ----------
+    path : Path
+        A ``cProfile`` dump of the composed graph.
+    top : int
+        Functions listed.
+    """
+    import pstats
+
+    stats = pstats.Stats(str(path))
+    total = stats.total_tt
+    print(
+        f'    profile of the executor thread (cProfile, wall time: waiting for the CPU and '
+        f'idle time count; {total:.1f} s, start-up included):'
+    )
+    rows = []
+    for (file, _, func), (_, _, _, cumtime, _) in stats.stats.items():
+        if '/maglev_ros/nodes/' in file and (
+            func.startswith('_on_') or func in ('publish', 'on_message')  # on_message: recorder
+        ):
+            rows.append((cumtime, f'{Path(file).stem}.{func}'))
+    for cumtime, name in sorted(rows, reverse=True)[:top]:
+        print(f'        {name:<40} {100 * cumtime / total:5.1f} % (with callees)')
+    own = sorted(
+        ((tottime, f'{Path(file).name}:{func}') for (file, _, func), (_, _, tottime, _, _)
+         in stats.stats.items()),
+        reverse=True,
+    )[:top]  # fmt: skip
+    print('      own time:')
+    for tottime, name in own:
+        print(f'        {name:<40} {100 * tottime / total:5.1f} %')
+
+
+class _Pinger:
+    """Publishes stamped JointState pings at ``rate`` Hz in bursts every ``pace`` s."""
+
+    def __init__(self, rate: float, context=None, pace: float = 1e-3) -> None:
+        import rclpy
+        from sensor_msgs.msg import JointState
+
+        from maglev_ros.nodes.qos import SENSOR_QOS
+
+        self.node = rclpy.create_node('bench_pinger', context=context)
+        self.pub = self.node.create_publisher(JointState, PING, SENSOR_QOS)
+        self.msg = JointState()
+        self.msg.effort = [0.0] * 4
+        self.sent = 0
+        self.start = None
+        self.rate = rate
+        self.node.create_timer(pace, self.tick)
+
+    def tick(self) -> None:
+        from maglev_ros.nodes.messages import split_stamp
+
+        now = time.monotonic()
+        if self.start is None:
+            if self.pub.get_subscription_count() < 2:  # echo_1 and the observer
+                return
+            self.start = now
+        due = int((now - self.start) * self.rate) + 1
+        for k in range(self.sent, min(due, self.sent + 50)):
+            sec, nanosec = split_stamp(1_000_000_000 + round(k * 1e9 / self.rate))
+            self.msg.header.stamp.sec, self.msg.header.stamp.nanosec = sec, nanosec
+            self.pub.publish(self.msg)
+            self.sent = k + 1
+
+
+def _echo(name: str, source: str, target: str, context=None):
+    import rclpy
+    from sensor_msgs.msg import JointState
+
+    from maglev_ros.nodes.qos import SENSOR_QOS
+
+    node = rclpy.create_node(name, context=context)
+    pub = node.create_publisher(JointState, target, SENSOR_QOS)
+    node.create_subscription(JointState, source, pub.publish, SENSOR_QOS)
+    return node
+
+
+def pingpong_child(which: list[str], rate: float) -> int:
+    """Run pinger and/or echo nodes in this process on the package's executor until SIGINT.
+
+    Parameters
+    ----------
+    which : list of str
+        Some of ``pinger``, ``echo_1``, ``echo_2``.
+    rate : float
+        Pings per second, Hz.
+    """
+    from maglev_ros.nodes.runtime import run_nodes
+
+    factories = {
+        'pinger': lambda: _Pinger(rate).node,
+        'echo_1': lambda: _echo('bench_echo_1', PING, ECHO),
+        'echo_2': lambda: _echo('bench_echo_2', ECHO, PONG),
+    }
+    return run_nodes([factories[w] for w in which], [sys.argv[0]], 'closed_loop_graph', ())
+
+
+# ---------------------------------------------------------------------- observer
+class Observer:
+    """Stores the arrival time (ns, monotonic) and raw bytes of two streams.
+
+    Parameters
+    ----------
+    source, answer : (str, type, QoSProfile)
+        Topic, message class and QoS of the samples and of the answers.
+    """
+
+    def __init__(self, source, answer) -> None:
+        import rclpy
+
+        from maglev_ros.nodes.runtime import Spinner
+
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, args=[])
+        self.node = rclpy.create_node('closed_loop_graph_observer', context=self.context)
+        self.samples: list[tuple[int, bytes]] = []
+        self.answers: list[tuple[int, bytes]] = []
+        clock = time.monotonic_ns
+        for (topic, cls, qos), store in ((source, self.samples), (answer, self.answers)):
+            self.node.create_subscription(
+                cls, topic, lambda data, store=store: store.append((clock(), data)), qos, raw=True
+            )
+        self.source_type = source[1]
+        self.spinner = Spinner(self.context, [self.node])
+
+    def stamps(self, messages) -> np.ndarray:
+        """Header stamps of raw messages of the source's type, ns.
+
+        Parameters
+        ----------
+        messages : list of (int, bytes)
+            Arrival time and raw message.
+        """
+        from rclpy.serialization import deserialize_message
+
+        from maglev_ros.nodes.messages import stamp_ns
+
+        return np.array(
+            [stamp_ns(deserialize_message(d, self.source_type)) for _, d in messages],
+            dtype=np.int64,
+        )
+
+    def close(self) -> None:
+        """Stop spinning and shut the observer's context down."""
+        import rclpy
+
+        self.spinner.close()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def _percentiles(latency_ns: np.ndarray) -> tuple[float, float]:
+    """Median and 99th percentile, us."""
+    if latency_ns.size == 0:
+        return float('nan'), float('nan')
+    return tuple(float(v) * 1e-3 for v in np.percentile(latency_ns, [50, 99]))
+
+
+def _wait(predicate, what: str, procs: Processes, timeout: float = 180.0) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if not procs.running():
+            raise SystemExit(f'a process ended while waiting for {what}; output:\n{procs.tail()}')
+        if time.monotonic() > deadline:
+            raise SystemExit(f'timed out waiting for {what}; output:\n{procs.tail()}')
+        time.sleep(0.05)
+
+
+def _cpu_report(names: dict[int, str], cpu: dict[int, float], threads, wall: float) -> float:
+    """Print CPU per process (and per thread of a single process); return the total, s."""
+    for pid, name in names.items():
+        if cpu[pid] > 0.005 * wall:
+            print(f'    {name:<32} pid {pid:>7}: CPU {100 * cpu[pid] / wall:5.1f} % of a core')
+    if threads is not None:
+        for name, seconds in sorted(threads.items(), key=lambda kv: -kv[1]):
+            if seconds > 0.01 * wall:
+                print(f'        thread {name:<24}: {100 * seconds / wall:5.1f} %')
+    total = sum(cpu.values())
+    print(f'    total CPU {100 * total / wall:.1f} % of a core', flush=True)
+    return total
+
+
+def _window(procs: Processes, seconds: float, observer: Observer):
+    """Measure CPU over ``seconds`` of wall time; return (t0_ns, t1_ns, names, cpu, threads)."""
+    names = procs.names()
+    single = next(iter(names)) if len(names) == 1 else None
+    cpu0 = {pid: cpu_seconds(pid) for pid in names}
+    threads0 = thread_cpu_seconds(single) if single else None
+    t0 = time.monotonic_ns()
+    time.sleep(seconds)
+    t1 = time.monotonic_ns()
+    cpu = {pid: cpu_seconds(pid) - cpu0[pid] for pid in names}
+    threads = None
+    if single:
+        after = thread_cpu_seconds(single)
+        threads = {k: v - threads0.get(k, 0.0) for k, v in after.items()}
+    return t0, t1, names, cpu, threads
+
+
+def run_graph(
+    label: str, commands: list[list[str]], env: dict, seconds: float, rate: float
+) -> dict:
+    """Run the graph, resume the simulator once matched, measure; print and return figures.
+
+    Parameters
+    ----------
+    label : str
+        Set-up name.
+    commands : list of list of str
+        The processes' argv.
+    env : dict
+        Their environment.
+    seconds : float
+        s of wall time measured.
+    rate : float
+        Samples (pings) per second expected, Hz.
+    """
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from std_srvs.srv import SetBool
+
+    from maglev_ros import topics
+    from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
+
+    observer = Observer(
+        (topics.CURRENTS_TOPIC, JointState, SENSOR_QOS),
+        (topics.COMMAND_TOPIC, Float64MultiArray, LOCKSTEP_COMMAND_QOS),
+    )
+    node = observer.node
+    procs = Processes(commands, env)
+    try:
+        client = node.create_client(SetBool, topics.SIMULATOR_PAUSE_SERVICE)
+
+        def matched():
+            return (
+                node.count_subscribers(topics.CURRENTS_TOPIC) >= 5  # 4 nodes + observer
+                and node.count_subscribers(topics.ESTIMATE_TOPIC) >= 1
+                and node.count_publishers(topics.ESTIMATE_TOPIC) >= 1
+                and node.count_publishers(topics.COMMAND_TOPIC) >= 1
+                and node.count_subscribers(topics.COMMAND_TOPIC) >= 3  # sim, recorder, observer
+                and client.service_is_ready()
+            )
+
+        print(f'{label}: starting (the first start compiles numba kernels) ...', flush=True)
+        _wait(matched, 'the graph to match its topics', procs)
+        time.sleep(2.0)  # both ends of every match (readers and writers)
+        future = client.call_async(SetBool.Request(data=False))
+        _wait(future.done, 'the simulator to resume', procs, 30.0)
+        _wait(lambda: len(observer.answers) > 0, 'the first command', procs, 60.0)
+        time.sleep(1.0)  # steady
+        print(f'{label}: running {seconds:g} s ...', flush=True)
+        t0, t1, names, cpu, threads = _window(procs, seconds, observer)
+        samples, answers = list(observer.samples), list(observer.answers)
+    finally:
+        procs.stop()
+        observer.close()
+    wall = (t1 - t0) * 1e-9
+    arrival = np.array([t for t, _ in samples], dtype=np.int64)
+    stamps = observer.stamps(samples)
+    command_arrival = np.array([t for t, _ in answers], dtype=np.int64)
+    crashed = any('crashed' in line for line in procs.lines)
+    in_window = (arrival >= t0) & (arrival < t1)
+    rtf = int(in_window.sum()) / (rate * wall)
+    # command j answers sample j (every node had every sample from the first)
+    n = min(arrival.size, command_arrival.size)
+    order_ok = bool(np.all(np.diff(stamps) > 0))
+    # samples received but not answered yet at each command: beyond the queues' depth
+    # (SENSOR_QOS keeps 1000) a node may have lost samples and the pairing is void
+    backlog = np.searchsorted(arrival, command_arrival[:n], side='right') - np.arange(1, n + 1)
+    pair = (command_arrival[:n] >= t0) & (command_arrival[:n] < t1)
+    latency = command_arrival[:n][pair] - arrival[:n][pair]
+    worst = int(backlog[: int(np.searchsorted(command_arrival[:n], t1))].max(initial=0))
+    valid = order_ok and worst < DEPTH and not (latency.size and latency.min() < 0)
+    med, p99 = _percentiles(latency) if valid else (float('nan'), float('nan'))
+    print(
+        f'{label}: {int(in_window.sum())} samples in {wall:.1f} s = real-time factor {rtf:.3f}; '
+        f'sensor-to-command latency median {med:.0f} us, 99th percentile {p99:.0f} us '
+        f'({latency.size} commands; largest backlog {worst} samples; stamps increasing '
+        f'{order_ok}); crashed {crashed}'
+    )
+    if not valid:
+        why = (
+            f'the graph fell behind by {worst} samples, more than the queues keep ({DEPTH})'
+            if worst >= DEPTH
+            else 'commands do not pair with samples one to one'
+        )
+        print(f'    latency not valid: {why}')
+    total = _cpu_report(names, cpu, threads, wall)
+    return {'rtf': rtf, 'median': med, 'p99': p99, 'cpu': total / wall, 'crashed': crashed}
+
+
+def run_pingpong(
+    label: str, commands: list[list[str]], env: dict, seconds: float, rate: float
+) -> dict:
+    """Run the ping-pong, measure; print and return figures.
+
+    Parameters
+    ----------
+    label : str
+        Set-up name.
+    commands : list of list of str
+        The processes' argv.
+    env : dict
+        Their environment.
+    seconds : float
+        s of wall time measured.
+    rate : float
+        Samples (pings) per second expected, Hz.
+    """
+    from sensor_msgs.msg import JointState
+
+    from maglev_ros.nodes.qos import SENSOR_QOS
+
+    observer = Observer((PING, JointState, SENSOR_QOS), (PONG, JointState, SENSOR_QOS))
+    procs = Processes(commands, env)
+    try:
+        print(f'{label}: starting ...', flush=True)
+        _wait(lambda: len(observer.answers) > 0, 'the first pong', procs, 120.0)
+        time.sleep(1.0)
+        print(f'{label}: running {seconds:g} s ...', flush=True)
+        t0, t1, names, cpu, threads = _window(procs, seconds, observer)
+        pings, pongs = list(observer.samples), list(observer.answers)
+    finally:
+        procs.stop()
+        observer.close()
+    wall = (t1 - t0) * 1e-9
+    sent = dict(zip(observer.stamps(pings).tolist(), (t for t, _ in pings), strict=True))
+    back = [(t, s) for (t, _), s in zip(pongs, observer.stamps(pongs).tolist(), strict=True)]
+    latency = np.array(
+        [t - sent[s] for t, s in back if t0 <= t < t1 and s in sent], dtype=np.int64
+    )
+    n_pings = sum(1 for t, _ in pings if t0 <= t < t1)
+    med, p99 = _percentiles(latency)
+    print(
+        f'{label}: {n_pings} pings in {wall:.1f} s = {n_pings / (rate * wall):.3f} of '
+        f'{rate:g} Hz; '
+        f'ping-to-pong latency (two echoes) median {med:.0f} us, 99th percentile {p99:.0f} us '
+        f'({latency.size} pongs)'
+    )
+    if n_pings < 0.99 * rate * wall or latency.size < 0.99 * n_pings:
+        print('    the ping-pong fell behind: its latency is queueing, not transport')
+    total = _cpu_report(names, cpu, threads, wall)
+    return {'median': med, 'p99': p99, 'cpu': total / wall}
+
+
+def main() -> int:
+    """Run the set-ups and print their figures."""
+    ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    ap.add_argument('--seconds', type=float, default=20.0, help='s of wall time per set-up')
+    ap.add_argument('--only', choices=('composed', 'separate'), help='one layout only')
+    ap.add_argument(
+        '--param', action='append', default=[], metavar='NODE:NAME:=VALUE',
+        help='override a node parameter (YAML value), e.g. controller:sample_rate:=1000.0',
+    )  # fmt: skip
+    ap.add_argument(
+        '--profile', action='store_true',
+        help='composed: profile the executor thread (cProfile; slows it) and print where '
+        'its time goes',
+    )  # fmt: skip
+    ap.add_argument('--child', help=argparse.SUPPRESS)
+    ap.add_argument('--values', help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.child == 'graph':
+        return composed_graph_child(json.loads(args.values))
+    if args.child:
+        return pingpong_child(args.child.split(','), float(args.values))
+    try:
+        if not args.seconds > 0:
+            raise BenchmarkArgumentError(f'--seconds must be > 0, got {args.seconds}')
+        for text in args.param:
+            parse_param(text)
+    except BenchmarkArgumentError as err:
+        print(f'closed_loop_graph: error: {err}', file=sys.stderr)
+        return 2
+    env = os.environ | {
+        'ROS_DOMAIN_ID': str(DOMAIN),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'PYTHONUNBUFFERED': '1',
+        'RCUTILS_COLORIZED_OUTPUT': '0',
+    }
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+    tmp = Path(tempfile.mkdtemp(prefix='closed_loop_graph_'))
+    py, me = sys.executable, str(Path(__file__).resolve())
+    print(
+        f'load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs, nice '
+        f'{os.nice(0)}; overrides: {" ".join(args.param) or "none"}',
+        flush=True,
+    )
+    results = {}
+    try:
+        for layout in ('composed', 'separate'):
+            if args.only not in (None, layout):
+                continue
+            try:
+                values = graph_parameters(args.param, str(tmp / f'bag_{layout}'))
+            except Exception as err:  # noqa: BLE001 - a YAML value that does not parse
+                print(f'closed_loop_graph: error: --param: {err}', file=sys.stderr)
+                return 2
+            rate = float(values['simulator'].get('sample_rate', 5000.0))
+            if layout == 'composed':
+                graph = [[py, me, '--child', 'graph', '--values', json.dumps(values)]]
+                pingpong = [[py, me, '--child', ','.join(_PINGPONG), '--values', str(rate)]]
+            else:
+                graph = [
+                    [py, '-m', f'maglev_ros.nodes.{node}', '--ros-args']
+                    + [a for k, v in values[node].items() for a in ('-p', f'{k}:={_yaml_text(v)}')]
+                    for node in NODES
+                ]
+                pingpong = [[py, me, '--child', w, '--values', str(rate)] for w in _PINGPONG]
+            graph_env = env
+            if args.profile and layout == 'composed':
+                graph_env = env | {_PROFILE_ENV: str(tmp / 'composed.prof')}
+            results[layout] = (
+                run_graph(f'graph {layout}', graph, graph_env, args.seconds, rate),
+                run_pingpong(f'ping-pong {layout}', pingpong, env, args.seconds, rate),
+            )
+        if args.profile and (tmp / 'composed.prof').exists():
+            print_profile(tmp / 'composed.prof')
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    print('summary (targets: real-time factor >= 1.0, latency within 2x the ping-pong):')
+    for layout, (g, p) in results.items():
+        if np.isnan(g['median']):
+            latency = 'latency not valid (the graph fell behind)'
+        else:
+            latency = (
+                f'latency over the ping-pong (baseline, same run): median '
+                f'{g["median"] / p["median"]:.2f}x ({g["median"]:.0f} / {p["median"]:.0f} us), '
+                f'99th percentile {g["p99"] / p["p99"]:.2f}x ({g["p99"]:.0f} / {p["p99"]:.0f} us)'
+            )
+        print(
+            f'  {layout:<9} real-time factor {g["rtf"]:.3f}; {latency}; graph CPU '
+            f'{100 * g["cpu"]:.0f} % of a core'
+        )
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
