@@ -160,7 +160,7 @@ def run_setup(label: str, argv: list[str], env: dict, seconds: float, z_eq: floa
         observer.close()
     pos = observer.positions()[n0:n1]
     if not len(pos):
-        print(f'{label}: no sample in the {seconds:g} s window; output:\n' + ''.join(lines[-20:]))
+        print(f'{label}: no sample in the {seconds:g} s window; output:\n' + procs.tail())
         nan = np.full(3, np.nan)
         return {'rms': nan, 'worst': nan, 'crashed': True, 'cpu': 0.0}
     err = pos - np.array([0.0, 0.0, z_eq])
