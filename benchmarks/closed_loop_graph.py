@@ -68,7 +68,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from process_cpu import Processes, cpu_seconds, thread_cpu_seconds
+from process_cpu import Processes, benchmark_environment, cpu_seconds, thread_cpu_seconds
 
 DOMAIN = 78  # ROS_DOMAIN_ID of the runs (localhost only)
 NODES = ('simulator', 'estimator', 'controller', 'identifier', 'recorder')
@@ -581,13 +581,7 @@ def main() -> int:
     except BenchmarkArgumentError as err:
         print(f'closed_loop_graph: error: {err}', file=sys.stderr)
         return 2
-    env = os.environ | {
-        'ROS_DOMAIN_ID': str(DOMAIN),
-        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-        'PYTHONUNBUFFERED': '1',
-        'RCUTILS_COLORIZED_OUTPUT': '0',
-    }
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+    env = benchmark_environment(DOMAIN)
     tmp = Path(tempfile.mkdtemp(prefix='closed_loop_graph_'))
     py, me = sys.executable, str(Path(__file__).resolve())
     print(

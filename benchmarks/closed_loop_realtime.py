@@ -42,7 +42,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from process_cpu import Processes, cpu_seconds
+from process_cpu import Processes, benchmark_environment, cpu_seconds
 
 RATE = 5000.0
 DOMAIN = 77  # ROS_DOMAIN_ID of the runs (localhost only)
@@ -203,13 +203,7 @@ def main() -> int:
     from maglev_ros.physics.equilibria import find_equilibria
 
     z_eq = find_equilibria(make_model('maggy_v2'))[0].z
-    env = os.environ | {
-        'ROS_DOMAIN_ID': str(DOMAIN),
-        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
-        'PYTHONUNBUFFERED': '1',
-        'RCUTILS_COLORIZED_OUTPUT': '0',
-    }
-    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+    env = benchmark_environment(DOMAIN)
     results = {}
     print(f'load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs', flush=True)
     if args.only in (None, 'composed'):

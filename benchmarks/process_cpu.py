@@ -14,9 +14,33 @@ import subprocess
 import threading
 from pathlib import Path
 
-__all__ = ['Processes', 'cpu_seconds', 'process_names', 'thread_cpu_seconds']
+__all__ = [
+    'Processes',
+    'benchmark_environment',
+    'cpu_seconds',
+    'process_names',
+    'thread_cpu_seconds',
+]
 
 _TICK = os.sysconf('SC_CLK_TCK')
+
+
+def benchmark_environment(domain: int) -> dict[str, str]:
+    """Return the environment of a benchmark's processes, and set its ROS part here too.
+
+    Parameters
+    ----------
+    domain : int
+        ``ROS_DOMAIN_ID`` of the run (discovery stays on localhost).
+    """
+    env = os.environ | {
+        'ROS_DOMAIN_ID': str(domain),
+        'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST',
+        'PYTHONUNBUFFERED': '1',
+        'RCUTILS_COLORIZED_OUTPUT': '0',
+    }
+    os.environ.update({k: env[k] for k in ('ROS_DOMAIN_ID', 'ROS_AUTOMATIC_DISCOVERY_RANGE')})
+    return env
 
 
 def _stat_cpu(path: Path) -> float:
