@@ -288,6 +288,7 @@ class ControllerNode(Node):
         self.per_estimate = cfg.trigger == 'estimate'
         if self.per_estimate:  # no pairing: the estimate alone (its currents: the last command)
             self._last_estimate_ns: int | None = None
+            self._estimates_seen = False
             self._estimate_reader = RawFieldReader('nav_msgs/msg/Odometry', ODOMETRY_VALUES)
             self.create_subscription(
                 Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS, raw=True
@@ -353,6 +354,7 @@ class ControllerNode(Node):
     def _on_estimate_only(self, raw: bytes) -> None:
         """``trigger: estimate``: one command per estimate, with its own stamp."""
         self._last_sample_ns = self._last_estimate_ns = self.get_clock().now().nanoseconds
+        self._estimates_seen = True
         read = self._estimate_reader.read(raw)
         if read is None:
             self.get_logger().error(
@@ -370,10 +372,16 @@ class ControllerNode(Node):
         The core's watchdog sees only the stamps of the estimates that come;
         when they stop, this timer commands zero currents (once) and reports
         the ERROR. The first estimate after it re-arms the core's way
-        (``rearm_samples`` in a row).
+        (``rearm_samples`` in a row). Before the first estimate it commands
+        zero currents every period: the controller is up and spinning (a
+        simulator with ``wait_for_controller`` starts on it).
         """
         last = self._last_estimate_ns
-        if last is None or not self.context.ok():
+        if not self.context.ok():
+            return
+        if last is None:
+            if not self._estimates_seen:  # ready: zero currents until the first estimate
+                self._publish(np.zeros(self.controller.n_inputs))
             return
         now = self.get_clock().now().nanoseconds
         if now - last > self.config.controller.input_timeout * 1e9:

@@ -198,7 +198,7 @@ PARAMETERS = ParameterTable(
         ),
         'wait_for_controller': Param(
             False,
-            f'realtime: start only once a {contract.COMMAND_TOPIC} publisher and '
+            f'realtime: start only once a first {contract.COMMAND_TOPIC} arrived and '
             'start_subscribers subscribers exist (a free magnet waits for its controller)',
         ),
         'sensors': Param(
@@ -505,10 +505,10 @@ class SimulatorNode(Node):
 
     def _realtime_loop(self) -> None:
         if not self.session.started:  # wait_for_controller
-            self.get_logger().info(f'waiting for a {contract.COMMAND_TOPIC} publisher')
+            self.get_logger().info(f'waiting for a first command on {contract.COMMAND_TOPIC}')
             while not self._stop.wait(0.01):
                 try:
-                    ready = self._graph_ready()
+                    ready = self._graph_ready() and self.counters['commands'] > 0
                 except Exception:  # the context shut down (signal) while waiting
                     if self.context.ok() and not self._stop.is_set():
                         raise

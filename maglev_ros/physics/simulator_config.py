@@ -66,9 +66,9 @@ class SimulatorConfig:
     diagnostics_period : float
         s between diagnostics messages.
     wait_for_controller : bool
-        Real time: step from the first sample on only once a command publisher
-        and ``start_subscribers`` subscribers of ``maglev/currents`` exist (the
-        lockstep rule), so a free magnet does not fall before the controller is up.
+        Real time: step from the first sample on only once a first command
+        arrived and ``start_subscribers`` subscribers of ``maglev/currents``
+        exist, so a free magnet does not fall before the controller is up.
     """
 
     params: str

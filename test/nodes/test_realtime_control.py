@@ -2,10 +2,11 @@
 
 * the estimator's ``publish_rate``: only the estimates of samples whose stamp
   is a multiple of the publishing period go out (the filter steps every sample);
-* the controller's ``trigger: estimate``: one command per estimate, and when
-  the estimates stop for ``input_timeout`` one zero command and an ERROR;
-* the simulator's ``wait_for_controller``: real time starts only once a
-  command publisher exists.
+* the controller's ``trigger: estimate``: zero commands while no estimate came
+  (it is up), one command per estimate, and when the estimates stop for
+  ``input_timeout`` one zero command and an ERROR;
+* the simulator's ``wait_for_controller``: real time starts only at the first
+  command.
 
 Messages are fed to the nodes' own callbacks as the raw bytes a ``raw=True``
 subscription delivers, so nothing here depends on the machine's speed but the
@@ -102,23 +103,28 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
     spinner = Spinner(ctx, [listener, ctrl])
     try:
         wait_for(lambda: ctrl._pub.get_subscription_count() >= 1, what='discovery')
+        # up and spinning, no estimate yet: zero commands every input_timeout (the
+        # simulator's wait_for_controller starts on the first)
+        wait_for(lambda: len(commands) >= 2, what='the ready commands')
+        assert all(list(c.data) == [0.0] * 4 for c in commands)
         x = x_eq.copy()
         x[0] += 2e-4  # 0.2 mm off in x: the LQR pushes back
         for k in range(5):
             ctrl._on_estimate_only(serialize_message(odometry_message((k + 1) * 1_000_000, x)))
-        wait_for(lambda: len(commands) >= 5, what='one command per estimate')
-        first = np.array(commands[0].data)
-        assert np.any(first != 0.0) and np.all(np.abs(first) <= 1.0)
+        answers = ctrl.commands  # published so far: the ready ones, then one per estimate
+        wait_for(lambda: len(commands) >= answers, what='one command per estimate')
+        pushed = [np.array(c.data) for c in commands[:answers] if any(c.data)]
+        assert len(pushed) == 5 and all(np.all(np.abs(c) <= 1.0) for c in pushed)
         # silence: after input_timeout (50 ms of the node's clock) one zero command
-        wait_for(lambda: len(commands) >= 6, timeout=60.0, what='the zero command')
-        assert list(commands[5].data) == [0.0] * 4
+        wait_for(lambda: len(commands) >= answers + 1, timeout=60.0, what='the zero command')
+        assert list(commands[answers].data) == [0.0] * 4
         wait_for(
             lambda: any(s.level == DiagnosticStatus.ERROR for s in diags),
             timeout=60.0,
             what='an ERROR on /diagnostics',
         )
         time.sleep(0.3)
-        assert len(commands) == 6  # once per silence
+        assert len(commands) == answers + 1  # once per silence, no more ready commands
     finally:
         spinner.close()
         ctrl.destroy_node()
@@ -135,11 +141,17 @@ def test_realtime_simulator_waits_for_its_controller(ctx):
     )
     spinner = Spinner(ctx, [sim])
     try:
-        time.sleep(0.5)
-        assert sim.counters['samples'] == 0 and not sim.session.started
         node = rclpy.create_node('a_controller', context=ctx)
-        node.create_publisher(Float64MultiArray, topics.COMMAND_TOPIC, 10)
-        wait_for(lambda: sim.counters['samples'] > 0, timeout=60.0, what='stepping')
+        pub = node.create_publisher(Float64MultiArray, topics.COMMAND_TOPIC, 10)
+        wait_for(lambda: sim.command_publishers >= 1, what='discovery')
+        time.sleep(0.5)  # a publisher is not yet a controller: no command, no step
+        assert sim.counters['samples'] == 0 and not sim.session.started
+
+        def commanded():
+            pub.publish(Float64MultiArray(data=[0.0] * 4))
+            return sim.counters['samples'] > 0
+
+        wait_for(commanded, timeout=60.0, period=0.05, what='stepping on the first command')
         node.destroy_node()
     finally:
         spinner.close()
