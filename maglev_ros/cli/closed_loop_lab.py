@@ -162,6 +162,9 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
             name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
             print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
             return stop.exit_status or 130
+        except RuntimeError as err:  # the graph did not come up or stopped answering
+            print(f'{PROG}: error: {err} (bag, if any, finalised in {bag})', file=sys.stderr)
+            return 1
         finally:
             for bar in bars.values():
                 bar.close()

@@ -9,18 +9,24 @@ The graph of the issue's main job, composed on one executor
   ``delay_commands``: the board's one sample of command latency) with its
   excitation (:mod:`maglev_ros.control.excitation`, an input disturbance
   starting with the recording);
-* once the magnet has settled: the online identifier and the recorder.
+* the online identifier (x and y field of sensor 0 against the pair inputs)
+  and the recorder (``record_from``: the first recorded sample on).
 
-Order of events. The magnet starts at rest at the equilibrium and levitates
-for ``settle`` s of simulated time; the simulator then pauses by itself after
-exactly that many samples (:meth:`SimulatorNode.pause_after`), the last
-sample's command waits in its queue, and the settling is checked on the true
-state (moving RMS of the position error over the last 0.1 s). The identifier
-and the recorder are added and discovery is awaited on both sides of every
-topic they read, then the simulation resumes and pauses again after exactly
-``samples`` more samples: the bag and the identifier get those samples, each
-with its command and excitation, and nothing else. The excitation's first
-sample is the first recorded one.
+Order of events. Discovery is awaited on both sides of every topic, then
+the magnet, at rest at the equilibrium, levitates for ``settle`` s of
+simulated time; the simulator pauses by itself after exactly that many
+samples (:meth:`SimulatorNode.pause_after`), the last sample's command waits
+in its queue, the settling is checked on the true state (RMS of the
+position error over the last 0.1 s) and the identifier is reset (its
+service). The simulation resumes and pauses again after exactly ``samples``
+more samples: the bag and the identifier get those samples, each with its
+command and excitation, and nothing else. The first recorded command is the
+first to carry the excitation (computed at the last settling sample and
+published, ``delay_commands``, for the next).
+
+Every node is there from the start: a subscription matched just before the
+recording could have its first messages handled after those of other
+topics, and the recorder would log them at the previous ``/clock``.
 """
 
 from __future__ import annotations
@@ -40,6 +46,8 @@ from maglev_ros.topics import (
     CURRENTS_TOPIC,
     ESTIMATE_TOPIC,
     EXCITATION_TOPIC,
+    IDENTIFIER_RESET_SERVICE,
+    REFERENCE_TOPIC,
     TRUE_STATE_TOPIC,
     command_channel,
     excitation_channel,
@@ -296,6 +304,7 @@ def run_closed_loop_lab(
     import os
 
     from rclpy.node import Node
+    from std_srvs.srv import Trigger
 
     from maglev_ros.nodes.bringup import Bringup
     from maglev_ros.nodes.controller import ControllerNode
@@ -379,29 +388,6 @@ def run_closed_loop_lab(
                 ),
             )
         )
-        watch_node = lab.add(Node('maglev_lab_settling', context=ctx))
-        watch = _SettleWatch(watch_node, z_eq, max(1, int(round(SETTLE_WINDOW * s.sample_rate))))
-        lab.start()
-        lab.wait_until(
-            lambda: (
-                sim.currents_subscribers >= 2
-                and sim.command_publishers >= 1
-                and _matched(est, CURRENTS_TOPIC, False) >= 1
-                and _matched(ctrl, CURRENTS_TOPIC, False) >= 1
-                and _matched(est, field_topic(0), False) >= 1
-                and _matched(est, ESTIMATE_TOPIC, True) >= 1
-                and _matched(ctrl, ESTIMATE_TOPIC, False) >= 1
-                and _matched(ctrl, COMMAND_TOPIC, True) >= 1
-                and _matched(watch_node, TRUE_STATE_TOPIC, False) >= 1
-            ),
-            'the simulator, estimator and controller',
-            stop=stop,
-        )
-        sim.pause_after(settle_n)
-        sim.set_paused(False)
-        _wait_paused(lab, sim, ctrl, settle_n, 'settling', report, stop)
-        watch.active = False
-        rms = watch.rms()
         ident = lab.add(
             IdentifierNode(
                 context=ctx,
@@ -420,11 +406,18 @@ def run_closed_loop_lab(
             RecorderNode(
                 context=ctx,
                 parameter_overrides=_overrides(
-                    path=str(bag), storage=s.storage, topics=topics, log_clock='topic'
+                    path=str(bag),
+                    storage=s.storage,
+                    topics=topics,
+                    log_clock='topic',
+                    record_from=(settle_n + 1) / s.sample_rate,  # the first recorded sample
                 ),
             ),
             destroy_last=True,  # finalises the bag once the others are gone
         )
+        watch_node = lab.add(Node('maglev_lab_settling', context=ctx))
+        watch = _SettleWatch(watch_node, z_eq, max(1, int(round(SETTLE_WINDOW * s.sample_rate))))
+        reset = watch_node.create_client(Trigger, IDENTIFIER_RESET_SERVICE)
         publishers = {  # topic: (publisher node, subscriptions it must have matched)
             **{
                 field_topic(k): (sim, 1 + (k in s.sensors) + (k == 0))  # estimator, recorder,
@@ -433,20 +426,39 @@ def run_closed_loop_lab(
             CURRENTS_TOPIC: (sim, 3),  # estimator, controller, recorder
             TRUE_STATE_TOPIC: (sim, 2),  # the settling watch, recorder
             CLOCK_TOPIC: (sim, 1),
+            ESTIMATE_TOPIC: (est, 1),
             COMMAND_TOPIC: (ctrl, 3),  # simulator, identifier, recorder
             EXCITATION_TOPIC: (ctrl, 1),
         }
+        lab.start()
         lab.wait_until(
             lambda: (
-                len(recorder.subscribed) == len(topics)
+                sim.command_publishers >= 1
+                and len(recorder.subscribed) == len(topics)
                 and recorder.metadata_complete
-                and all(_matched(recorder, t, False) >= 1 for t in topics)
-                and all(count >= 1 for count in _subscription_counts(ident))
+                and all(
+                    count >= 1
+                    for n in (est, ctrl, ident, recorder, watch_node)
+                    for count in _subscription_counts(n)
+                )  # fmt: skip
                 and all(_matched(n, t, True) >= k for t, (n, k) in publishers.items())
+                and reset.service_is_ready()
             ),
-            'the identifier and the recorder',
+            'the simulator, estimator, controller, identifier and recorder',
             stop=stop,
         )
+        sim.pause_after(settle_n)
+        sim.set_paused(False)
+        _wait_paused(lab, sim, ctrl, settle_n, 'settling', report, stop)
+        watch.active = False
+        rms = watch.rms()
+        # the identifier starts afresh with the first recorded sample: every settling
+        # sample reached it (one per command), then it is reset while nothing moves
+        lab.wait_until(
+            lambda: ident.samples >= settle_n + 1, 'the identifier (settling)', stop=stop
+        )
+        answer = reset.call_async(Trigger.Request())
+        lab.wait_until(answer.done, 'the identifier reset', stop=stop)
         wall = time.monotonic()
         sim.pause_after(last)
         sim.set_paused(False)
@@ -455,7 +467,7 @@ def run_closed_loop_lab(
         recorded = sim.sim.samples - settle_n
         lab.wait_until(
             lambda: (
-                all(recorder.counts['/' + t] >= recorded for t in topics if t != CLOCK_TOPIC)
+                all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)
                 and ident.samples >= recorded
             ),
             'the recorder and the identifier',
@@ -493,7 +505,9 @@ def run_closed_loop_lab(
 
 
 def _subscription_counts(node) -> list[int]:
-    return [sub.get_publisher_count() for sub in node.subscriptions]
+    """Count the publishers matched by each subscription of ``node`` (not the set-point)."""
+    skip = '/' + REFERENCE_TOPIC
+    return [sub.get_publisher_count() for sub in node.subscriptions if sub.topic_name != skip]
 
 
 def _wait_paused(lab, sim, ctrl, index, stage, report, stop, first: int = 0) -> None:
