@@ -425,7 +425,7 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
         raise UsageError(
             '--realtime: maglev-lab runs the closed loop in lockstep (exact samples, '
             'deterministic); on the wall clock use ros2 launch maglev_ros '
-            'closed_loop_lab.launch.xml'
+            'closed_loop_lab.launch.xml mode:=realtime delay_commands:=false'
         )
     if args.excitation == 'none' or args.amplitude == 0:
         raise UsageError('--amplitude must be > 0: the closed-loop IV needs the excitation')
