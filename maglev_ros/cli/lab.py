@@ -415,7 +415,7 @@ def _defaults(args: argparse.Namespace) -> None:
 def _check_closed_loop(args: argparse.Namespace) -> None:
     """Refuse what the closed-loop session does not run, saying what does."""
     if args.board or args.virtual_board:
-        option = '--board' if args.board else '--virtual-board'
+        option = f'--board {args.board}' if args.board else '--virtual-board'
         raise UsageError(
             f'{option}: maglev-lab runs the closed loop on the simulator only; against a '
             'board use ros2 launch maglev_ros closed_loop_lab_board.launch.xml port:=PATH, '
