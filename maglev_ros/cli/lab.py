@@ -121,9 +121,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         '--magnet',
         choices=('free', 'fixed', 'absent'),
-        default='free',
+        default=None,
         help='free (default): the closed-loop session (estimator, controller with its '
-        'excitation, identifier); fixed or absent: the open-loop session (excitation node)',
+        'excitation, identifier); fixed or absent: the open-loop session (excitation '
+        'node); with --board or --virtual-board the default is fixed',
     )
     p.add_argument('--field-model', choices=('fast', 'accurate', 'filament'), default='fast')
     p.add_argument('--sample-rate', type=positive_float, default=5000.0, help='Hz')
@@ -417,9 +418,9 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
     if args.board or args.virtual_board:
         option = f'--board {args.board}' if args.board else '--virtual-board'
         raise UsageError(
-            f'{option}: maglev-lab runs the closed loop on the simulator only; against a '
-            'board use ros2 launch maglev_ros closed_loop_lab_board.launch.xml port:=PATH, '
-            f'or add --magnet fixed for the open-loop session on the board'
+            f'{option} with --magnet free: maglev-lab runs the closed loop on the simulator '
+            'only; against a board use ros2 launch maglev_ros closed_loop_lab_board.launch.xml '
+            'port:=PATH, or leave --magnet free out for the open-loop session on the board'
         )
     if args.realtime:
         raise UsageError(
@@ -444,6 +445,8 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
+    if args.magnet is None:  # the closed loop, except on a board (the open-loop session)
+        args.magnet = 'fixed' if on_board(args) else 'free'
     if args.samples is not None and args.samples < 2:
         raise UsageError(f'--samples must be >= 2, got {args.samples}')
     if args.duration is None:

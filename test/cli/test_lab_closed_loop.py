@@ -80,8 +80,8 @@ def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_model
     'argv, match',
     [
         (['--realtime'], '--realtime: maglev-lab runs the closed loop in lockstep'),
-        (['--board', '/dev/ttyACM0'], 'board.launch.xml port:=PATH, or add --magnet fixed'),
-        (['--virtual-board'], '--virtual-board: maglev-lab runs the closed loop on the simulator'),
+        (['--board', '/dev/ttyACM0', '--magnet', 'free'], 'board.launch.xml port:=PATH'),
+        (['--virtual-board', '--magnet', 'free'], 'runs the closed loop on the simulator only'),
         (['--sensors', '0', '1'], 'the closed-loop session records and identifies sensor 0'),
         (['--check-band', '300', '10'], '--check-band must be LOW HIGH'),
         (['--amplitude', '0'], '--amplitude must be > 0'),
