@@ -58,6 +58,7 @@ __all__ = [
     'TRUE_STATE_TOPIC',
     'command_channel',
     'current_channel',
+    'excitation_channel',
     'field_channel',
     'field_topic',
     'sensor_frame',
@@ -191,6 +192,21 @@ def command_channel(coil: int) -> str:
     str
     """
     return f'{COMMAND_TOPIC}:data[{coil}]'
+
+
+def excitation_channel(coil: int) -> str:
+    """Channel spec of coil ``coil``'s excitation part (A), e.g. ``...excitation:data[0]``.
+
+    Parameters
+    ----------
+    coil : int
+        Coil index in :data:`COIL_NAMES` order.
+
+    Returns
+    -------
+    str
+    """
+    return f'{EXCITATION_TOPIC}:data[{coil}]'
 
 
 def _absolute_pattern(topic: str) -> str:

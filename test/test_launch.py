@@ -2,7 +2,7 @@
 
 Checked without the launch package: the XML is parsed with ``xml.etree``; an
 executable is a console script of this distribution, its node module's
-``_PARAMETERS`` are the parameters it declares.
+``PARAMETERS`` are the parameters it declares.
 """
 
 import importlib
@@ -33,7 +33,7 @@ def test_nodes_executables_and_parameters_exist(path):
         executable = node.get('exec')
         assert executable in scripts, f'{path.name}: no executable {executable!r}'
         module = importlib.import_module(scripts[executable].split(':')[0])
-        declared = set(module._PARAMETERS) | BUILT_IN
+        declared = set(module.PARAMETERS) | BUILT_IN
         for param in node.findall('param'):
             assert param.get('name') in declared, (
                 f'{path.name}: {executable} declares no parameter {param.get("name")!r}'
@@ -53,7 +53,12 @@ def test_lab_launch_exists(name):
 
 @pytest.mark.parametrize(
     'name, source',
-    [('closed_loop.launch.xml', 'simulator'), ('closed_loop_board.launch.xml', 'driver')],
+    [
+        ('closed_loop.launch.xml', 'simulator'),
+        ('closed_loop_board.launch.xml', 'driver'),
+        ('closed_loop_lab.launch.xml', 'simulator'),
+        ('closed_loop_lab_board.launch.xml', 'driver'),
+    ],
 )
 def test_closed_loop_launch_files_run_source_estimator_and_controller(name, source):
     root = ET.parse(LAUNCH / name).getroot()
@@ -86,3 +91,16 @@ def test_parameter_files_name_declared_parameters_with_their_types(path):
                     f'{path.name}: {name} = {value!r} is not a {type(default).__name__}'
                 )
                 assert value == default, f'{path.name}: {name} = {value!r}, default {default!r}'
+
+
+@pytest.mark.parametrize(
+    'name', ['closed_loop_lab.launch.xml', 'closed_loop_lab_board.launch.xml']
+)
+def test_closed_loop_lab_launch_files_excite_identify_and_record(name):
+    root = ET.parse(LAUNCH / name).getroot()
+    nodes = {node.get('exec'): node for node in root.findall('.//node')}
+    assert {'estimator', 'controller', 'identifier', 'recorder'} <= set(nodes), sorted(nodes)
+    params = {p.get('name'): p.get('value') for p in nodes['controller'].findall('param')}
+    assert params['excitation_signal'] == '$(var signal)'
+    recorded = {p.get('name'): p.get('value') for p in nodes['recorder'].findall('param')}
+    assert 'maglev/currents/excitation' in recorded['topics']

@@ -1,11 +1,20 @@
 """``maglev-lab``: the lab session as one command (pip-only friendly).
 
-Runs the simulator (lockstep), the excitation and the recorder as three nodes on
-one executor in this process, for a given simulated duration; then converts the
-bag into a data set (:func:`maglev_ros.bags.read_bag`: command inputs by log
-time, exact alignment), identifies one ARX model per field component against
-the excitation inputs, prints the fit on estimation and validation data and
-writes the plots::
+Closed loop (the magnet ``free``, the default; :mod:`maglev_ros.cli.closed_loop_lab`):
+the simulator (lockstep), estimator, controller with its excitation, the
+online identifier and the recorder run in this process; the magnet levitates
+and settles, exactly ``--samples`` samples are recorded and the seed's models
+(x, y and MIMO: ARX, IV on the excitation, ARMAX) are identified, checked
+against the physics and compared with the online identifier::
+
+    maglev-lab --out lab/
+
+Open loop (``--magnet fixed`` or ``absent``): runs the simulator (lockstep), the
+excitation and the recorder as three nodes on one executor in this process, for
+a given simulated duration; then converts the bag into a data set
+(:func:`maglev_ros.bags.read_bag`: command inputs by log time, exact alignment),
+identifies one ARX model per field component against the excitation inputs,
+prints the fit on estimation and validation data and writes the plots::
 
     maglev-lab --duration 5 --params maggy_v2 --magnet fixed --excitation prbs --out lab/
 
@@ -112,15 +121,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         '--magnet',
         choices=('free', 'fixed', 'absent'),
-        default='fixed',
-        help='levitating magnet (default fixed: no controller needed)',
+        default=None,
+        help='free (default): the closed-loop session (estimator, controller with its '
+        'excitation, identifier); fixed or absent: the open-loop session (excitation '
+        'node); with --board or --virtual-board the default is fixed',
     )
     p.add_argument('--field-model', choices=('fast', 'accurate', 'filament'), default='fast')
     p.add_argument('--sample-rate', type=positive_float, default=5000.0, help='Hz')
     p.add_argument('--no-coil', action='store_true', help='no coil L/R dynamics')
     p.add_argument('--delay', type=int, default=1, help='sensor delay in samples (default 1)')
     p.add_argument(
-        '--noise', type=non_negative_float, default=0.0, help='sensor noise, T rms (default 0)'
+        '--noise',
+        type=non_negative_float,
+        default=None,
+        help='sensor noise, T rms (default: 1e-4 closed loop, 0 open loop)',
+    )
+    p.add_argument(
+        '--quantization',
+        type=non_negative_float,
+        default=0.098e-3,
+        help='closed loop: sensor resolution, T per LSB (default 0.098e-3)',
     )
     p.add_argument('--seed', type=int, default=0, help='seed of noise and excitation')
     p.add_argument(
@@ -131,14 +151,19 @@ def build_parser() -> argparse.ArgumentParser:
         help='sensors to record and identify (default 0)',
     )
     p.add_argument('--excitation', choices=SIGNALS, default='prbs', help='input signal')
-    p.add_argument('--amplitude', type=non_negative_float, default=0.5, help='A (default 0.5)')
+    p.add_argument(
+        '--amplitude',
+        type=non_negative_float,
+        default=None,
+        help='A (default: 0.1 added to the closed loop, 0.5 open loop)',
+    )
     p.add_argument(
         '--band',
         type=float,
         nargs=2,
-        default=[0.0, 1.0],
+        default=None,
         metavar=('LOW', 'HIGH'),
-        help='band as fractions of Nyquist (default 0 1)',
+        help='band as fractions of Nyquist (default: 0 0.2 closed loop, 0 1 open loop)',
     )
     p.add_argument(
         '--pattern',
@@ -146,7 +171,42 @@ def build_parser() -> argparse.ArgumentParser:
         default='pairs',
         help='coil pattern (default pairs: +u on x+, -u on x-, same for y)',
     )
-    p.add_argument('--length', type=int, default=8191, help='samples per excitation period')
+    p.add_argument(
+        '--length',
+        type=int,
+        default=None,
+        help='samples per excitation period (default: --samples closed loop, 8191 open loop)',
+    )
+    closed = p.add_argument_group('closed loop (--magnet free)')
+    closed.add_argument(
+        '--settle',
+        type=positive_float,
+        default=1.0,
+        help='s of simulated levitation before the recording (default 1)',
+    )
+    closed.add_argument(
+        '--filter', choices=('kf', 'ekf', 'ukf'), default='kf', help='estimator (default kf)'
+    )
+    closed.add_argument(
+        '--instruments',
+        choices=('excitation', 'inputs'),
+        default='excitation',
+        help="IV instruments: the controller's excitation (default; unbiased in closed "
+        'loop) or the inputs (iv4, biased in closed loop)',
+    )
+    closed.add_argument(
+        '--check-band',
+        type=positive_float,
+        nargs=2,
+        default=[10.0, 300.0],
+        metavar=('LOW', 'HIGH'),
+        help='physics check band, Hz (default 10 300)',
+    )
+    closed.add_argument(
+        '--realtime',
+        action='store_true',
+        help='run on the wall clock (not supported by maglev-lab yet: see the error)',
+    )
     p.add_argument('--na', type=int, default=2, help='ARX order of A (default 2)')
     p.add_argument('--nb', type=int, default=2, help='ARX order of B per input (default 2)')
     p.add_argument(
@@ -329,7 +389,64 @@ def identify(data, na: int, nb: int, nk: int, split: float, quiet: bool = True):
         return identify_outputs(est, val, spec, ic='estimate')
 
 
+def closed_loop(args: argparse.Namespace) -> bool:
+    """Whether the session is the closed loop (the magnet free, the default).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments.
+    """
+    return getattr(args, 'magnet', 'free') == 'free'
+
+
+def _defaults(args: argparse.Namespace) -> None:
+    """Fill the settings whose defaults depend on the session (closed or open loop)."""
+    closed = closed_loop(args)
+    if args.noise is None:
+        args.noise = 1e-4 if closed else 0.0
+    if args.amplitude is None:
+        args.amplitude = 0.1 if closed else 0.5
+    if args.band is None:
+        args.band = [0.0, 0.2] if closed else [0.0, 1.0]
+    if args.length is None:
+        args.length = args.samples if closed else 8191
+
+
+def _check_closed_loop(args: argparse.Namespace) -> None:
+    """Refuse what the closed-loop session does not run, saying what does."""
+    if args.board or args.virtual_board:
+        option = f'--board {args.board}' if args.board else '--virtual-board'
+        raise UsageError(
+            f'{option} with --magnet free: maglev-lab runs the closed loop on the simulator '
+            'only; against a board use ros2 launch maglev_ros closed_loop_lab_board.launch.xml '
+            'port:=PATH, or leave --magnet free out for the open-loop session on the board'
+        )
+    if args.realtime:
+        raise UsageError(
+            '--realtime: maglev-lab runs the closed loop in lockstep (exact samples, '
+            'deterministic); on the wall clock use ros2 launch maglev_ros '
+            'closed_loop_lab.launch.xml mode:=realtime delay_commands:=false'
+        )
+    if args.excitation == 'none' or args.amplitude == 0:
+        raise UsageError('--amplitude must be > 0: the closed-loop IV needs the excitation')
+    if args.sensors != [0]:
+        raise UsageError(
+            f'--sensors: the closed-loop session records and identifies sensor 0 (the '
+            f"seed's models), got {args.sensors}"
+        )
+    if args.check_band[0] >= args.check_band[1]:
+        raise UsageError(f'--check-band must be LOW HIGH with LOW < HIGH, got {args.check_band}')
+    if args.check_band[1] > args.sample_rate / 2:
+        raise UsageError(
+            f'--check-band: HIGH must be at most Nyquist ({args.sample_rate / 2:g} Hz), '
+            f'got {args.check_band[1]:g}'
+        )
+
+
 def _check(args: argparse.Namespace) -> None:
+    if args.magnet is None:  # the closed loop, except on a board (the open-loop session)
+        args.magnet = 'fixed' if on_board(args) else 'free'
     if args.samples is not None and args.samples < 2:
         raise UsageError(f'--samples must be >= 2, got {args.samples}')
     if args.duration is None:
@@ -339,7 +456,7 @@ def _check(args: argparse.Namespace) -> None:
     if not 0.0 < args.split < 1.0:
         raise UsageError(f'--split must be in (0, 1), got {args.split}')
     _check_params(args.params)
-    for name in ('na', 'nb', 'length'):
+    for name in ('na', 'nb'):
         if getattr(args, name) < 1:
             raise UsageError(f'--{name} must be >= 1, got {getattr(args, name)}')
     if args.nk is None:
@@ -348,8 +465,13 @@ def _check(args: argparse.Namespace) -> None:
         raise UsageError(f'--board-sensors must be >= 1, got {args.board_sensors}')
     if args.nk < 0 or args.delay < 0:
         raise UsageError('--nk and --delay must be >= 0')
+    _defaults(args)
     if not 0.0 <= args.band[0] < args.band[1] <= 1.0:
         raise UsageError(f'--band must be LOW HIGH with 0 <= LOW < HIGH <= 1, got {args.band}')
+    if args.length < 1:
+        raise UsageError(f'--length must be >= 1, got {args.length}')
+    if closed_loop(args):
+        _check_closed_loop(args)
 
 
 def _check_params(params: str) -> None:
@@ -742,6 +864,10 @@ def _run(args: argparse.Namespace) -> int:
             raise UsageError(f'{bag} is not a bag (it holds other files); not removing it')
         shutil.rmtree(bag)
     out.mkdir(parents=True, exist_ok=True)
+    if closed_loop(args):
+        from maglev_ros.cli.closed_loop_lab import run_session
+
+        return run_session(args, out, bag)
     board = on_board(args)
     if board:
         where = (

@@ -262,8 +262,12 @@ class ClosedLoop:
         progress : callable, optional
             ``progress(t)`` called about every simulated second.
         excitation : array_like, shape (N, n_s), optional
-            Currents added to the controller's command at each sample, A
-            (identification experiments; rows past its end add nothing).
+            Currents added to the controller's command at each sample, A, as
+            an input disturbance (identification experiments; rows past its
+            end add nothing, nor does a controller that commands zero:
+            disabled, stale input or magnet lost); ``command`` in the result
+            is the controller's own part. The controller node adds the same
+            (:class:`~maglev_ros.control.excitation.ExcitationSchedule`).
         """
         sim, est, ctrl = self.simulator, self.estimator, self.controller
         dt = sim.dt
@@ -329,7 +333,7 @@ class ClosedLoop:
                     # the controller node reads the estimate from its Odometry
                     command = ctrl.command(t, odometry_round_trip(x_hat), currents)
             cmd_arr[k] = command
-            if excitation is not None and k < len(excitation):
+            if excitation is not None and k < len(excitation) and ctrl.active:
                 command = command + excitation[k]
             if not ctrl.active or last_level != 'OK':
                 status = ctrl.status()

@@ -48,6 +48,22 @@ after a disable that command and all later ones are zero, including one held
 back by ``delay_commands``. ``maglev/reference``
 (geometry_msgs/PoseStamped, frame ``maglev_base`` or empty) moves the
 set-point (LQR); a bad one is refused with an error log.
+
+Excitation (closed-loop identification, :mod:`maglev_ros.control.excitation`).
+``excitation_signal`` (``none`` by default; ``prbs``, ``random_binary``,
+``multisine``, ``chirp``) with ``excitation_amplitude``, ``_band``,
+``_pattern``, ``_seed``, ``_length``, ``_cycles`` (the excitation node's
+meanings) and ``excitation_start`` (s after the first sample) adds a known
+signal to every command, as an input disturbance: it is then uncorrelated
+with the sensor noise and is the instrument of IV. The value of sample k
+(samples since the first, from the stamps) is the core's
+:class:`~maglev_ros.control.excitation.ExcitationSchedule` value, as
+:class:`~maglev_ros.control.ClosedLoop` adds it; nothing is added while the
+controller commands zero. The node then publishes, per command and just
+before it, the excitation part on ``maglev/currents/excitation``
+(std_msgs/Float64MultiArray, 4 currents in A, x+ x- y+ y-; delayed with the
+command by ``delay_commands``); ``maglev/currents/command`` carries the total.
+Still exactly one command per sample.
 """
 
 from __future__ import annotations
@@ -66,6 +82,13 @@ from std_srvs.srv import SetBool
 from maglev_ros.cdr import ODOMETRY_VALUES
 from maglev_ros.cdr.reader import RawFieldReader
 from maglev_ros.control import MODES, ControllerConfig, ControllerConfigError, make_controller
+from maglev_ros.control.excitation import (
+    EXCITATION_SIGNALS,
+    CommandExcitation,
+    ExcitationSchedule,
+    LoopExcitationError,
+)
+from maglev_ros.excitation import PATTERNS
 from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
 from maglev_ros.nodes.params import integer as integer_rule
@@ -81,6 +104,7 @@ from maglev_ros.topics import (
     CURRENTS_TOPIC,
     DIAGNOSTICS_TOPIC,
     ESTIMATE_TOPIC,
+    EXCITATION_TOPIC,
     REFERENCE_TOPIC,
     field_topic,
 )
@@ -127,6 +151,8 @@ class ControllerNodeConfig:
     trigger : {'sample', 'estimate'}
         What a command answers: each sample (the lockstep contract) or each
         estimate message (real time at the estimator's ``publish_rate``).
+    excitation : CommandExcitation
+        The excitation added to the command (``signal`` ``none``: off).
     """
 
     params: str
@@ -135,6 +161,7 @@ class ControllerNodeConfig:
     start_enabled: bool
     diagnostics_period: float
     trigger: str = 'sample'
+    excitation: CommandExcitation = CommandExcitation()
 
 
 def _parameter_set(name: str, value: str) -> str:
@@ -172,6 +199,35 @@ _DESCRIPTIONS = {
     ),
 }
 
+_EXCITATION_DEFAULT = CommandExcitation()
+_EXCITATION_PARAMETERS = {
+    'excitation_signal': Param(
+        'none',
+        f'excitation added to the command: {", ".join(EXCITATION_SIGNALS)} (published '
+        f'apart on {EXCITATION_TOPIC})',
+        check=choice(*EXCITATION_SIGNALS),
+    ),
+    'excitation_amplitude': Param(
+        _EXCITATION_DEFAULT.amplitude, 'excitation: peak of each signal, A', check=number(0)
+    ),
+    'excitation_band': Param(
+        list(_EXCITATION_DEFAULT.band), 'excitation: band (low, high), fractions of Nyquist'
+    ),
+    'excitation_pattern': Param(
+        _EXCITATION_DEFAULT.pattern,
+        'excitation: coil pattern (pairs: x+ = r_x, x- = -r_x, y+ = r_y, y- = -r_y)',
+        check=choice(*PATTERNS),
+    ),
+    'excitation_seed': Param(0, 'excitation: seed of the signals', check=integer_rule(0)),
+    'excitation_length': Param(
+        _EXCITATION_DEFAULT.length, 'excitation: samples per period', check=integer_rule(1)
+    ),
+    'excitation_cycles': Param(0, 'excitation: periods (0: forever)', check=integer_rule(0)),
+    'excitation_start': Param(
+        0.0, 'excitation: s after the first sample it starts at', check=number(0)
+    ),
+}
+
 PARAMETERS = ParameterTable(
     NODE_NAME,
     ControllerParameterError,
@@ -203,6 +259,7 @@ PARAMETERS = ParameterTable(
             'publish_rate; sample_rate is then that rate)',
             check=choice(*TRIGGERS),
         ),
+        **_EXCITATION_PARAMETERS,
     },
 )
 
@@ -233,6 +290,11 @@ def build_config(values: dict) -> ControllerNodeConfig:
     start_enabled = v.pop('start_enabled')
     period = v.pop('diagnostics_period')
     trigger = v.pop('trigger')
+    settings = {name[len('excitation_') :]: v.pop(name) for name in _EXCITATION_PARAMETERS}
+    try:
+        excitation = CommandExcitation(**settings)
+    except LoopExcitationError as err:
+        raise ControllerParameterError(f'excitation_{err}') from None
     try:
         config = ControllerConfig.from_mapping(v)
     except ControllerConfigError as err:
@@ -241,7 +303,7 @@ def build_config(values: dict) -> ControllerNodeConfig:
         raise ControllerParameterError(
             f"trigger 'estimate' needs mode 'lqr' (the PD reads the fields), got {config.mode!r}"
         )
-    return ControllerNodeConfig(params, config, delay, start_enabled, period, trigger)
+    return ControllerNodeConfig(params, config, delay, start_enabled, period, trigger, excitation)
 
 
 class ControllerNode(Node):
@@ -284,6 +346,19 @@ class ControllerNode(Node):
         self._pending = np.zeros(model.n_inputs)  # delay_commands: computed, not yet sent
         self._msg = Float64MultiArray()
         self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
+        try:
+            self.excitation = ExcitationSchedule(cfg.excitation, cfg.controller.sample_rate)
+        except LoopExcitationError as err:
+            raise ControllerParameterError(f'excitation_{err}') from None
+        self._first_stamp: int | None = None  # the excitation's sample 0
+        self._pending_excitation = np.zeros(model.n_inputs)
+        self.last_excitation = np.zeros(model.n_inputs)
+        self._excitation_msg = Float64MultiArray()
+        self._excitation_pub = None
+        if self.excitation.enabled:
+            self._excitation_pub = self.create_publisher(
+                Float64MultiArray, EXCITATION_TOPIC, LOCKSTEP_COMMAND_QOS
+            )
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
         self.per_estimate = cfg.trigger == 'estimate'
         if self.per_estimate:  # no pairing: the estimate alone (its currents: the last command)
@@ -313,13 +388,21 @@ class ControllerNode(Node):
         self.get_logger().info(
             f'{c.mode} on {cfg.params}, {c.sample_rate:g} Hz, limit {c.current_limit:g} A, '
             f'input timeout {1e3 * c.input_timeout:g} ms, '
-            f'{"enabled" if cfg.start_enabled else "disabled"}'
+            f'{"enabled" if cfg.start_enabled else "disabled"}, '
+            f'{cfg.excitation.describe()}'
         )
 
     # ------------------------------------------------------------------ inputs
-    def _publish(self, command: np.ndarray) -> None:
+    def _publish(self, command: np.ndarray, excitation=None) -> None:
         if self.config.delay_commands:
             command, self._pending = self._pending, command
+            excitation, self._pending_excitation = self._pending_excitation, excitation
+        if self._excitation_pub is not None:  # the excitation part, just before its command
+            if excitation is None:  # a zero command of the safety or ready checks
+                excitation = np.zeros(self.controller.n_inputs)
+            self.last_excitation = excitation
+            self._excitation_msg.data = [float(v) for v in excitation]
+            self._excitation_pub.publish(self._excitation_msg)
         self.last_command = command
         self._msg.data = [float(v) for v in command]
         self._pub.publish(self._msg)
@@ -364,7 +447,7 @@ class ControllerNode(Node):
             )
             return
         stamp, values = read
-        self._publish(self.controller.command(stamp * 1e-9, odometry_state_values(values)))
+        self._send(stamp, self.controller.command(stamp * 1e-9, odometry_state_values(values)))
 
     def _check_stale(self) -> None:
         """``trigger: estimate``: no estimate for ``input_timeout`` of the node's clock.
@@ -416,7 +499,24 @@ class ControllerNode(Node):
                         if f is not None:
                             y[3 * k : 3 * k + 3] = f
                 command = self.controller.command(t, y, currents)
+            self._send(sample.stamp, command)
+
+    def _send(self, stamp: int, command: np.ndarray) -> None:
+        """Publish the command for the sample stamped ``stamp`` (ns), excitation added."""
+        if self._excitation_pub is None:
             self._publish(command)
+        else:
+            excitation = self._excitation_of(stamp)
+            self._publish(command + excitation, excitation)
+
+    def _excitation_of(self, stamp: int) -> np.ndarray:
+        """Return the excitation of the sample stamped ``stamp`` (ns); zero when commanding 0."""
+        if self._first_stamp is None:
+            self._first_stamp = stamp
+        if not self.controller.active:
+            return np.zeros(self.controller.n_inputs)
+        index = round((stamp - self._first_stamp) * self.config.controller.sample_rate * 1e-9)
+        return self.excitation.value(index)
 
     def _on_reference(self, msg: PoseStamped) -> None:
         if not self.lqr:
@@ -451,6 +551,7 @@ class ControllerNode(Node):
         self.controller.set_enabled(enable)
         if not enable:
             self._pending = np.zeros(self.controller.n_inputs)  # computed while enabled
+            self._pending_excitation = np.zeros(self.controller.n_inputs)
         response.success = True
         state = 'enabled' if enable else 'disabled: zero currents'
         response.message = f'{state} from command {self.commands} on'
@@ -485,6 +586,9 @@ class ControllerNode(Node):
             'timeouts': s.timeouts,
             'saturated commands': s.saturated,
         }
+        if self._excitation_pub is not None:
+            values['excitation'] = self.config.excitation.describe()
+            values['last excitation (A)'] = ' '.join(f'{v:.6g}' for v in self.last_excitation)
         if self.lqr:
             values['reference (m)'] = ' '.join(f'{v:.6g}' for v in self.controller.reference)
         self._diag_pub.publish(

@@ -11,7 +11,12 @@ Log times: ``log_clock = ros`` uses the node's clock (wall time, or ``/clock``
 with ``use_sim_time``); ``topic`` uses the newest ``/clock`` message the
 recorder received itself (``/clock`` must be among ``topics``): every message
 of a lockstep run is then logged at the simulated time of its sample, which is
-what the bag converter needs for header-less commands.
+what the bag converter needs for header-less commands. ``record_from`` (s of
+log time, default 0: everything) drops the messages logged before it: a
+lockstep recording can then start at a given sample with subscriptions that
+were matched long before (``maglev-lab``'s closed loop: the first messages on a
+freshly matched subscription may be handled after those of other topics, and
+would be logged at the previous clock).
 
 Metadata (the bag's ``custom_data``): package version, storage, topics,
 recording start, and every parameter of ``metadata_node`` (default the
@@ -37,7 +42,14 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from maglev_ros.bags import BagError, BagWriter
-from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, integer
+from maglev_ros.nodes.params import (
+    NodeParameterError,
+    Param,
+    ParameterTable,
+    choice,
+    integer,
+    number,
+)
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.topics import (
     CLOCK_TOPIC,
@@ -92,6 +104,8 @@ class RecorderConfig:
         ``ros`` or ``topic``.
     metadata_node : str
         Node whose parameters go into the metadata ('' for none).
+    record_from : float
+        Log time from which messages are written, s (0: all).
     """
 
     path: str
@@ -100,6 +114,7 @@ class RecorderConfig:
     depth: int
     log_clock: str
     metadata_node: str
+    record_from: float = 0.0
 
 
 def _topics(name: str, topics: tuple[str, ...]) -> tuple[str, ...]:
@@ -125,6 +140,13 @@ PARAMETERS = ParameterTable(
             check=choice('ros', 'topic'),
         ),
         'metadata_node': Param('maglev_simulator', "node whose parameters are stored ('' : none)"),
+        'record_from': Param(
+            0.0,
+            'log time from which messages are written, s (0: all; with log_clock topic in '
+            'lockstep: a recording that starts at a given sample, its subscriptions already '
+            'established)',
+            check=number(0),
+        ),
     },
 )
 _PARAMETERS = PARAMETERS  # the name test_launch and older callers use
@@ -226,6 +248,7 @@ class RecorderNode(Node):
             'recorder.storage': cfg.storage,
             'recorder.topics': ' '.join(cfg.topics),
             'recorder.log_clock': cfg.log_clock,
+            'recorder.record_from': cfg.record_from,
             'recorder.started': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
         }
         try:
@@ -304,6 +327,7 @@ class RecorderNode(Node):
         counts = self.counts
         by_topic = self.config.log_clock == 'topic'
         clock = self.get_clock()
+        start_ns = round(self.config.record_from * 1e9)
 
         def on_message(data: bytes) -> None:
             if is_clock:
@@ -315,6 +339,8 @@ class RecorderNode(Node):
                 stamp = clock.now().nanoseconds
             else:  # system time, as clock.now() gives it, without its Time object (3 us)
                 stamp = time.time_ns()
+            if stamp < start_ns:  # before the recording (record_from): not written
+                return
             try:
                 write(handle, stamp, data)
             except BagError:  # closed while this message was in flight

@@ -557,6 +557,21 @@ class SimulatorNode(Node):
         with self._lock:
             self._publish(self.session.set_paused(paused, time.monotonic()))
 
+    def pause_after(self, index: int | None) -> None:
+        """Pause by itself once the run's sample ``index`` was stepped (None: never).
+
+        Lockstep: exactly the samples up to ``index`` are published, the
+        commands after them queue until :meth:`set_paused` resumes
+        (:meth:`~maglev_ros.physics.session.SimulationSession.pause_after`).
+
+        Parameters
+        ----------
+        index : int or None
+            Index of a sample of the current run (sample 0 is its first).
+        """
+        with self._lock:
+            self.session.pause_after(index)
+
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response):
         response.message = self.reset()
         response.success = True

@@ -35,7 +35,9 @@ Timing modes
 
     Deterministic given the simulator's seed.
 
-In both modes, pausing stops stepping (queued lockstep commands wait), a
+In both modes, pausing stops stepping (queued lockstep commands wait),
+:meth:`~SimulationSession.pause_after` pauses by itself once a given sample
+was stepped (lockstep: an exact number of samples, e.g. a recording), a
 crash stops the integration until :meth:`~SimulationSession.reset`, and a
 reset starts a new run at sample 0 stamped one sample period after the last
 published sample: simulated time increases across runs.
@@ -194,6 +196,7 @@ class SimulationSession:
         self._rate_mark = (time.monotonic() if now is None else now, 0)
         self._pending: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
         self._crash_pending = False
+        self._pause_after: int | None = None  # the run's sample index to pause after
         self._first_reading = simulator.reset()
         self.last_state = simulator.state
 
@@ -245,6 +248,24 @@ class SimulationSession:
         if not self.paused and self.started and self.mode == 'lockstep':
             return self._advance(now)
         return None
+
+    def pause_after(self, index: int | None) -> None:
+        """Pause by itself once the run's sample ``index`` was stepped (None: never).
+
+        The sample itself is returned (published); the commands after it wait
+        in the queue until :meth:`set_paused` resumes. Lockstep then steps
+        exactly the samples up to ``index``. A sample already stepped pauses
+        at once. The setting is cleared when it pauses.
+
+        Parameters
+        ----------
+        index : int or None
+            Index of a sample of the current run (sample 0 is the run's first).
+        """
+        self._pause_after = None if index is None else int(index)
+        if self._pause_after is not None and self.sim.samples >= self._pause_after:
+            self._pause_after = None
+            self.paused = True
 
     def reset(self, now: float) -> SampleBatch | None:
         """Restart from the initial state (recovers a crash).
@@ -400,7 +421,7 @@ class SimulationSession:
             if self._got_command and self._steps_since_command >= 1:
                 self.counters['held_samples'] += 1
             self._steps_since_command += 1
-            if not self._step(self._command):
+            if not self._step(self._command) or self.paused:  # a crash, or pause_after
                 break
         return self._take()
 
@@ -438,6 +459,9 @@ class SimulationSession:
             self._crash_pending = True
             return False
         self._pending.append((sim.samples, reading, sim.state, sim.currents))
+        if self._pause_after is not None and sim.samples >= self._pause_after:
+            self._pause_after = None
+            self.paused = True
         return True
 
     def _first_sample(self) -> SampleBatch:

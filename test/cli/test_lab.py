@@ -49,7 +49,7 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
 
 def test_duration_still_gives_exact_samples(domain, tmp_path, capfd):
     out = tmp_path / 'lab'
-    argv = ['--duration', '0.1', '--out', str(out), '--no-plots', '--quiet']
+    argv = ['--duration', '0.1', '--magnet', 'fixed', '--out', str(out), '--no-plots', '--quiet']
     assert lab.main(argv) == 0, capfd.readouterr().err
     assert json.loads((out / 'models.json').read_text())['data']['N'] == 500
 

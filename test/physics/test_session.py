@@ -57,6 +57,30 @@ def test_lockstep_queues_commands_while_paused(v2):
     assert s.waiting_since == 2.0
 
 
+def test_lockstep_pause_after_steps_exactly_up_to_a_sample(v2):
+    s = session(v2, paused=True)
+    s.start(now=0.0)
+    for k in range(5):
+        s.command([0.01 * k, 0, 0, 0], now=1.0)  # queued while paused
+    s.pause_after(3)
+    batch = s.set_paused(False, now=2.0)
+    assert batch.indices.tolist() == [1, 2, 3] and s.paused  # sample 3 is published
+    assert s.check_timeout(now=100.0) is None  # paused: nothing more
+    batch = s.set_paused(False, now=3.0)  # resumed: the queued commands, no further limit
+    assert batch.indices.tolist() == [4, 5] and not s.paused
+    s.pause_after(5)  # already stepped: pauses at once
+    assert s.paused and s.command([0, 0, 0, 0], now=4.0) is None
+
+
+def test_realtime_pause_after_ends_the_burst(v2):
+    s = session(v2, 'realtime', pace_period=0.001)
+    s.start(now=0.0)
+    s.pause_after(7)
+    assert s.pace(now=0.0)[0] is None  # pacing starts
+    batch, _ = s.pace(now=0.005)  # 25 samples due
+    assert batch.indices.tolist()[-1] == 7 and s.paused
+
+
 def test_lockstep_timeout_holds_the_last_command(v2):
     s = session(v2, command_timeout=0.1)
     s.start(now=0.0)

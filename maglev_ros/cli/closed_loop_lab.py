@@ -1,0 +1,457 @@
+"""``maglev-lab``'s main job: the closed-loop lab session, from levitation to the seed's models.
+
+The steps (``maglev-lab`` with the magnet ``free``, the default):
+
+1. :func:`~maglev_ros.nodes.closed_loop_lab.run_closed_loop_lab`: simulator
+   (lockstep), estimator, controller with its excitation, identifier and
+   recorder in this process; the magnet levitates and settles, then exactly
+   ``--samples`` samples are recorded;
+2. the bag is converted (:func:`maglev_ros.bags.read_bag`): the x and y field
+   of sensor 0, the pair inputs ``u_x``, ``u_y`` (the total command,
+   ``0.5 (c+ - c-)``), the excitation ``r_x``, ``r_y`` (the IV's instruments)
+   and the true position;
+3. :func:`~maglev_ros.sysid.seed_models.identify_groups`: the seed's models,
+   split at the middle;
+4. the physics check of every SISO model against the linearisation, the online
+   identifier's coefficients beside the batch ARX of the same samples, plots
+   and ``models.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import signal
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from maglev_ros.cli.progress import progress_bar
+from maglev_ros.topics import TRUE_STATE_TOPIC, excitation_channel, field_channel
+
+__all__ = ['CHECK_BAND', 'graph_settings', 'load_closed_loop_data', 'run_session']
+
+PROG = 'maglev-lab'
+CHECK_BAND = (10.0, 300.0)  # Hz, the physics check's band (see test/sysid/test_iv_physics.py)
+RELATIVE = 1e-300  # guards the relative difference of exactly zero coefficients
+
+
+def graph_settings(args: argparse.Namespace):
+    """Return the :class:`~maglev_ros.nodes.closed_loop_lab.LabGraphSettings` of the arguments.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``maglev-lab``'s checked arguments.
+    """
+    from maglev_ros.control.excitation import CommandExcitation
+    from maglev_ros.nodes.closed_loop_lab import LabGraphSettings
+
+    return LabGraphSettings(
+        params=args.params,
+        samples=args.samples,
+        settle=args.settle,
+        sample_rate=args.sample_rate,
+        noise=args.noise,
+        quantization=args.quantization,
+        sensor_delay=args.delay,
+        coil_dynamics=not args.no_coil,
+        field_model=args.field_model,
+        seed=args.seed,
+        sensors=tuple(args.sensors),
+        storage=args.storage,
+        filter=args.filter,
+        excitation=CommandExcitation(
+            args.excitation,
+            args.amplitude,
+            tuple(args.band),
+            args.pattern,
+            seed=args.seed,
+            length=args.length,
+        ),
+    )
+
+
+def load_closed_loop_data(bag: Path):
+    """Read the closed-loop record: fields, pair inputs, excitation and true position.
+
+    Parameters
+    ----------
+    bag : Path
+        The bag directory.
+
+    Returns
+    -------
+    dataset : maglev_ros.bags.BagDataset
+        Outputs ``Bx_0``, ``By_0``, ``x``, ``y``, ``z`` (T, m); inputs
+        ``u_x``, ``u_y`` (total command) and ``r_x``, ``r_y`` (its excitation), A.
+    """
+    from maglev_ros.bags import read_bag
+    from maglev_ros.nodes.closed_loop_lab import pair_channel
+
+    outputs = [f'Bx_0={field_channel(0, "x")}', f'By_0={field_channel(0, "y")}']
+    outputs += [f'{a}={TRUE_STATE_TOPIC}:pose.pose.position.{a}' for a in 'xyz']
+    inputs = [pair_channel(p) for p in 'xy'] + [pair_channel(p, excitation_channel) for p in 'xy']
+    return read_bag(bag, outputs, inputs)
+
+
+def _plants(args: argparse.Namespace, Ts: float) -> dict:
+    """Return the true local transfer functions of the x and y pairs (the check's truth)."""
+    from maglev_ros.physics import CoilDynamics, linearize, make_model
+    from maglev_ros.sysid.physics_check import local_plant
+
+    model = make_model(args.params)
+    linear = linearize(model).reduced()
+    tau = None
+    if not args.no_coil:
+        coil = CoilDynamics.from_parameters(model.params)
+        tau = coil.inductance / coil.resistance
+    # the bag's command of sample t drives the coils over [t, t + 1): only the
+    # sensor's delay is left (local_plant's convention)
+    return {
+        pair: local_plant(linear, Ts, f'B{pair}_0', pair, args.delay, tau) for pair in ('x', 'y')
+    }
+
+
+def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
+    """Run the closed-loop session (see the module docstring); print and write the results.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        ``maglev-lab``'s checked arguments (magnet ``free``).
+    out : Path
+        Output directory (exists).
+    bag : Path
+        Bag directory to create.
+
+    Returns
+    -------
+    int
+        0 every model usable, 1 a model failed or is unstable, 128 + the
+        signal when stopped (the bag finalised).
+    """
+    from maglev_ros.nodes.closed_loop_lab import run_closed_loop_lab
+    from maglev_ros.stop_signals import StopSignals
+
+    settings = graph_settings(args)
+    e = settings.excitation
+    print(
+        f'{PROG}: closed loop, {args.samples} samples ({args.duration:g} s) of {args.params} '
+        f'recorded after {args.settle:g} s of levitation; {args.filter.upper()} + LQR, '
+        f'{e.signal} {e.amplitude:g} A on {e.pattern} (band {e.band[0]:g}-{e.band[1]:g} of '
+        f'Nyquist) added to the command; coil dynamics {"off" if args.no_coil else "on"}, '
+        f'sensor delay {args.delay}, noise {args.noise:g} T, quantisation '
+        f'{args.quantization:g} T, seed {args.seed}'
+    )
+    bars: dict = {}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        bar = bars.get(stage)
+        if bar is None:
+            for other in bars.values():
+                other.close()
+            bar = bars[stage] = progress_bar(total, stage, 'samples', args.quiet)
+        bar.update(done - bar.n)
+
+    with StopSignals() as stop:
+        try:
+            run = run_closed_loop_lab(settings, bag, stop, progress)
+        except KeyboardInterrupt:
+            name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
+            print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
+            return stop.exit_status or 130
+        except RuntimeError as err:  # the graph did not come up or stopped answering
+            print(f'{PROG}: error: {err} (bag, if any, finalised in {bag})', file=sys.stderr)
+            return 1
+        finally:
+            for bar in bars.values():
+                bar.close()
+    rms_um = ', '.join(f'{1e6 * v:.0f}' for v in run.settle_rms)
+    print(
+        f'{"settled" if run.settled else "NOT settled"} after {run.settle_s:g} s: RMS of x, y, z '
+        f'over the last 0.1 s {rms_um} um'
+    )
+    rate = run.samples / args.sample_rate / max(run.wall_s, 1e-9)
+    print(
+        f'recorded {run.samples} samples ({run.samples / args.sample_rate:.3f} s simulated in '
+        f'{run.wall_s:.1f} s, {rate:.2f} x real time; {run.timeouts} command timeouts) -> {bag}'
+    )
+    if run.crashed:
+        print(
+            f'warning: the magnet crashed ({run.crash_reason}); identifying the samples '
+            'before the crash',
+            file=sys.stderr,
+        )
+    return _identify_and_report(args, out, bag, run)
+
+
+def _identify_and_report(args: argparse.Namespace, out: Path, bag: Path, run) -> int:
+    from maglev_ros.sysid.seed_models import identify_groups, physics_deviations
+
+    dataset = load_closed_loop_data(bag)
+    data = dataset.data
+    positions = np.asarray(data.y)[:, 2:5]
+    data = data.select(outputs=[0, 1])
+    z_eq = _equilibrium_height(args.params)
+    error = positions - np.array([0.0, 0.0, z_eq])
+    excursion = np.abs(error).max(axis=0)
+    rms = np.sqrt(np.mean(error**2, axis=0))
+    u = np.asarray(data.u)
+    print(
+        'magnet while excited: largest excursion from the set-point x, y, z '
+        + ', '.join(f'{1e3 * v:.3f}' for v in excursion)
+        + ' mm (RMS '
+        + ', '.join(f'{1e6 * v:.0f}' for v in rms)
+        + f' um); pair inputs within {np.abs(u[:, :2]).max():.3f} A'
+    )
+    alignment = dataset.alignment
+    methods = ', '.join(f'{r.topic} {r.method}' for r in alignment.reports)
+    print(f'alignment: time base {alignment.base}; {methods}')
+    est_n = int(round(args.split * data.N))
+    print(
+        f'{data.N} samples, Ts = {data.Ts:g} s: estimation {est_n}, validation '
+        f'{data.N - est_n} (from t = {est_n * data.Ts:g} s); IV instruments: '
+        + ('the excitation r_x, r_y' if args.instruments == 'excitation' else 'the inputs (iv4)')
+    )
+    with progress_bar(None, 'identifying', 'models', args.quiet) as bar:
+
+        def step(label: str, k: int, loss: float) -> None:
+            bar.set_postfix_str(label if k == 0 else f'{label}: iteration {k}')
+
+        results = identify_groups(
+            data, args.split, use_instruments=args.instruments == 'excitation', progress=step
+        )
+    plants = _plants(args, data.Ts)
+    band = tuple(args.check_band)
+    checks = physics_deviations(results, plants, band)
+    _print_table(results, checks, band)
+    _print_online(run, data)
+    written = [] if args.no_plots else _plots(results, checks, plants, band, out)
+    for path in written:
+        print(f'wrote {path}')
+    summary = _summary(args, run, dataset, results, checks, band, excursion, rms)
+    (out / 'models.json').write_text(json.dumps(_plain(summary), indent=1))
+    print(f'wrote {out / "models.json"}')
+    return summary['exit_status']
+
+
+def _equilibrium_height(params: str) -> float:
+    from maglev_ros.physics import make_model
+    from maglev_ros.physics.equilibria import find_equilibria
+
+    return float(find_equilibria(make_model(params))[0].z)
+
+
+def _check_text(check) -> str:
+    if check is None:
+        return ''
+    if isinstance(check, str):
+        return f'n/a ({check})'
+    return f'{check.max_db:5.2f} dB {check.max_deg:5.1f} deg'
+
+
+def _print_table(results, checks: dict, band) -> None:
+    print(f'{"model":<22} {"fit est. %":>11} {"fit val. %":>11}  {"physics check":<19} status')
+    for item in results:
+        g = item.group
+        head = f'{", ".join(g.outputs)} <- {", ".join(g.inputs)}'
+        print(f'{"MIMO 2x2" if g.name == "mimo" else g.name}: {head}')
+        for row in item.result.rows:
+            label = row.label + (
+                ' (IV on r)' if row.structure == 'iv' and item.instruments else ''
+            )
+            est = '/'.join(_percent(v) for v in row.fit_estimation)
+            val = '/'.join(_percent(v) for v in row.fit_validation)
+            status = row.status if row.status == 'ok' else f'{row.status}: {row.reason}'
+            check = _check_text(checks.get((g.name, row.label)))
+            print(f'  {label:<20} {est:>11} {val:>11}  {check:<19} {status}')
+            for note in row.notes:
+                print(f'  {"":<20} note: {note}')
+    excluded = sorted({f for c in checks.values() if not isinstance(c, str) for f in c.excluded})
+    print(
+        f'physics check: largest deviation from the linearisation (discretised, coil L/R, '
+        f'sensor delay) over {band[0]:g}-{band[1]:g} Hz'
+        + (
+            f', without +-1 Hz around the undamped resonance at '
+            f'{", ".join(f"{f:.2f}" for f in excluded)} Hz'
+            if excluded
+            else ''
+        )
+    )
+
+
+def _percent(value: float) -> str:
+    return 'n/a' if not np.isfinite(value) else f'{value:.2f}'
+
+
+def _print_online(run, data) -> None:
+    """Print the online identifier's coefficients beside the batch ARX of the same samples."""
+    from maglev_ros.sysid import IdData, arx
+
+    online = run.identifier
+    if online is None:
+        print('online ARX: the identifier got no sample')
+        return
+    model = online.model
+    print(
+        f'online ARX (identifier node, {online.samples} samples, forgetting factor '
+        f'{online.forgetting:g}) beside batch ARX of the same samples (not detrended):'
+    )
+    for i, (yname, uname) in enumerate((('Bx_0', 'u_x'), ('By_0', 'u_y'))):
+        na = int(model.orders.na[i, i])
+        nb = int(model.orders.nb[i, i])
+        nk = int(model.orders.nk[i, i])
+        raw = IdData(data.y[:, i], data.u[:, i], data.Ts, [yname], [uname])
+        batch = arx(raw, na, nb, nk)
+        a_on, b_on = model.polynomial('A', i, i)[1:], model.polynomial('B', i, i)[nk:]
+        a_ba, b_ba = batch.polynomial('A')[1:], batch.polynomial('B')[nk:]
+        theta_on, theta_ba = np.r_[a_on, b_on], np.r_[a_ba, b_ba]
+        diff = np.abs(theta_on - theta_ba).max() / max(np.abs(theta_ba).max(), RELATIVE)
+        print(
+            f'  {yname} <- {uname} (ARX {na} {nb} {nk}): largest difference {diff:.1e} of the '
+            f'largest coefficient'
+        )
+        for name, on, ba, scale in (('a', a_on, a_ba, 1.0), ('b mT/A', b_on, b_ba, 1e3)):
+            for kind, values in (('online', on), ('batch', ba)):
+                print(f'    {name:<7}{kind:<7}' + ' '.join(f'{scale * v:8.4f}' for v in values))
+
+
+def _plots(results, checks: dict, plants: dict, band, out: Path) -> list[Path]:
+    from maglev_ros.sysid import compare_plot
+    from maglev_ros.sysid.physics_plot import physics_check_plot
+
+    written = []
+    for item in results:
+        rows = [r for r in item.result.rows if r.validated is not None]
+        if not rows:
+            continue
+        labels = [r.label + (' (reduced)' if r.status == 'reduced' else '') for r in rows]
+        written.append(
+            compare_plot(
+                item.result.validation,
+                [r.validated for r in rows],
+                out / f'compare_{item.group.name}.png',
+                labels,
+                ic='estimate',
+            )
+        )
+        if item.group.pair in plants:
+            fitted = [r for r in item.result.rows if r.model is not None]
+            written.append(
+                physics_check_plot(
+                    [r.model for r in fitted],
+                    out / f'physics_{item.group.name}.png',
+                    [r.label for r in fitted],
+                    plants[item.group.pair],
+                    band,
+                    [checks.get((item.group.name, r.label)) for r in fitted],
+                )
+            )
+    return written
+
+
+def _summary(args, run, dataset, results, checks, band, excursion, rms) -> dict:
+    from maglev_ros.sysid import model_to_dict
+
+    models = []
+    for item in results:
+        for row in item.result.rows:
+            check = checks.get((item.group.name, row.label))
+            entry = {
+                'group': item.group.name,
+                'label': row.label,
+                'structure': row.structure,
+                'outputs': list(item.group.outputs),
+                'inputs': list(item.group.inputs),
+                'instruments': list(item.instruments) if row.structure == 'iv' else [],
+                'status': row.status,
+                'reason': row.reason,
+                'notes': list(row.notes),
+                'fit_estimation': row.fit_estimation,
+                'fit_validation': row.fit_validation,
+                'model': None if row.model is None else model_to_dict(row.model),
+            }
+            if check is not None:
+                entry['physics_check'] = (
+                    {'error': check}
+                    if isinstance(check, str)
+                    else {
+                        'band_hz': list(band),
+                        'max_db': check.max_db,
+                        'max_deg': check.max_deg,
+                        'rms_db': check.rms_db,
+                        'rms_deg': check.rms_deg,
+                        'excluded_hz': list(check.excluded),
+                    }
+                )
+            if entry['model'] is not None:
+                entry['model'].pop('covariance', None)
+            models.append(entry)
+    online = run.identifier
+    status = 0 if all(r.usable for item in results for r in item.result.rows) else 1
+    return {
+        'session': 'closed loop',
+        'run': {
+            'samples': run.samples,
+            'settle_s': run.settle_s,
+            'settle_rms_m': run.settle_rms,
+            'settled': run.settled,
+            'simulated_s': run.simulated_s,
+            'wall_s': run.wall_s,
+            'timeouts': run.timeouts,
+            'crashed': run.crashed,
+            'crash_reason': run.crash_reason,
+            'controller': run.controller,
+            'largest_excursion_m': excursion,
+            'rms_excursion_m': rms,
+        },
+        'args': dict(vars(args)),
+        'metadata': dict(dataset.metadata),
+        'alignment': {
+            'base': dataset.alignment.base,
+            'methods': {r.topic: r.method for r in dataset.alignment.reports},
+        },
+        'data': {
+            'N': dataset.data.N,
+            'n_estimation': results[0].result.estimation.N if results else 0,
+            'n_validation': results[0].result.validation.N if results else 0,
+        },
+        'models': models,
+        'online': None
+        if online is None
+        else {
+            'samples': online.samples,
+            'forgetting': online.forgetting,
+            'covariance_trace': online.covariance_trace,
+            'fit_percent': online.fit,
+            'model': _online_dict(online.model),
+        },
+        'exit_status': status,
+    }
+
+
+def _online_dict(model) -> dict:
+    from maglev_ros.sysid import model_to_dict
+
+    entry = model_to_dict(model)
+    entry.pop('covariance', None)
+    return entry
+
+
+def _plain(value):
+    """JSON-safe copy: arrays to lists, NaN/inf to None, other objects to str."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _plain(value.tolist())
+    if isinstance(value, np.generic):
+        return _plain(value.item())
+    if isinstance(value, float):
+        return value if np.isfinite(value) else None
+    if value is None or isinstance(value, (bool, int, str)):
+        return value
+    return str(value)

@@ -1,0 +1,537 @@
+"""The closed-loop lab session as one process: levitate, settle, excite, record exactly N samples.
+
+The graph of the issue's main job, composed on one executor
+(:class:`~maglev_ros.nodes.bringup.Bringup`):
+
+* the simulator (lockstep, magnet free, sensor noise and quantisation, sensor
+  delay, coil dynamics), started paused;
+* the estimator (``filter``, default the KF) and the controller (LQR,
+  ``delay_commands``: the board's one sample of command latency) with its
+  excitation (:mod:`maglev_ros.control.excitation`, an input disturbance
+  starting with the recording);
+* the online identifier (x and y field of sensor 0 against the pair inputs)
+  and the recorder (``record_from``: the first recorded sample on).
+
+Order of events. Discovery is awaited on both sides of every topic, then
+the magnet, at rest at the equilibrium, levitates for ``settle`` s of
+simulated time; the simulator pauses by itself after exactly that many
+samples (:meth:`SimulatorNode.pause_after`), the last sample's command waits
+in its queue, the settling is checked on the true state (RMS of the
+position error over the last 0.1 s) and the identifier is reset (its
+service). The simulation resumes and pauses again after exactly ``samples``
+more samples: the bag and the identifier get those samples, each with its
+command and excitation, and nothing else. The first recorded command is the
+first to carry the excitation (computed at the last settling sample and
+published, ``delay_commands``, for the next).
+
+Every node is there from the start: a subscription matched just before the
+recording could have its first messages handled after those of other
+topics, and the recorder would log them at the previous ``/clock``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+from rclpy.parameter import Parameter
+
+from maglev_ros.control.excitation import CommandExcitation
+from maglev_ros.topics import (
+    CLOCK_TOPIC,
+    COMMAND_TOPIC,
+    CURRENTS_TOPIC,
+    ESTIMATE_TOPIC,
+    EXCITATION_TOPIC,
+    IDENTIFIER_RESET_SERVICE,
+    REFERENCE_TOPIC,
+    TRUE_STATE_TOPIC,
+    command_channel,
+    excitation_channel,
+    field_channel,
+    field_topic,
+)
+
+__all__ = [
+    'IDENTIFIER_CHANNELS',
+    'LabGraphSettings',
+    'LabRun',
+    'OnlineEstimate',
+    'pair_channel',
+    'run_closed_loop_lab',
+]
+
+SETTLE_WINDOW = 0.1  # s of simulated time: the settling check's moving RMS
+WAIT_S = 60.0  # s, longest wait for discovery, draining and a single sample (JIT)
+
+
+def pair_channel(pair: str, channel: Callable[[int], str] = command_channel) -> str:
+    """Channel spec of an antisymmetric pair's input ``0.5 (c+ - c-)``, named ``u_<pair>``.
+
+    Parameters
+    ----------
+    pair : {'x', 'y'}
+        The coil pair (x+ x- or y+ y-).
+    channel : callable
+        Coil index to channel spec: :func:`~maglev_ros.topics.command_channel`
+        (the total command, named ``u_<pair>``) or
+        :func:`~maglev_ros.topics.excitation_channel` (the excitation, ``r_<pair>``).
+
+    Returns
+    -------
+    str
+        E.g. ``u_x=0.5*maglev/currents/command:data[0]-0.5*maglev/currents/command:data[1]``.
+    """
+    plus = {'x': 0, 'y': 2}[pair]
+    name = 'r' if channel is excitation_channel else 'u'
+    return f'{name}_{pair}=0.5*{channel(plus)}-0.5*{channel(plus + 1)}'
+
+
+#: The identifier node's channels: the x and y field of sensor 0 against the pair inputs.
+IDENTIFIER_CHANNELS = (
+    (f'Bx_0={field_channel(0, "x")}', f'By_0={field_channel(0, "y")}'),
+    (pair_channel('x'), pair_channel('y')),
+)
+
+
+@dataclass(frozen=True)
+class LabGraphSettings:
+    """What the closed-loop lab runs.
+
+    Attributes
+    ----------
+    params : str
+        Parameter set (plant, estimator and controller).
+    samples : int
+        Samples to record after settling.
+    settle : float
+        s of simulated time before the recording.
+    sample_rate : float
+        Hz.
+    noise, quantization : float
+        Sensor noise (T rms) and resolution (T per LSB).
+    sensor_delay : int
+        Samples.
+    coil_dynamics : bool
+        Coil L/R electrics.
+    field_model : str
+        The simulator's field model.
+    seed : int
+        Seed of the sensor noise.
+    sensors : tuple of int
+        Sensors whose fields are recorded.
+    storage : str
+        ``mcap`` or ``sqlite3``.
+    filter : str
+        The estimator's filter.
+    excitation : CommandExcitation
+        The controller's excitation; its ``start`` is set to the first recorded sample.
+    identifier_orders : tuple
+        ``(na, nb, nk)`` of the identifier node, ny*ny and ny*nu values row by
+        row for :data:`IDENTIFIER_CHANNELS` (default: x 7 9 1 and y 6 6 1, decoupled).
+    initial_covariance : float
+        The identifier's ``P0 = p0 I`` (fields in T: large).
+    """
+
+    params: str = 'maggy_v2'
+    samples: int = 25000
+    settle: float = 1.0
+    sample_rate: float = 5000.0
+    noise: float = 1e-4
+    quantization: float = 0.098e-3
+    sensor_delay: int = 1
+    coil_dynamics: bool = True
+    field_model: str = 'fast'
+    seed: int = 0
+    sensors: tuple[int, ...] = (0,)
+    storage: str = 'mcap'
+    filter: str = 'kf'
+    excitation: CommandExcitation = field(
+        default_factory=lambda: CommandExcitation('prbs', 0.1, (0.0, 0.2), 'pairs')
+    )
+    identifier_orders: tuple = ((7, 0, 0, 6), (9, 0, 0, 6), (1, 1, 1, 1))
+    initial_covariance: float = 1e10
+
+    @property
+    def settle_samples(self) -> int:
+        """Index of the last sample before the recording (the settling's samples)."""
+        return max(1, int(round(self.settle * self.sample_rate)))
+
+
+@dataclass(frozen=True)
+class OnlineEstimate:
+    """The online identifier's final state.
+
+    Attributes
+    ----------
+    model : PolyModel
+        Its ARX estimate (all rows), raw (not detrended) signals.
+    samples : int
+        Samples it was given.
+    covariance_trace : float
+        Trace of its covariance.
+    fit : ndarray, shape (ny,)
+        One-step prediction fit over its window, %.
+    forgetting : float
+        Its forgetting factor.
+    """
+
+    model: object
+    samples: int
+    covariance_trace: float
+    fit: np.ndarray
+    forgetting: float
+
+
+@dataclass(frozen=True)
+class LabRun:
+    """What the closed-loop session did.
+
+    Attributes
+    ----------
+    samples : int
+        Samples recorded (published after settling).
+    settle_s : float
+        Simulated s before the recording.
+    settle_rms : ndarray, shape (3,)
+        RMS of the true position error over the last 0.1 s of settling, m.
+    settled : bool
+        Whether that RMS is below 0.1 mm on every axis.
+    simulated_s : float
+        Simulated time at the end, s.
+    wall_s : float
+        Wall time of the recording, s.
+    timeouts : int
+        Lockstep command timeouts of the simulator (0: every sample had its command).
+    crashed : bool
+    crash_reason : str
+    controller : dict
+        Controller counters: ``saturated`` commands, ``level`` and ``message``.
+    identifier : OnlineEstimate or None
+        None if it got no sample.
+    """
+
+    samples: int
+    settle_s: float
+    settle_rms: np.ndarray
+    settled: bool
+    simulated_s: float
+    wall_s: float
+    timeouts: int
+    crashed: bool
+    crash_reason: str
+    controller: dict
+    identifier: OnlineEstimate | None
+
+
+def _overrides(**values) -> list:
+    return [Parameter(k, value=v) for k, v in values.items()]
+
+
+def _matched(node, topic: str, publisher: bool) -> int:
+    """Count the peers matched by ``node``'s publisher (subscription) on ``topic`` (-1: none)."""
+    name = '/' + topic.lstrip('/')
+    if publisher:
+        counts = [p.get_subscription_count() for p in node.publishers if p.topic_name == name]
+    else:
+        counts = [s.get_publisher_count() for s in node.subscriptions if s.topic_name == name]
+    return min(counts) if counts else -1
+
+
+class _SettleWatch:
+    """Position error of the true state over the last window, from ``maglev/state/true``."""
+
+    def __init__(self, node, z_eq: float, window: int) -> None:
+        from collections import deque
+
+        from nav_msgs.msg import Odometry
+        from rclpy.serialization import deserialize_message
+
+        from maglev_ros.nodes.qos import SENSOR_QOS
+
+        self._errors: deque = deque(maxlen=window)
+        self._z_eq = z_eq
+        self.active = True
+        self._decode = lambda raw: deserialize_message(raw, Odometry)
+        node.create_subscription(Odometry, TRUE_STATE_TOPIC, self._on_state, SENSOR_QOS, raw=True)
+
+    def _on_state(self, raw: bytes) -> None:
+        if self.active:  # after settling nothing is decoded
+            p = self._decode(raw).pose.pose.position
+            self._errors.append((p.x, p.y, p.z - self._z_eq))
+
+    def rms(self) -> np.ndarray:
+        """RMS of the last window's position error per axis, m, shape (3,)."""
+        if not self._errors:
+            return np.full(3, np.nan)
+        return np.sqrt(np.mean(np.square(np.array(self._errors)), axis=0))
+
+
+def run_closed_loop_lab(
+    settings: LabGraphSettings,
+    bag: Path,
+    stop=None,
+    progress: Callable[[str, int, int], None] | None = None,
+) -> LabRun:
+    """Run the closed-loop lab session (see the module docstring) and record the bag.
+
+    Parameters
+    ----------
+    settings : LabGraphSettings
+        What to run.
+    bag : Path
+        Bag directory to create.
+    stop : StopSignals or threading.Event, optional
+        Ends the run when a stop signal arrives.
+    progress : callable, optional
+        ``progress(stage, done, total)`` with stage ``settling`` or
+        ``recording``, samples, called while waiting.
+
+    Returns
+    -------
+    LabRun
+
+    Raises
+    ------
+    KeyboardInterrupt
+        On a stop signal (the bag is finalised first).
+    RuntimeError
+        If the graph does not come up or stops answering (names what).
+    """
+    import os
+
+    from rclpy.node import Node
+    from std_srvs.srv import Trigger
+
+    from maglev_ros.nodes.bringup import Bringup
+    from maglev_ros.nodes.controller import ControllerNode
+    from maglev_ros.nodes.estimator import EstimatorNode
+    from maglev_ros.nodes.identifier import IdentifierNode
+    from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.nodes.simulator import SimulatorNode
+    from maglev_ros.physics import make_model
+    from maglev_ros.physics.equilibria import find_equilibria
+
+    s = settings
+    settle_n = s.settle_samples
+    last = settle_n + s.samples  # index of the last recorded sample
+    # the excitation starts with the command computed at sample settle_n: published
+    # (delay_commands) for sample settle_n + 1, the first recorded command
+    excitation = replace(s.excitation, start=settle_n / s.sample_rate)
+    z_eq = find_equilibria(make_model(s.params))[0].z
+    topics = [
+        *(field_topic(k) for k in s.sensors),
+        CURRENTS_TOPIC,
+        COMMAND_TOPIC,
+        EXCITATION_TOPIC,
+        TRUE_STATE_TOPIC,
+        CLOCK_TOPIC,
+    ]
+    report = progress or (lambda stage, done, total: None)
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    with Bringup() as lab:
+        ctx = lab.context
+        sim = lab.add(
+            SimulatorNode(
+                context=ctx,
+                parameter_overrides=_overrides(
+                    params=s.params,
+                    field_model=s.field_model,
+                    magnet='free',
+                    sample_rate=s.sample_rate,
+                    coil_dynamics=s.coil_dynamics,
+                    sensor_delay=s.sensor_delay,
+                    sensor_noise=s.noise,
+                    sensor_quantization=s.quantization,
+                    seed=s.seed,
+                    mode='lockstep',
+                    start_paused=True,
+                    sensors=list(range(len(make_model(s.params).params.sensors))),
+                    marker_rate=0.0,
+                    command_timeout=WAIT_S,
+                ),
+            )
+        )
+        est = lab.add(
+            EstimatorNode(
+                context=ctx,
+                parameter_overrides=_overrides(
+                    params=s.params,
+                    filter=s.filter,
+                    sample_rate=s.sample_rate,
+                    sensor_delay=s.sensor_delay,
+                    sensor_noise=max(s.noise, 1e-6),
+                    quantization=s.quantization,
+                ),
+            )
+        )
+        e = excitation
+        ctrl = lab.add(
+            ControllerNode(
+                context=ctx,
+                parameter_overrides=_overrides(
+                    params=s.params,
+                    sample_rate=s.sample_rate,
+                    coil_dynamics=s.coil_dynamics,
+                    delay_commands=True,
+                    excitation_signal=e.signal,
+                    excitation_amplitude=e.amplitude,
+                    excitation_band=list(e.band),
+                    excitation_pattern=e.pattern,
+                    excitation_seed=e.seed,
+                    excitation_length=e.length,
+                    excitation_cycles=e.cycles,
+                    excitation_start=e.start,
+                ),
+            )
+        )
+        ident = lab.add(
+            IdentifierNode(
+                context=ctx,
+                parameter_overrides=_overrides(
+                    outputs=list(IDENTIFIER_CHANNELS[0]),
+                    inputs=list(IDENTIFIER_CHANNELS[1]),
+                    na=list(s.identifier_orders[0]),
+                    nb=list(s.identifier_orders[1]),
+                    nk=list(s.identifier_orders[2]),
+                    initial_covariance=s.initial_covariance,
+                    publish_rate=1.0,
+                ),
+            )
+        )
+        recorder = lab.add(
+            RecorderNode(
+                context=ctx,
+                parameter_overrides=_overrides(
+                    path=str(bag),
+                    storage=s.storage,
+                    topics=topics,
+                    log_clock='topic',
+                    record_from=(settle_n + 1) / s.sample_rate,  # the first recorded sample
+                ),
+            ),
+            destroy_last=True,  # finalises the bag once the others are gone
+        )
+        watch_node = lab.add(Node('maglev_lab_settling', context=ctx))
+        watch = _SettleWatch(watch_node, z_eq, max(1, int(round(SETTLE_WINDOW * s.sample_rate))))
+        reset = watch_node.create_client(Trigger, IDENTIFIER_RESET_SERVICE)
+        publishers = {  # topic: (publisher node, subscriptions it must have matched)
+            **{
+                field_topic(k): (sim, 1 + (k in s.sensors) + (k == 0))  # estimator, recorder,
+                for k in sim.sensors  # identifier
+            },
+            CURRENTS_TOPIC: (sim, 3),  # estimator, controller, recorder
+            TRUE_STATE_TOPIC: (sim, 2),  # the settling watch, recorder
+            CLOCK_TOPIC: (sim, 1),
+            ESTIMATE_TOPIC: (est, 1),
+            COMMAND_TOPIC: (ctrl, 3),  # simulator, identifier, recorder
+            EXCITATION_TOPIC: (ctrl, 1),
+        }
+        lab.start()
+        lab.wait_until(
+            lambda: (
+                sim.command_publishers >= 1
+                and len(recorder.subscribed) == len(topics)
+                and recorder.metadata_complete
+                and all(
+                    count >= 1
+                    for n in (est, ctrl, ident, recorder, watch_node)
+                    for count in _subscription_counts(n)
+                )  # fmt: skip
+                and all(_matched(n, t, True) >= k for t, (n, k) in publishers.items())
+                and reset.service_is_ready()
+            ),
+            'the simulator, estimator, controller, identifier and recorder',
+            stop=stop,
+        )
+        sim.pause_after(settle_n)
+        sim.set_paused(False)
+        _wait_paused(lab, sim, ctrl, settle_n, 'settling', report, stop)
+        watch.active = False
+        rms = watch.rms()
+        # the identifier starts afresh with the first recorded sample: every settling
+        # sample reached it (one per command), then it is reset while nothing moves
+        lab.wait_until(
+            lambda: ident.samples >= settle_n + 1, 'the identifier (settling)', stop=stop
+        )
+        answer = reset.call_async(Trigger.Request())
+        lab.wait_until(answer.done, 'the identifier reset', stop=stop)
+        wall = time.monotonic()
+        sim.pause_after(last)
+        sim.set_paused(False)
+        _wait_paused(lab, sim, ctrl, last, 'recording', report, stop, first=settle_n)
+        wall = time.monotonic() - wall
+        recorded = sim.sim.samples - settle_n
+        lab.wait_until(
+            lambda: (
+                all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)
+                and ident.samples >= recorded
+            ),
+            'the recorder and the identifier',
+            stop=stop,
+        )
+        status = ctrl.controller.status()
+        online = None
+        if ident.samples:
+            st = ident.identifier.status()
+            online = OnlineEstimate(
+                ident.identifier.model(1.0 / s.sample_rate),
+                int(ident.samples),
+                float(st.covariance_trace),
+                np.asarray(st.fit),
+                ident.config.forgetting,
+            )
+        return LabRun(
+            samples=int(recorded),
+            settle_s=settle_n / s.sample_rate,
+            settle_rms=rms,
+            settled=bool(np.all(rms < 1e-4)),
+            simulated_s=float(sim.sim.time),
+            wall_s=wall,
+            timeouts=int(sim.counters['timeouts']),
+            crashed=bool(sim.sim.crashed),
+            crash_reason=sim.sim.reason,
+            controller={
+                'level': status.level,
+                'message': status.message,
+                'saturated': int(status.saturated),
+                'commands': int(ctrl.commands),
+            },
+            identifier=online,
+        )
+
+
+def _subscription_counts(node) -> list[int]:
+    """Count the publishers matched by each subscription of ``node`` (not the set-point)."""
+    skip = '/' + REFERENCE_TOPIC
+    return [sub.get_publisher_count() for sub in node.subscriptions if sub.topic_name != skip]
+
+
+def _wait_paused(lab, sim, ctrl, index, stage, report, stop, first: int = 0) -> None:
+    """Wait until the simulator paused after sample ``index`` and the controller answered it.
+
+    Raises RuntimeError when no sample is stepped for ``2 WAIT_S`` (the
+    simulator holds a missing command after ``WAIT_S``: the graph stopped).
+    """
+    total = index - first
+    last = [-1, time.monotonic()]
+
+    def done() -> bool:
+        stepped = sim.sim.samples
+        now = time.monotonic()
+        if stepped != last[0]:
+            last[:] = [stepped, now]
+        elif now - last[1] > 2 * WAIT_S:
+            raise RuntimeError(
+                f'the {stage} stopped at sample {stepped}: no sample for {2 * WAIT_S:g} s'
+            )
+        report(stage, min(max(stepped - first, 0), total), total)
+        if sim.sim.crashed:
+            return True
+        # paused after `index`; the controller's command for it is queued at the simulator
+        return sim.paused and stepped >= index and ctrl.commands >= stepped + 1
+
+    lab.wait_until(done, f'the {stage} ({total} samples)', timeout=1e9, stop=stop)

@@ -1,0 +1,95 @@
+"""The main job: ``maglev-lab`` closed loop (the default), end to end in one process.
+
+A short record (2000 samples after 0.1 s of levitation) of the whole chain:
+simulator (lockstep, noise, quantisation, delay, coil dynamics), KF, LQR with
+its PRBS, identifier, recorder; then the seed's models, the physics check and
+the online identifier beside the batch ARX. The long record (25 000 samples)
+is the README's main job.
+"""
+
+import json
+import re
+
+import numpy as np
+import pytest
+from rosbags.rosbag2 import Reader
+
+from maglev_ros import topics
+from maglev_ros.bags import read_bag
+from maglev_ros.cli import lab
+from maglev_ros.control.excitation import CommandExcitation, ExcitationSchedule
+
+SAMPLES = 2000
+SEED = 2
+
+
+def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_models(
+    domain, tmp_path, capfd
+):
+    out = tmp_path / 'lab'
+    argv = ['--duration', '0.4', '--settle', '0.1', '--seed', str(SEED), '--out', str(out)]
+    status = lab.main([*argv, '--quiet'])
+    printed = capfd.readouterr().out
+    summary = json.loads((out / 'models.json').read_text())
+    assert status == summary['exit_status'] and status in (0, 1), printed
+    run = summary['run']
+    # exactly the samples asked for, after settling, each with its command and excitation
+    assert f'recorded {SAMPLES} samples' in printed and 'settled after 0.1 s' in printed
+    assert summary['data'] == {'N': SAMPLES, 'n_estimation': 1000, 'n_validation': 1000}
+    assert run['timeouts'] == 0 and not run['crashed'] and run['settled']
+    with Reader(out / 'bag') as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    channels = [topics.command_channel(k) for k in range(4)]
+    channels += [topics.excitation_channel(k) for k in range(4)]
+    u = np.asarray(read_bag(out / 'bag', [topics.field_channel(0, 'x')], channels).data.u)
+    commands, excitations = u[:, :4], u[:, 4:]
+    assert set(counts.values()) == {SAMPLES}, counts
+    # the recorded excitation is the core's signal from its first sample on (seeded)
+    cfg = CommandExcitation('prbs', 0.1, (0.0, 0.2), 'pairs', seed=SEED, length=SAMPLES)
+    np.testing.assert_array_equal(excitations, ExcitationSchedule(cfg, 5000.0).sequence(SAMPLES))
+    controller_part = commands - excitations
+    assert np.abs(controller_part).max() <= 1.0 + 1e-12  # the LQR's limit
+    # the magnet within 0.5 mm of its set-point during the excitation
+    assert max(run['largest_excursion_m']) < 0.5e-3, run['largest_excursion_m']
+    # the seed's models: x, y (ARX, IV on the excitation, ARMAX) and MIMO (ARX, ARMAX)
+    models = summary['models']
+    assert [(m['group'], m['label']) for m in models] == [
+        ('x', 'ARX 7 9 1'), ('x', 'IV4 7 9 1'), ('x', 'ARMAX 5 5 3 1'),
+        ('y', 'ARX 6 6 1'), ('y', 'IV4 6 6 1'), ('y', 'ARMAX 6 6 5 1'),
+        ('mimo', 'ARX'), ('mimo', 'ARMAX'),
+    ]  # fmt: skip
+    iv = [m for m in models if m['structure'] == 'iv']
+    assert [m['instruments'] for m in iv] == [['r_x'], ['r_y']]
+    for m in models:
+        assert m['model'] is not None and len(m['fit_validation']) == len(m['outputs'])
+        if m['group'] != 'mimo':  # the physics check of every SISO model, in dB and degrees
+            check = m['physics_check']
+            assert check['band_hz'] == [10.0, 300.0] and np.isfinite(check['max_db'])
+            assert re.search(rf'{re.escape(m["label"])}.*\d+\.\d\d dB +\d+\.\d deg', printed)
+    usable = [m for m in models if m['status'] in ('ok', 'reduced')]
+    assert len(usable) >= 6, [(m['label'], m['status'], m['reason']) for m in models]
+    # the identifier node ran on the same samples: its ARX is the batch ARX of them
+    assert summary['online']['samples'] == SAMPLES
+    differences = [float(d) for d in re.findall(r'largest difference (\S+) of', printed)]
+    assert len(differences) == 2 and max(differences) < 1e-5, printed
+    for name in ('compare_x', 'compare_y', 'compare_mimo', 'physics_x', 'physics_y'):
+        assert (out / f'{name}.png').stat().st_size > 10_000
+
+
+@pytest.mark.parametrize(
+    'argv, match',
+    [
+        (['--realtime'], '--realtime: maglev-lab runs the closed loop in lockstep'),
+        (['--board', '/dev/ttyACM0', '--magnet', 'free'], 'board.launch.xml port:=PATH'),
+        (['--virtual-board', '--magnet', 'free'], 'runs the closed loop on the simulator only'),
+        (['--sensors', '0', '1'], 'the closed-loop session records and identifies sensor 0'),
+        (['--check-band', '300', '10'], '--check-band must be LOW HIGH'),
+        (['--amplitude', '0'], '--amplitude must be > 0'),
+    ],
+)  # fmt: skip
+def test_what_the_closed_loop_does_not_run_is_a_usage_error(argv, match, tmp_path, capfd):
+    out = tmp_path / 'lab'
+    assert lab.main([*argv, '--out', str(out)]) == 2
+    err = capfd.readouterr().err
+    assert match in err and err.count('\n') == 1, err
+    assert not out.exists()
