@@ -10,6 +10,7 @@ a complete sample). ``/clock`` once per burst (real time) comes separately.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Sequence
 
 import numpy as np
@@ -63,7 +64,9 @@ class SampleEncoder:
         self.topics = tuple(topics)
         self.state = bool(state)
         self.burst = int(burst)
-        self._clock_batch = RawMessageBatch(clock_layout()) if clock == 'burst' else None
+        # /clock once per burst: the template with its stamp packed in (one struct call;
+        # a compiled batch call per burst costs more for one small message)
+        self._clock_layout = clock_layout() if clock == 'burst' else None
         self._columns = np.array([3 * k + j for k in sensors for j in range(3)])
         self._odom_cache = np.zeros(13)
         self._odom_state = b''  # bytes of the state _odom_cache was computed for
@@ -84,12 +87,16 @@ class SampleEncoder:
         list of bytes
             One Clock message per sample index that starts a burst.
         """
-        if self._clock_batch is None:
+        layout = self._clock_layout
+        if layout is None:
             return []
-        ticks = batch.stamps_ns[batch.indices % self.burst == 0]
-        if not ticks.size:
-            return []
-        return self._clock_batch.serialise(ticks, np.empty((ticks.size, 0)))
+        burst, out = self.burst, []
+        for index, t_ns in zip(batch.indices.tolist(), batch.stamps_ns.tolist(), strict=True):
+            if index % burst == 0:
+                message = bytearray(layout.template)
+                struct.pack_into('<iI', message, layout.stamp_offset, *divmod(t_ns, 1_000_000_000))
+                out.append(bytes(message))
+        return out
 
     def sample_messages(self, batch: SampleBatch) -> list[bytes]:
         """Serialise each sample of a batch, sample after sample (``topics`` order).

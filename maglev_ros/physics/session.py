@@ -476,9 +476,10 @@ class SimulationSession:
             return None
         self._pending, self._crash_pending = [], False
         n = len(pending)
-        indices = np.fromiter((p[0] for p in pending), np.int64, n)
+        columns = list(zip(*pending, strict=True))  # index, reading, state, currents of each
+        indices = np.array(columns[0] if n else (), dtype=np.int64)
         if n:
-            readings, states, currents = (np.array([p[k] for p in pending]) for k in (1, 2, 3))
+            readings, states, currents = (np.array(columns[k]) for k in (1, 2, 3))
         else:
             readings = np.empty((0, len(self._first_reading)))
             states, currents = np.empty((0, 12)), np.empty((0, 4))
