@@ -60,8 +60,8 @@ class RawFieldReader:
         self._store = jazzy_typestore()
         self._struct: struct.Struct | None = None
         self._size = -1
-        self._lengths: tuple[int, ...] = ()
-        self._n_lengths = 0
+        self._lengths: tuple[int, ...] = ()  # every length field's value, in byte order
+        self._length_positions: list[int] = []  # their positions in the unpacked tuple
         self._order: list[int] = []  # position of each wanted field in the unpacked tuple
         self.layouts = 0
 
@@ -106,13 +106,21 @@ class RawFieldReader:
             The stamp in ns and the values of ``paths``, in order; None for a
             message that cannot be laid out (big-endian, a field missing).
         """
-        for attempt in (0, 1):
-            if self._struct is not None and len(raw) == self._size and raw[1] == 1:
-                values = self._struct.unpack_from(raw)
-                if tuple(values[i] for i in self._length_positions) == self._lengths:
-                    order = self._order
-                    stamp = values[order[0]] * 1_000_000_000 + values[order[1]]
-                    return stamp, tuple(values[i] for i in order[2:])
-            if attempt or not self._lay_out(raw):
-                return None
-        return None
+        values = self._unpack(raw)
+        if values is None and self._lay_out(raw):  # another layout: walk it once
+            values = self._unpack(raw)
+        if values is None:
+            return None
+        order = self._order
+        return values[order[0]] * 1_000_000_000 + values[order[1]], tuple(
+            values[i] for i in order[2:]
+        )
+
+    def _unpack(self, raw: bytes) -> tuple | None:
+        """Unpack ``raw`` by the current layout, None if it does not have it."""
+        if self._struct is None or len(raw) != self._size or raw[1] != 1:
+            return None
+        values = self._struct.unpack_from(raw)
+        if tuple(values[i] for i in self._length_positions) != self._lengths:
+            return None
+        return values

@@ -281,10 +281,11 @@ class EstimatorNode(Node):
         estimate_message(0, x, self.estimator.state_covariance)
         self.estimator.reset()
         self.n_sensors = self.estimator.n_sensors
-        period_ns = 1e9 / cfg.estimator.sample_rate
-        self._period_ns = period_ns
+        self._period_ns = 1e9 / cfg.estimator.sample_rate
         # parts 0 .. k-1: the sensors' fields; part k: the currents
-        self._samples = SampleAssembler(self.n_sensors + 1, round(cfg.sample_wait * period_ns))
+        self._samples = SampleAssembler(
+            self.n_sensors + 1, round(cfg.sample_wait * self._period_ns)
+        )
         self.lost_samples = 0  # released without their currents: not estimated
         self.published = 0
         self.last_stamp: int | None = None
