@@ -9,7 +9,7 @@ and for publishing raw bytes:
 * ``templates``: a message serialised once with the offsets of its stamp and
   varying float64s (:class:`RawLayout`), and the layouts of the Maggy
   graph's 5 kHz messages (:func:`field_layout`, :func:`currents_layout`,
-  :func:`odometry_layout`, :func:`clock_layout`);
+  :func:`odometry_layout`, :func:`estimate_layout`, :func:`clock_layout`);
 * ``batch``: a burst of samples' messages written in one compiled call
   (:class:`~maglev_ros.cdr.batch.SampleSerialiser`), used by the simulator
   and driver nodes. Not re-exported here: it imports numba, which nodes that
@@ -20,6 +20,7 @@ and for publishing raw bytes:
 from .layout import CdrLayout, Path, cdr_layout, decode_columns
 from .templates import (
     CURRENT_VALUES,
+    ESTIMATE_VALUES,
     FIELD_VALUES,
     HEADER_STAMP,
     ODOMETRY_VALUES,
@@ -27,6 +28,7 @@ from .templates import (
     clock_layout,
     currents_layout,
     default_message,
+    estimate_layout,
     field_layout,
     odometry_layout,
     raw_layout,
@@ -37,6 +39,7 @@ __all__ = [
     'CURRENT_VALUES',
     'FIELD_VALUES',
     'HEADER_STAMP',
+    'ESTIMATE_VALUES',
     'ODOMETRY_VALUES',
     'CdrLayout',
     'Path',
@@ -48,6 +51,7 @@ __all__ = [
     'default_message',
     'field_layout',
     'jazzy_typestore',
+    'estimate_layout',
     'odometry_layout',
     'raw_layout',
 ]

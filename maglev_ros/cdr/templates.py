@@ -34,6 +34,7 @@ __all__ = [
     'FIELD_VALUES',
     'HEADER_STAMP',
     'ODOMETRY_VALUES',
+    'ESTIMATE_VALUES',
     'RawLayout',
     'clock_layout',
     'currents_layout',
@@ -51,6 +52,12 @@ ODOMETRY_VALUES: tuple[Path, ...] = (  # position, quaternion x y z w, twist (ch
     *(('pose', 'pose', 'orientation', a) for a in 'xyzw'),
     *(('twist', 'twist', 'linear', a) for a in 'xyz'),
     *(('twist', 'twist', 'angular', a) for a in 'xyz'),
+)
+#: The estimate's Odometry: :data:`ODOMETRY_VALUES`, then the 36 pose and 36 twist covariances.
+ESTIMATE_VALUES: tuple[Path, ...] = (
+    *ODOMETRY_VALUES,
+    *(('pose', 'covariance', i) for i in range(36)),
+    *(('twist', 'covariance', i) for i in range(36)),
 )
 _STRINGS = ('string', 'wstring')
 _NUMPY_TYPES = {'bool': np.bool_, 'byte': np.uint8, 'char': np.uint8, 'octet': np.uint8}
@@ -214,6 +221,26 @@ def odometry_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) ->
     msg.header.frame_id = frame
     msg.child_frame_id = child_frame
     return raw_layout(msg, msgtype, ODOMETRY_VALUES)
+
+
+def estimate_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) -> RawLayout:
+    """Raw layout of a nav_msgs/Odometry with covariances (``maglev/state/estimate``).
+
+    85 values, in the order of :data:`ESTIMATE_VALUES`: the 13 of
+    :func:`odometry_layout`, then the row-major 6x6 pose and twist covariances.
+
+    Parameters
+    ----------
+    frame : str, optional
+        ``header.frame_id`` (default ``maglev_base``).
+    child_frame : str, optional
+        ``child_frame_id`` (default ``maglev_magnet``).
+    """
+    msgtype = 'nav_msgs/msg/Odometry'
+    msg = default_message(msgtype)
+    msg.header.frame_id = frame
+    msg.child_frame_id = child_frame
+    return raw_layout(msg, msgtype, ESTIMATE_VALUES)
 
 
 def clock_layout() -> RawLayout:

@@ -281,6 +281,11 @@ class Estimator:
             self.missing += ~available
         if dof < 3 * available.sum():
             self.rejected += available & ~accepted
+        self._record(currents, accepted, nis_sensor, nis, dof)
+        return self._out_x
+
+    def _record(self, currents, accepted, nis_sensor, nis, dof) -> None:
+        """Keep a stepped sample's NIS, acceptance and currents; restart when lost."""
         slot = self.samples % self.config.nis_window
         self._nis_ring[slot] = nis
         self._dof_ring[slot] = dof
@@ -291,7 +296,6 @@ class Estimator:
         self.unaccepted = 0 if dof else self.unaccepted + 1
         if self.unaccepted >= self.config.lost_samples:
             self._restart()
-        return self._out_x
 
     def _restart(self) -> None:
         """Start again from the prior at the equilibrium (counts kept; see ``lost_samples``)."""

@@ -24,6 +24,9 @@ __all__ = [
     'embed_state',
     'freeze_check',
     'kf_sample',
+    'kf_step',
+    'odometry_covariances',
+    'estimate_values',
 ]
 
 
@@ -446,3 +449,173 @@ def kf_sample(
     if delayed:
         return xn, Pn, xn, Pn, accepted, nis_sensor, nis, dof
     return xp, Pp, xn, Pn, accepted, nis_sensor, nis, dof
+
+
+@njit(cache=True)
+def kf_step(
+    y,
+    currents,
+    prev,
+    delayed,
+    x,
+    P,
+    F,
+    B,
+    H,
+    D,
+    y_eq,
+    u_eq,
+    r_diag,
+    Q,
+    gate,
+    last,
+    runs,
+    run,
+    frozen,
+    events,
+    missing,
+    rejected,
+    x_eq,
+    reduced,
+    out_x,
+):  # pragma: no cover - jitted
+    """One whole linear-KF sample: freeze check, update, predict, counts.
+
+    What :meth:`Estimator.step <maglev_ros.estimation.base.Estimator.step>`
+    does for the KF, in one compiled call (the same operations in the same
+    order, so the same numbers): the readings' freeze check
+    (:func:`freeze_check`), the currents at the reading's instant and over
+    the prediction (see :mod:`maglev_ros.estimation.base`), :func:`kf_sample`,
+    the missing and rejected counts, and the 12-state estimate.
+
+    Parameters
+    ----------
+    y : ndarray, shape (3 k,)
+        Readings, T (NaN: missing).
+    currents : ndarray, shape (m,)
+        The sample's currents, A.
+    prev : ndarray, shape (m,)
+        The previous sample's currents, A (NaN before the first sample).
+    delayed : bool
+        One sample of sensor delay.
+    x, P, F, B, H, D, y_eq, u_eq, r_diag, Q, gate
+        As :func:`kf_sample`.
+    last, runs : ndarray
+        Freeze-check history (updated in place, see :func:`freeze_check`).
+    run : int
+        Identical readings in a row that make a sensor frozen.
+    frozen : ndarray of bool, shape (k,)
+        Sensors frozen (updated in place).
+    events, missing, rejected : ndarray of int, shape (k,)
+        Freezes seen, missing and rejected readings per sensor (updated in place).
+    x_eq : ndarray, shape (12,)
+        Equilibrium state.
+    reduced : ndarray of int, shape (10,)
+        Indices of the reduced states in the 12-state.
+    out_x : ndarray, shape (12,)
+        The published estimate (written).
+
+    Returns
+    -------
+    x_prior, P_prior : ndarray
+        The next sample's prior.
+    P_out : ndarray
+        Covariance of the published estimate.
+    accepted : ndarray of bool, shape (k,)
+    nis_sensor : ndarray, shape (k,)
+    nis : float
+    dof : int
+    """
+    available, now_frozen = freeze_check(y, last, runs, run)
+    k = available.shape[0]
+    for s in range(k):
+        if now_frozen[s] and not frozen[s]:
+            events[s] += 1
+        frozen[s] = now_frozen[s]
+    held = currents
+    across = currents
+    if delayed:
+        if np.isfinite(prev[0]):
+            held = prev
+        across = 0.5 * (held + currents)
+    x_out, p_out, x_prior, p_prior, accepted, nis_sensor, nis, dof = kf_sample(
+        x, P, y, held, across, delayed, F, B, H, D, y_eq, u_eq, r_diag, Q, available, gate
+    )
+    n_available = 0
+    for s in range(k):
+        if available[s]:
+            n_available += 1
+        else:
+            missing[s] += 1
+    if dof < 3 * n_available:
+        for s in range(k):
+            if available[s] and not accepted[s]:
+                rejected[s] += 1
+    out_x[:] = x_eq
+    for i in range(reduced.shape[0]):
+        out_x[reduced[i]] += x_out[i]
+    return x_prior, p_prior, p_out, accepted, nis_sensor, nis, dof
+
+
+@njit(cache=True)
+def odometry_covariances(x, p, unobserved):  # pragma: no cover - jitted
+    """Return the pose and twist covariances of an Odometry of estimate ``x``.
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        Estimate: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    p : ndarray, shape (>= 10, >= 10)
+        Covariance of x y z alpha beta vx vy vz wx wy (then any other states).
+    unobserved : float
+        Variance of the unobservable yaw and yaw rate.
+
+    Returns
+    -------
+    pose, twist : ndarray, shape (6, 6)
+        Pose covariance over x y z and rotations about x y z; twist covariance
+        over the magnet-frame velocity (nav_msgs: the child frame) and the body
+        rates. Yaw and yaw rate: ``unobserved``, uncorrelated.
+    """
+    pose = np.zeros((6, 6))
+    pose[:5, :5] = p[:5, :5]
+    pose[5, 5] = unobserved
+    rot = phys.rotation_matrix(x[3], x[4], x[5])
+    rt = np.ascontiguousarray(rot.T)
+    twist = np.zeros((6, 6))
+    twist[:3, :3] = rt @ np.ascontiguousarray(p[5:8, 5:8]) @ rot
+    cross = rt @ np.ascontiguousarray(p[5:8, 8:10])
+    twist[:3, 3:5] = cross
+    twist[3:5, :3] = cross.T
+    twist[3:5, 3:5] = p[8:10, 8:10]
+    twist[5, 5] = unobserved
+    return pose, twist
+
+
+@njit(cache=True)
+def estimate_values(x, p, unobserved, out):  # pragma: no cover - jitted
+    """Fill the 85 varying numbers of an estimate's Odometry (``ESTIMATE_VALUES``).
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        Estimate: position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
+    p : ndarray, shape (>= 10, >= 10)
+        Covariance of its reduced states.
+    unobserved : float
+        Variance of the unobservable yaw and yaw rate.
+    out : ndarray, shape (85,)
+        Written: position (3), quaternion x y z w (4), magnet-frame velocity
+        (3), body rates (3) (as ``physics.kernels.odometry_values``), then the
+        pose and twist covariances of :func:`odometry_covariances`, row-major.
+    """
+    out[0:3] = x[0:3]
+    qx, qy, qz, qw = phys.euler_to_quaternion(x[3], x[4], x[5])
+    out[3], out[4], out[5], out[6] = qx, qy, qz, qw
+    rot = phys.rotation_matrix(x[3], x[4], x[5])
+    for i in range(3):
+        out[7 + i] = rot[0, i] * x[6] + rot[1, i] * x[7] + rot[2, i] * x[8]
+    out[10:13] = x[9:12]
+    pose, twist = odometry_covariances(x, p, unobserved)
+    out[13:49] = pose.ravel()
+    out[49:85] = twist.ravel()

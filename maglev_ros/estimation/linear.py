@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..physics.discretization import zoh
 from .base import Estimator
-from .kernels import gated_update, kf_predict, kf_sample
+from .kernels import gated_update, kf_predict, kf_sample, kf_step
 
 __all__ = ['KalmanEstimator']
 
@@ -41,6 +43,7 @@ class KalmanEstimator(Estimator):
     def __init__(self, model, config=None, linear=None):
         self._x = None
         self._P = None
+        self._no_currents = np.full(model.n_inputs, np.nan)  # kf_step: no previous sample
         super().__init__(model, config, linear)
 
     def _build(self) -> None:
@@ -126,6 +129,68 @@ class KalmanEstimator(Estimator):
         )
         self._x, self._P = x, P
         return accepted, nis_sensor, nis, dof
+
+    def step(self, y, currents) -> np.ndarray:
+        """Process one complete sample and return the state estimate.
+
+        As :meth:`Estimator.step`; without the magnet-strength state the whole
+        sample is one compiled call (:func:`kernels.kf_step`: the same
+        operations, so the same numbers), ~3x less time per sample, what a
+        5 kHz estimator in real time needs.
+
+        Parameters
+        ----------
+        y : array_like, shape (3 k,)
+            The sample's sensor readings, T (NaN for a missing sensor).
+        currents : array_like, shape (n_s,)
+            The sample's measured coil currents, A.
+
+        Returns
+        -------
+        ndarray, shape (12,)
+            Estimated state at this sample (gamma and wz are 0: unobservable).
+        """
+        if self.strength_index is not None:
+            return super().step(y, currents)
+        y = np.asarray(y, dtype=float)
+        currents = np.asarray(currents, dtype=float)
+        if y.shape != (self.n_outputs,):
+            raise ValueError(f'y must have {self.n_outputs} readings, got shape {y.shape}')
+        if currents.shape != (self.n_inputs,) or not math.isfinite(currents.sum()):
+            raise ValueError(f'currents must be {self.n_inputs} finite numbers, got {currents!r}')
+        f = self.freeze
+        out_x = np.empty(12)
+        prev = self._no_currents if self._prev_currents is None else self._prev_currents
+        self._x, self._P, self._out_p, accepted, nis_sensor, nis, dof = kf_step(
+            y,
+            currents,
+            prev,
+            self.config.sensor_delay == 1,
+            self._x,
+            self._P,
+            self.F,
+            self.B,
+            self.H,
+            self.D,
+            self.y_eq,
+            self.u_eq,
+            self.r_diag,
+            self.Q,
+            self.gate,
+            f._last,
+            f.runs,
+            f.run,
+            f.frozen,
+            f.events,
+            self.missing,
+            self.rejected,
+            self.x_eq,
+            self.reduced,
+            out_x,
+        )
+        self._out_x = out_x
+        self._record(currents, accepted, nis_sensor, nis, dof)
+        return self._out_x  # the prior's x_eq if the filter restarted
 
     def _sample(self, y, held, across, available, delayed):
         """Run the whole sample in one compiled call (:func:`kernels.kf_sample`)."""

@@ -13,16 +13,10 @@ from nav_msgs.msg import Odometry
 
 from maglev_ros.nodes.messages import odometry_message
 
-__all__ = ['UNOBSERVED_VARIANCE', 'estimate_message', 'odometry_state']
+__all__ = ['UNOBSERVED_VARIANCE', 'EstimateEncoder', 'estimate_message', 'odometry_state']
 
 #: Variance given to the unobservable yaw and yaw rate (rad^2, (rad/s)^2).
 UNOBSERVED_VARIANCE = 1.0e6
-
-
-def _rotation(alpha: float, beta: float, gamma: float) -> np.ndarray:
-    from maglev_ros.physics.kernels import rotation_matrix
-
-    return np.asarray(rotation_matrix(alpha, beta, gamma))
 
 
 def estimate_message(t_ns: int, x: np.ndarray, cov: np.ndarray) -> Odometry:
@@ -41,24 +35,53 @@ def estimate_message(t_ns: int, x: np.ndarray, cov: np.ndarray) -> Odometry:
     -------
     Odometry
         Pose covariance over x y z, rotation about x y z (yaw: unobserved);
-        twist covariance over the magnet-frame velocity and the body rates.
+        twist covariance over the magnet-frame velocity and the body rates
+        (:func:`~maglev_ros.estimation.kernels.odometry_covariances`).
     """
+    from maglev_ros.estimation.kernels import odometry_covariances
+
     msg = odometry_message(t_ns, x)
-    p = np.asarray(cov, dtype=float)[:10, :10]
-    pose = np.zeros((6, 6))
-    pose[:5, :5] = p[:5, :5]
-    pose[5, 5] = UNOBSERVED_VARIANCE
-    rot = _rotation(float(x[3]), float(x[4]), float(x[5]))
-    twist = np.zeros((6, 6))
-    twist[:3, :3] = rot.T @ p[5:8, 5:8] @ rot
-    cross = rot.T @ p[5:8, 8:10]
-    twist[:3, 3:5] = cross
-    twist[3:5, :3] = cross.T
-    twist[3:5, 3:5] = p[8:10, 8:10]
-    twist[5, 5] = UNOBSERVED_VARIANCE
+    pose, twist = odometry_covariances(
+        np.asarray(x, dtype=float), np.asarray(cov, dtype=float), UNOBSERVED_VARIANCE
+    )
     msg.pose.covariance = pose.ravel().tolist()
     msg.twist.covariance = twist.ravel().tolist()
     return msg
+
+
+class EstimateEncoder:
+    """Serialise estimates as ``maglev/state/estimate`` CDR bytes, ~10x faster than messages.
+
+    The same message as :func:`estimate_message`, made by patching a
+    serialised template (:func:`~maglev_ros.cdr.templates.estimate_layout`),
+    for ``Publisher.publish(bytes)``.
+    """
+
+    def __init__(self) -> None:
+        from maglev_ros.cdr import estimate_layout
+        from maglev_ros.cdr.batch import RawMessageBatch
+
+        self._batch = RawMessageBatch(estimate_layout())
+        self._stamp = np.zeros(1, dtype=np.int64)
+        self._values = np.zeros((1, self._batch.n_values))
+
+    def encode(self, t_ns: int, x: np.ndarray, cov: np.ndarray) -> bytes:
+        """Return the serialised Odometry of estimate ``x`` (see :func:`estimate_message`).
+
+        Parameters
+        ----------
+        t_ns : int
+            Stamp, ns (>= 0).
+        x : ndarray, shape (12,)
+            Estimate.
+        cov : ndarray, shape (>= 10, >= 10)
+            Covariance of its reduced states.
+        """
+        from maglev_ros.estimation.kernels import estimate_values
+
+        estimate_values(x, cov, UNOBSERVED_VARIANCE, self._values[0])
+        self._stamp[0] = t_ns
+        return self._batch.serialise(self._stamp, self._values)[0]
 
 
 def odometry_state(msg: Odometry) -> np.ndarray:

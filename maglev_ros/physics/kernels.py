@@ -113,6 +113,7 @@ def rotation_matrix(alpha: float, beta: float, gamma: float) -> np.ndarray:
     return r
 
 
+@njit(cache=True)
 def euler_to_quaternion(alpha: float, beta: float, gamma: float) -> tuple[float, ...]:
     """Quaternion (x, y, z, w) of ``R = Rz(gamma) Ry(beta) Rx(alpha)`` (angles in rad).
 

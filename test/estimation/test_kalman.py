@@ -175,3 +175,28 @@ def test_a_lost_magnet_restarts_the_filter_instead_of_diverging(v2, v2_linear, k
     assert status.restarts == 10 and status.unaccepted == 0
     assert sum(status.rejected) == 3000
     assert np.allclose(est.state_std()[:3], 1e-3)  # bounded: restarted from the prior
+
+
+@pytest.mark.parametrize('delay', [1, 0])
+def test_compiled_step_gives_the_numbers_of_the_python_step(v2, v2_linear, v2_data, delay):
+    """KalmanEstimator.step (one compiled call) against Estimator.step (Python around kernels)."""
+    from maglev_ros.estimation.base import Estimator
+
+    ys, cs, _ = v2_data
+    ys = ys.copy()  # 750 samples
+    ys[100:110, 0:3] = np.nan  # a missing sensor
+    ys[200:230, 3:6] = ys[200, 3:6]  # a frozen sensor
+    ys[500, 6:9] += 5e-3  # an outlier the gate rejects
+    ys[600:660] = np.nan  # every reading lost: the filter restarts
+    config = EstimatorConfig(sensor_delay=delay, lost_samples=50)
+    fast = KalmanEstimator(v2, config, linear=v2_linear)
+    slow = KalmanEstimator(v2, config, linear=v2_linear)
+    for y, c in zip(ys, cs, strict=True):
+        x_fast = fast.step(y, c)
+        x_slow = Estimator.step(slow, y, c)
+        assert np.array_equal(x_fast, x_slow)
+        assert np.array_equal(fast.state_covariance, slow.state_covariance)
+    assert fast.status() == slow.status()
+    status = fast.status()
+    assert status.rejected[2] >= 1 and status.missing[0] >= 10 and status.freeze_events[1] == 1
+    assert status.restarts >= 1

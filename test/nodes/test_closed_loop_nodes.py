@@ -185,6 +185,8 @@ def test_cut_estimator_input_gives_zero_currents_and_an_error(ctx):
         wait_for(lambda: len(peer.estimates) >= 1000, timeout=60.0, what='1000 estimates')
         assert ctrl.controller.status().level == 'OK'
         spinner.executor.remove_node(est)  # the estimator's input is cut
+        if est.streams is not None:  # its sample streams' own thread too
+            est.streams.close()
         sim.session.command_timeout = 0.002  # the simulator holds the command and goes on
         n_cmd = len(peer.commands)
         wait_for(
