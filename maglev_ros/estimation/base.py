@@ -284,6 +284,38 @@ class Estimator:
         self._record(currents, accepted, nis_sensor, nis, dof)
         return self._out_x
 
+    def step_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:
+        """Process n complete samples in order, as n calls of :meth:`step`.
+
+        Parameters
+        ----------
+        ys : array_like, shape (n, 3 k)
+            Readings, T (NaN for a missing sensor).
+        currents : array_like, shape (n, n_s)
+            Measured coil currents, A.
+
+        Returns
+        -------
+        x : ndarray, shape (n, 12)
+            The estimate of each sample.
+        p : ndarray, shape (n, n_states, n_states)
+            Its covariance (:attr:`state_covariance`).
+        """
+        ys = np.asarray(ys, dtype=float)
+        currents = np.asarray(currents, dtype=float)
+        n = ys.shape[0] if ys.ndim == 2 else -1
+        if n < 0 or currents.shape[:1] != (n,):
+            raise ValueError(
+                f'ys (n, {self.n_outputs}) and currents (n, {self.n_inputs}) must have as '
+                f'many rows, got shapes {ys.shape} and {currents.shape}'
+            )
+        x = np.empty((n, 12))
+        p = np.empty((n, self.n_states, self.n_states))
+        for i in range(n):
+            x[i] = self.step(ys[i], currents[i])
+            p[i] = self._out_p
+        return x, p
+
     def _record(self, currents, accepted, nis_sensor, nis, dof) -> None:
         """Keep a stepped sample's NIS, acceptance and currents; restart when lost."""
         slot = self.samples % self.config.nis_window

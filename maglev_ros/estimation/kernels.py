@@ -25,6 +25,7 @@ __all__ = [
     'freeze_check',
     'kf_sample',
     'kf_step',
+    'kf_steps',
     'odometry_covariances',
     'estimate_values',
 ]
@@ -619,3 +620,128 @@ def estimate_values(x, p, unobserved, out):  # pragma: no cover - jitted
     pose, twist = odometry_covariances(x, p, unobserved)
     out[13:49] = pose.ravel()
     out[49:85] = twist.ravel()
+
+
+@njit(cache=True)
+def kf_steps(
+    ys,
+    us,
+    prev,
+    delayed,
+    x,
+    P,
+    F,
+    B,
+    H,
+    D,
+    y_eq,
+    u_eq,
+    r_diag,
+    Q,
+    gate,
+    last,
+    runs,
+    run,
+    frozen,
+    events,
+    missing,
+    rejected,
+    x_eq,
+    reduced,
+    nis_ring,
+    dof_ring,
+    counters,
+    lost_samples,
+    p_init,
+    x_out,
+    p_out,
+):  # pragma: no cover - jitted
+    """Many linear-KF samples in one call: :func:`kf_step` and the bookkeeping after it.
+
+    What :meth:`Estimator.step <maglev_ros.estimation.base.Estimator.step>`
+    does sample after sample, the NIS window, the counts and the restart of
+    a lost filter included (the same operations, so the same numbers).
+
+    Parameters
+    ----------
+    ys : ndarray, shape (n, 3 k)
+        Readings, T.
+    us : ndarray, shape (n, m)
+        Currents, A.
+    prev : ndarray, shape (m,)
+        The currents of the sample before the first (NaN: none).
+    delayed, x, P, F, B, H, D, y_eq, u_eq, r_diag, Q, gate : object
+        As :func:`kf_step`.
+    last, runs, run, frozen, events, missing, rejected, x_eq, reduced : object
+        As :func:`kf_step`.
+    nis_ring, dof_ring : ndarray, shape (w,)
+        NIS window (updated in place).
+    counters : ndarray of int64, shape (3,)
+        Samples so far, samples in a row without an accepted reading, restarts
+        (updated in place).
+    lost_samples : int
+        Samples without an accepted reading before a restart.
+    p_init : ndarray, shape (n_states, n_states)
+        Covariance of the prior a restart starts from.
+    x_out : ndarray, shape (n, 12)
+        The estimates (written).
+    p_out : ndarray, shape (n, n_states, n_states)
+        Their covariances (written).
+
+    Returns
+    -------
+    x, P : ndarray
+        The next sample's prior.
+    accepted, nis_sensor, nis, dof
+        Of the last sample.
+    """
+    k = frozen.shape[0]
+    accepted = np.zeros(k, dtype=np.bool_)
+    nis_sensor = np.full(k, np.nan)
+    nis = 0.0
+    dof = 0
+    window = nis_ring.shape[0]
+    for i in range(ys.shape[0]):
+        out = x_out[i]
+        x, P, p_i, accepted, nis_sensor, nis, dof = kf_step(
+            ys[i],
+            us[i],
+            prev,
+            delayed,
+            x,
+            P,
+            F,
+            B,
+            H,
+            D,
+            y_eq,
+            u_eq,
+            r_diag,
+            Q,
+            gate,
+            last,
+            runs,
+            run,
+            frozen,
+            events,
+            missing,
+            rejected,
+            x_eq,
+            reduced,
+            out,
+        )
+        slot = counters[0] % window
+        nis_ring[slot] = nis
+        dof_ring[slot] = dof
+        prev = us[i]
+        counters[0] += 1
+        counters[1] = 0 if dof else counters[1] + 1
+        if counters[1] >= lost_samples:  # restart from the prior at the equilibrium
+            x = np.zeros(x.shape[0])
+            P = p_init.copy()
+            out[:] = x_eq
+            p_i = P.copy()
+            counters[2] += 1
+            counters[1] = 0
+        p_out[i] = p_i
+    return x, P, accepted, nis_sensor, nis, dof

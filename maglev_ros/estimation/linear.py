@@ -8,7 +8,7 @@ import numpy as np
 
 from ..physics.discretization import zoh
 from .base import Estimator
-from .kernels import gated_update, kf_predict, kf_sample, kf_step
+from .kernels import gated_update, kf_predict, kf_sample, kf_step, kf_steps
 
 __all__ = ['KalmanEstimator']
 
@@ -74,6 +74,7 @@ class KalmanEstimator(Estimator):
     def _set_state(self, dx, P) -> None:
         if self._x is None:
             self._build()
+            self._p_init = np.ascontiguousarray(self.initial_covariance())
         self._x = np.ascontiguousarray(dx, dtype=float)
         self._P = np.ascontiguousarray(P, dtype=float)
 
@@ -152,8 +153,10 @@ class KalmanEstimator(Estimator):
         """
         if self.strength_index is not None:
             return super().step(y, currents)
-        y = np.asarray(y, dtype=float)
-        currents = np.asarray(currents, dtype=float)
+        # C-contiguous always: one compiled signature (a strided row, e.g. of a
+        # burst's array, would compile kf_step again: seconds in a real-time loop)
+        y = np.ascontiguousarray(y, dtype=float)
+        currents = np.ascontiguousarray(currents, dtype=float)
         if y.shape != (self.n_outputs,):
             raise ValueError(f'y must have {self.n_outputs} readings, got shape {y.shape}')
         if currents.shape != (self.n_inputs,) or not math.isfinite(currents.sum()):
@@ -191,6 +194,91 @@ class KalmanEstimator(Estimator):
         self._out_x = out_x
         self._record(currents, accepted, nis_sensor, nis, dof)
         return self._out_x  # the prior's x_eq if the filter restarted
+
+    def step_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:
+        """Process n complete samples in order, as n calls of :meth:`step`, in one call.
+
+        Without the magnet-strength state, one compiled call for them all
+        (:func:`kernels.kf_steps`, the same numbers as :meth:`step`): a burst of
+        a real-time simulator in the same process (the estimator node's
+        ``intra_process``) at ~13 us a sample.
+
+        Parameters
+        ----------
+        ys : array_like, shape (n, 3 k)
+            Readings, T (NaN for a missing sensor).
+        currents : array_like, shape (n, n_s)
+            Measured coil currents, A.
+
+        Returns
+        -------
+        x : ndarray, shape (n, 12)
+            The estimate of each sample.
+        p : ndarray, shape (n, n_states, n_states)
+            Its covariance (:attr:`state_covariance`).
+        """
+        if self.strength_index is not None:
+            return super().step_many(ys, currents)
+        ys = np.ascontiguousarray(ys, dtype=float)
+        currents = np.ascontiguousarray(currents, dtype=float)
+        n = ys.shape[0] if ys.ndim == 2 else -1
+        if ys.shape[1:] != (self.n_outputs,) or currents.shape != (n, self.n_inputs):
+            raise ValueError(
+                f'ys (n, {self.n_outputs}) and currents (n, {self.n_inputs}) must have as '
+                f'many rows, got shapes {ys.shape} and {currents.shape}'
+            )
+        if not math.isfinite(currents.sum()):
+            bad = int(np.nonzero(~np.isfinite(currents).all(axis=1))[0][0])
+            raise ValueError(
+                f'currents must be finite numbers, got {currents[bad]!r} in row {bad}'
+            )
+        x = np.empty((n, 12))
+        p = np.empty((n, self.n_states, self.n_states))
+        if n == 0:
+            return x, p
+        f = self.freeze
+        prev = self._no_currents if self._prev_currents is None else self._prev_currents
+        counters = np.array([self.samples, self.unaccepted, self.restarts], dtype=np.int64)
+        self._x, self._P, accepted, nis_sensor, nis, dof = kf_steps(
+            ys,
+            currents,
+            np.ascontiguousarray(prev, dtype=float),
+            self.config.sensor_delay == 1,
+            self._x,
+            self._P,
+            self.F,
+            self.B,
+            self.H,
+            self.D,
+            self.y_eq,
+            self.u_eq,
+            self.r_diag,
+            self.Q,
+            self.gate,
+            f._last,
+            f.runs,
+            f.run,
+            f.frozen,
+            f.events,
+            self.missing,
+            self.rejected,
+            self.x_eq,
+            self.reduced,
+            self._nis_ring,
+            self._dof_ring,
+            counters,
+            self.config.lost_samples,
+            self._p_init,
+            x,
+            p,
+        )
+        self.samples, self.unaccepted, self.restarts = (int(v) for v in counters)
+        self.last_nis, self.last_dof = nis, dof
+        self.last_accepted, self.last_nis_sensor = accepted, nis_sensor
+        self._prev_currents = currents[-1].copy()
+        self._out_x = x[-1].copy()
+        self._out_p = p[-1].copy()
+        return x, p
 
     def _sample(self, y, held, across, available, delayed):
         """Run the whole sample in one compiled call (:func:`kernels.kf_sample`)."""

@@ -94,6 +94,8 @@ class EstimatorNodeConfig:
         Samples per published estimate (1: every sample; ``publish_rate``).
     stream_thread : bool
         Take the sample streams in a thread of their own (:mod:`.sample_streams`).
+    intra_process : bool
+        Take the samples from a simulator node of this process (:mod:`.intra_process`).
     """
 
     params: str
@@ -102,6 +104,7 @@ class EstimatorNodeConfig:
     sample_wait: int = 10
     publish_every: int = 1
     stream_thread: bool = True
+    intra_process: bool = False
 
 
 def _parameter_set(name: str, value: str) -> str:
@@ -214,7 +217,13 @@ PARAMETERS = ParameterTable(
         'stream_thread': Param(
             True,
             'take the fields and currents in a thread of their own, a burst per wake-up '
-            '(false: one executor callback per message, ~6x the CPU at 5 kHz)',
+            '(false: one executor callback per message)',
+        ),
+        'intra_process': Param(
+            False,
+            'composed with the simulator node (created before this one, same process): '
+            'take its samples directly, not through the middleware (as rclcpp intra-process '
+            'communication; the same numbers); no simulator there: subscribe as usual',
         ),
     },
 )
@@ -246,6 +255,7 @@ def build_config(values: dict) -> EstimatorNodeConfig:
     wait = v.pop('sample_wait')
     rate = v.pop('publish_rate')
     stream_thread = v.pop('stream_thread')
+    intra_process = v.pop('intra_process')
     try:
         config = EstimatorConfig.from_mapping(v)
     except EstimatorConfigError as err:
@@ -258,7 +268,7 @@ def build_config(values: dict) -> EstimatorNodeConfig:
                 f'publish_rate must divide sample_rate {config.sample_rate:g} Hz into whole '
                 f'samples (e.g. {config.sample_rate / 5:g}), got {rate:g}'
             )
-    return EstimatorNodeConfig(params, config, period, wait, every, stream_thread)
+    return EstimatorNodeConfig(params, config, period, wait, every, stream_thread, intra_process)
 
 
 class EstimatorNode(Node):
@@ -277,7 +287,7 @@ class EstimatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.streams = None
+        self.streams = self.source = None
         self.config = cfg = build_config(PARAMETERS.declare(self))
         from maglev_ros.physics import make_model
 
@@ -291,6 +301,7 @@ class EstimatorNode(Node):
         self._encoder = EstimateEncoder()
         x = self.estimator.step(self.estimator.y_eq, self.estimator.u_eq)
         self._encoder.encode(0, x, self.estimator._out_p)
+        self.estimator.step_many(self.estimator.y_eq[None], self.estimator.u_eq[None])
         self.estimator.reset()
         self.n_sensors = self.estimator.n_sensors
         self._period_ns = 1e9 / cfg.estimator.sample_rate
@@ -311,6 +322,60 @@ class EstimatorNode(Node):
         self._currents_reader = RawFieldReader(
             'sensor_msgs/msg/JointState', CURRENT_VALUES[: self.estimator.n_inputs]
         )
+        self.source = None  # intra_process: the simulator's samples, not its messages
+        if cfg.intra_process:
+            self.source = self._connect_source()
+        if self.source is None:
+            self._subscribe_streams(cfg)
+        self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
+        self.get_logger().info(
+            f'{cfg.estimator.filter} on {cfg.params}, {self.n_sensors} sensors, '
+            f'{cfg.estimator.sample_rate:g} Hz, sensor delay {cfg.estimator.sensor_delay}'
+            f'{", samples from the simulator in this process" if self.source else ""}'
+        )
+
+    def _connect_source(self):
+        """Connect to the simulator of this process (intra_process); None if there is none."""
+        from maglev_ros.nodes.intra_process import find_source
+
+        source = find_source(self.context, self.resolve_topic_name(CURRENTS_TOPIC))
+        wanted = tuple(range(self.n_sensors))
+        if source is None or source.sensors[: self.n_sensors] != wanted:
+            self.get_logger().warning(
+                'intra_process: no simulator publishing sensors '
+                f'{list(wanted)} in this process (create it first): subscribing instead'
+            )
+            return None
+        source.connect(self._on_batch, NODE_NAME)
+        return source
+
+    def _on_batch(self, batch) -> None:
+        """Estimate a batch of the simulator's samples (intra_process; its thread)."""
+        n = len(batch)
+        if n == 0:
+            return
+        stamps = batch.stamps_ns
+        try:
+            x, p = self.estimator.step_many(
+                batch.readings[:, : 3 * self.n_sensors],
+                batch.currents[:, : self.estimator.n_inputs],
+            )
+        except ValueError as err:  # not from a simulator: say so, keep running
+            self.get_logger().error(
+                f'samples {stamps[0]}..{stamps[-1]} ns not estimated: {err}',
+                throttle_duration_sec=1.0,
+            )
+            return
+        self.last_stamp = int(stamps[-1])
+        every = self.config.publish_every
+        for i in range(n):
+            stamp = int(stamps[i])
+            if every > 1 and round(stamp / self._period_ns) % every:
+                continue  # not a publishing sample (publish_rate)
+            self._pub.publish(self._encoder.encode(stamp, x[i], p[i]))
+            self.published += 1
+
+    def _subscribe_streams(self, cfg: EstimatorNodeConfig) -> None:
         # the 5 kHz streams in a thread of their own, a burst per wake-up (sample_streams)
         streams = [
             Stream(MagneticField, field_topic(k), lambda raw, k=k: self._on_field(k, raw))
@@ -318,16 +383,13 @@ class EstimatorNode(Node):
         ]
         streams.append(Stream(JointState, CURRENTS_TOPIC, self._on_currents))
         self.streams = open_streams(self, streams, SENSOR_QOS, own_thread=cfg.stream_thread)
-        self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
-        self.get_logger().info(
-            f'{cfg.estimator.filter} on {cfg.params}, {self.n_sensors} sensors, '
-            f'{cfg.estimator.sample_rate:g} Hz, sensor delay {cfg.estimator.sensor_delay}'
-        )
 
     def destroy_node(self) -> None:
         """Stop the sample streams' thread, then destroy the node."""
         if self.streams is not None:
             self.streams.close()
+        if self.source is not None:
+            self.source.disconnect(self._on_batch)
         super().destroy_node()
 
     def _unreadable(self, topic: str, what: str) -> None:
@@ -367,7 +429,10 @@ class EstimatorNode(Node):
                     y[3 * k : 3 * k + 3] = field
         else:
             y = np.array(sum(fields, ()))
-        currents = np.array(parts[-1])
+        self._step(stamp, y, np.array(parts[-1]))
+
+    def _step(self, stamp: int, y: np.ndarray, currents: np.ndarray) -> None:
+        """Step the estimator with one sample's readings and currents; publish its estimate."""
         try:
             x = self.estimator.step(y, currents)
         except ValueError as err:  # a malformed message: say so, keep running

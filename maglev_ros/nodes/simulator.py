@@ -75,6 +75,7 @@ from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.intra_process import SampleSource, register_source, unregister_source
 from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
 from maglev_ros.nodes.params import (
     NodeParameterError,
@@ -309,6 +310,11 @@ class SimulatorNode(Node):
             DiagnosticArray, contract.DIAGNOSTICS_TOPIC, contract.DIAGNOSTICS_QOS
         )
         self._wire_publishing(cfg)
+        # composed nodes of this process may take the samples directly (intra_process)
+        self.samples_source = SampleSource(self.sensors)
+        self.samples_source.on_error = self._on_listener_error
+        self._samples_topic = self.resolve_topic_name(contract.CURRENTS_TOPIC)
+        register_source(self.context, self._samples_topic, self.samples_source)
         command_qos = (
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
         )
@@ -359,9 +365,10 @@ class SimulatorNode(Node):
         The currents message ends each sample (a lockstep excitation answers
         it with the next command; a recorder counts samples by it), so this is
         the readiness to wait on before stepping; lockstep starts once it
-        reaches ``start_subscribers``.
+        reaches ``start_subscribers``. Listeners of this process that take
+        the samples directly (:mod:`~maglev_ros.nodes.intra_process`) count too.
         """
-        return self._current_pub.get_subscription_count()
+        return self._current_pub.get_subscription_count() + self.samples_source.listeners
 
     @property
     def command_publishers(self) -> int:
@@ -413,6 +420,7 @@ class SimulatorNode(Node):
         pubs[contract.CURRENTS_TOPIC] = self._current_pub
         pubs[contract.CLOCK_TOPIC] = self._clock_pub
         self._publish_calls = [pubs[topic].handle.publish_raw for topic in self._encoder.topics]
+        self._sample_pubs = [pubs[topic] for topic in self._encoder.topics]
         if self._clock_pub is not None:
             self._publish_clock = self._clock_pub.handle.publish_raw
 
@@ -429,11 +437,32 @@ class SimulatorNode(Node):
         if n:
             for message in self._encoder.clock_messages(batch):
                 self._publish_clock(message)
-            messages = self._encoder.sample_messages(batch)
-            for publish, message in zip(self._publish_calls * n, messages, strict=True):
+            # a topic nobody subscribes to is neither serialised nor published
+            # (volatile: no subscriber joining later could get the message; a composed
+            # estimator that takes the samples in this process leaves the fields and
+            # the currents without any)
+            active = self._active_topics()
+            messages = self._encoder.sample_messages(batch, active)
+            calls = [c for c, a in zip(self._publish_calls, active, strict=True) if a]
+            for publish, message in zip(calls * n, messages, strict=True):
                 publish(message)
+            if self.samples_source.connected:
+                self.samples_source.deliver(batch)
         if batch.crashed:
             self._on_crash()
+
+    def _active_topics(self) -> tuple[bool, ...]:
+        """Return which sample topics have subscribers now.
+
+        Asked each batch: a subscriber that just matched gets every sample from
+        the first, as a test or a recorder expects.
+        """
+        return tuple(pub.get_subscription_count() > 0 for pub in self._sample_pubs)
+
+    def _on_listener_error(self, name: str, err: Exception) -> None:
+        self.get_logger().error(
+            f'{name}: samples not taken in this process: {err}', throttle_duration_sec=1.0
+        )
 
     def publish_markers(self) -> None:
         """Publish the base and the magnet (at its latest state) as RViz markers."""
@@ -594,6 +623,7 @@ class SimulatorNode(Node):
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
+        unregister_source(self.context, self._samples_topic, self.samples_source)
 
     def destroy_node(self) -> None:
         """Stop stepping, then destroy the node."""

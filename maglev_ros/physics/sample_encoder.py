@@ -70,7 +70,11 @@ class SampleEncoder:
         self._columns = np.array([3 * k + j for k in sensors for j in range(3)])
         self._odom_cache = np.zeros(13)
         self._odom_state = b''  # bytes of the state _odom_cache was computed for
-        self._serialiser = SampleSerialiser([RawMessageBatch(x) for x in layouts])
+        self._parts = [RawMessageBatch(x) for x in layouts]
+        self._serialiser = SampleSerialiser(self._parts)
+        self._subsets: dict[tuple[bool, ...], SampleSerialiser] = {}  # of some topics only
+        self._sensors = tuple(sensors)
+        self._clock_per_sample = clock == 'sample'
         # load the compiled kernel now, not in the stepping thread (up to 1 s the first time)
         self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, self._serialiser.n_values)))
 
@@ -98,7 +102,7 @@ class SampleEncoder:
                 out.append(bytes(message))
         return out
 
-    def sample_messages(self, batch: SampleBatch) -> list[bytes]:
+    def sample_messages(self, batch: SampleBatch, active=None) -> list[bytes]:
         """Serialise each sample of a batch, sample after sample (``topics`` order).
 
         The true state's 13 odometry values are recomputed only when the state
@@ -108,21 +112,45 @@ class SampleEncoder:
         ----------
         batch : SampleBatch
             Samples stepped, at least one.
+        active : sequence of bool, optional
+            Per topic of :attr:`topics`: serialise it (default all). A topic
+            nobody subscribes to need not be serialised.
 
         Returns
         -------
         list of bytes
-            ``len(batch) * len(topics)`` messages.
+            ``len(batch)`` times the messages of the active topics.
         """
-        values = [batch.readings[:, self._columns]]  # each published sensor's x y z
+        if active is None or all(active):
+            values = [batch.readings[:, self._columns]]  # each published sensor's x y z
+            if self.state:
+                values.append(self._odometry(batch))
+            values.append(batch.currents)
+            return self._serialiser.serialise(batch.stamps_ns, values)
+        active = tuple(bool(a) for a in active)
+        serialiser = self._subsets.get(active)
+        if serialiser is None:
+            parts = [p for p, a in zip(self._parts, active, strict=True) if a]
+            serialiser = self._subsets[active] = SampleSerialiser(parts)
+        blocks = [np.zeros((len(batch), 0))] if self._clock_per_sample else []
+        blocks += [batch.readings[:, 3 * k : 3 * k + 3] for k in self._sensors]
         if self.state:
-            odometry = np.empty((len(batch), 13))
-            for i, state in enumerate(batch.states):
-                key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
-                if key != self._odom_state:
-                    self._odom_cache = odometry_values(state)
-                    self._odom_state = key
-                odometry[i] = self._odom_cache
-            values.append(odometry)
-        values.append(batch.currents)
-        return self._serialiser.serialise(batch.stamps_ns, values)
+            blocks.append(None)  # computed only if wanted
+        blocks.append(batch.currents)
+        values = []
+        for block, wanted in zip(blocks, active, strict=True):
+            if wanted:
+                values.append(self._odometry(batch) if block is None else block)
+        if not values:
+            return []
+        return serialiser.serialise(batch.stamps_ns, values)
+
+    def _odometry(self, batch: SampleBatch) -> np.ndarray:
+        odometry = np.empty((len(batch), 13))
+        for i, state in enumerate(batch.states):
+            key = state.tobytes()  # cheaper than np.array_equal at 5 kHz
+            if key != self._odom_state:
+                self._odom_cache = odometry_values(state)
+                self._odom_state = key
+            odometry[i] = self._odom_cache
+        return odometry

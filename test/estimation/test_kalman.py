@@ -200,3 +200,30 @@ def test_compiled_step_gives_the_numbers_of_the_python_step(v2, v2_linear, v2_da
     status = fast.status()
     assert status.rejected[2] >= 1 and status.missing[0] >= 10 and status.freeze_events[1] == 1
     assert status.restarts >= 1
+
+
+@pytest.mark.parametrize('strength', [False, True])
+def test_step_many_gives_the_numbers_of_step(v2, v2_linear, v2_data, strength):
+    """A burst at a time (step_many, one compiled call) against sample after sample."""
+    ys, cs, _ = v2_data
+    ys = ys.copy()
+    ys[100:110, 0:3] = np.nan
+    ys[200:230, 3:6] = ys[200, 3:6]
+    ys[500, 6:9] += 5e-3
+    ys[600:660] = np.nan  # a restart
+    config = EstimatorConfig(lost_samples=50, magnet_strength=strength)
+    many = KalmanEstimator(v2, config, linear=v2_linear)
+    one = KalmanEstimator(v2, config, linear=v2_linear)
+    bounds = [0, 1, 6, 107, 333, 334, 601, 680, len(ys)]  # bursts of 1 to 267 samples
+    for lo, hi in zip(bounds[:-1], bounds[1:], strict=True):
+        x, p = many.step_many(ys[lo:hi], cs[lo:hi])
+        for i in range(lo, hi):
+            assert np.array_equal(x[i - lo], one.step(ys[i], cs[i]))
+            assert np.array_equal(p[i - lo], one.state_covariance)
+    assert many.status() == one.status()
+    assert np.array_equal(many.state, one.state)
+    assert many.status().restarts >= 1
+    with pytest.raises(ValueError, match='finite'):
+        many.step_many(ys[:3], np.full((3, 4), np.nan))
+    with pytest.raises(ValueError, match='rows'):
+        many.step_many(ys[:3], cs[:2])

@@ -12,6 +12,7 @@ response every command is zero.
 """
 
 import numpy as np
+import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
@@ -46,7 +47,7 @@ def _x0():
     return [5e-4, 0.0, z_eq] + [0.0] * 9
 
 
-def _graph(ctx, command_timeout, mode='lqr'):
+def _graph(ctx, command_timeout, mode='lqr', intra_process=False):
     sim = SimulatorNode(
         context=ctx,
         parameter_overrides=params(
@@ -64,7 +65,10 @@ def _graph(ctx, command_timeout, mode='lqr'):
             command_timeout=command_timeout,
         ),
     )
-    est = EstimatorNode(context=ctx, parameter_overrides=params(diagnostics_period=0.2))
+    est = EstimatorNode(
+        context=ctx,
+        parameter_overrides=params(diagnostics_period=0.2, intra_process=intra_process),
+    )
     ctrl = ControllerNode(
         context=ctx,
         parameter_overrides=params(diagnostics_period=0.2, delay_commands=True, mode=mode),
@@ -109,7 +113,9 @@ class _Peer:
 
 def _start(sim, spinner_nodes, ctx, est=None, ctrl=None):
     spinner = Spinner(ctx, spinner_nodes)
-    wait_for(lambda: sim._current_pub.get_subscription_count() >= 2, what='discovery')
+    # the controller and the estimator (unless it takes the samples in-process)
+    currents = 1 if est is not None and est.source is not None else 2
+    wait_for(lambda: sim._current_pub.get_subscription_count() >= currents, what='discovery')
     # the peer hears every estimate and every command from the first on
     if est is not None:
         wait_for(lambda: est._pub.get_subscription_count() >= 2, what='estimate discovery')
@@ -119,12 +125,15 @@ def _start(sim, spinner_nodes, ctx, est=None, ctrl=None):
     return spinner
 
 
-def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx):
+@pytest.mark.parametrize('intra_process', [False, True])
+def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx, intra_process):
     # s of simulated time: the settling; the 60 s hold runs on the ROS-free loop
-    # (test/controller), which these nodes equal sample by sample
+    # (test/controller), which these nodes equal sample by sample; intra_process: the
+    # estimator takes the simulator's samples in this process, with the same numbers
     duration = 1.0
     n = int(duration * RATE)
-    sim, est, ctrl = _graph(ctx, command_timeout=120.0)  # first sample: JIT
+    sim, est, ctrl = _graph(ctx, command_timeout=120.0, intra_process=intra_process)
+    assert (est.source is not None) == intra_process and (est.streams is None) == intra_process
     peer = _Peer(ctx)
     spinner = _start(sim, [sim, est, ctrl, peer.node], ctx, est, ctrl)
     try:

@@ -84,3 +84,24 @@ def test_fixed_magnet_odometry_is_computed_once_and_stays_exact(v2):
     a, b = (_decode(m[1], 'nav_msgs/msg/Odometry').pose.pose for m in (first, later))
     assert (a.position.z, a.orientation.w) == (b.position.z, b.orientation.w)
     assert a.position.z == odometry_values(sim.state)[2]
+
+
+@pytest.mark.parametrize(
+    'active',
+    [
+        (True, False, True, False, True),  # /clock, sensor 2, currents
+        (False, False, False, True, False),  # the true state only
+        (False, True, True, False, True),
+        (False,) * 5,
+    ],
+)
+def test_topics_without_subscribers_are_not_serialised(v2, active):
+    batch = _batch(v2)
+    encoder = SampleEncoder([1, 2], state=True, clock='sample')
+    full = encoder.sample_messages(batch)
+    some = encoder.sample_messages(batch, active)
+    k = sum(active)
+    assert len(some) == k * len(batch)
+    for i in range(len(batch)):
+        wanted = [m for m, a in zip(full[5 * i : 5 * i + 5], active, strict=True) if a]
+        assert some[k * i : k * i + k] == wanted
