@@ -80,13 +80,14 @@ def composed_child(control_rate: float) -> int:
     def build(cls, values):
         return lambda: cls(parameter_overrides=[Parameter(k, value=v) for k, v in values])
 
-    # composed: the estimator takes the simulator's samples in-process (intra_process)
+    # composed: samples, estimates and commands handed over in-process (intra_process)
     est = [*_EST, ('publish_rate', control_rate), ('intra_process', True)]
     ctrl = [
         *_CTRL,
         ('sample_rate', control_rate),
         ('trigger', 'estimate'),
         ('input_timeout', 0.02),
+        ('intra_process', True),
     ]
     return run_nodes(
         [build(SimulatorNode, _SIM), build(EstimatorNode, est), build(ControllerNode, ctrl)],

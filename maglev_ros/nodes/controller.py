@@ -89,6 +89,7 @@ from maglev_ros.control.excitation import (
     LoopExcitationError,
 )
 from maglev_ros.excitation import PATTERNS
+from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
 from maglev_ros.nodes.params import integer as integer_rule
@@ -153,6 +154,10 @@ class ControllerNodeConfig:
         estimate message (real time at the estimator's ``publish_rate``).
     excitation : CommandExcitation
         The excitation added to the command (``signal`` ``none``: off).
+    intra_process : bool
+        ``trigger: estimate``: take the estimates from an estimator of this
+        process and send the commands to its simulator directly
+        (:mod:`~maglev_ros.nodes.intra_process`).
     """
 
     params: str
@@ -162,6 +167,7 @@ class ControllerNodeConfig:
     diagnostics_period: float
     trigger: str = 'sample'
     excitation: CommandExcitation = CommandExcitation()
+    intra_process: bool = False
 
 
 def _parameter_set(name: str, value: str) -> str:
@@ -259,6 +265,13 @@ PARAMETERS = ParameterTable(
             'publish_rate; sample_rate is then that rate)',
             check=choice(*TRIGGERS),
         ),
+        'intra_process': Param(
+            False,
+            'trigger estimate, composed after the estimator and the simulator (same '
+            'process): take the estimates and send the commands directly, in the '
+            "simulator's thread (one burst of latency whatever the load; as rclcpp "
+            'intra-process communication); the topics are still published',
+        ),
         **_EXCITATION_PARAMETERS,
     },
 )
@@ -290,6 +303,7 @@ def build_config(values: dict) -> ControllerNodeConfig:
     start_enabled = v.pop('start_enabled')
     period = v.pop('diagnostics_period')
     trigger = v.pop('trigger')
+    intra = v.pop('intra_process')
     settings = {name[len('excitation_') :]: v.pop(name) for name in _EXCITATION_PARAMETERS}
     try:
         excitation = CommandExcitation(**settings)
@@ -303,7 +317,9 @@ def build_config(values: dict) -> ControllerNodeConfig:
         raise ControllerParameterError(
             f"trigger 'estimate' needs mode 'lqr' (the PD reads the fields), got {config.mode!r}"
         )
-    return ControllerNodeConfig(params, config, delay, start_enabled, period, trigger, excitation)
+    return ControllerNodeConfig(
+        params, config, delay, start_enabled, period, trigger, excitation, intra
+    )
 
 
 class ControllerNode(Node):
@@ -360,14 +376,19 @@ class ControllerNode(Node):
                 Float64MultiArray, EXCITATION_TOPIC, LOCKSTEP_COMMAND_QOS
             )
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        self.estimates = None  # intra_process: the estimator's channel
+        self._command_input = None  # intra_process: the simulator's command input
         self.per_estimate = cfg.trigger == 'estimate'
         if self.per_estimate:  # no pairing: the estimate alone (its currents: the last command)
             self._last_estimate_ns: int | None = None
             self._estimates_seen = False
             self._estimate_reader = RawFieldReader('nav_msgs/msg/Odometry', ODOMETRY_VALUES)
-            self.create_subscription(
-                Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS, raw=True
-            )
+            if cfg.intra_process:
+                self._connect_in_process()
+            if self.estimates is None:
+                self.create_subscription(
+                    Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS, raw=True
+                )
             self.create_timer(cfg.controller.input_timeout, self._check_stale)
         else:
             self.create_subscription(JointState, CURRENTS_TOPIC, self._on_currents, SENSOR_QOS)
@@ -406,6 +427,8 @@ class ControllerNode(Node):
         self.last_command = command
         self._msg.data = [float(v) for v in command]
         self._pub.publish(self._msg)
+        if self._command_input is not None:  # intra_process: the simulator, directly
+            self._command_input(self._msg.data)
         self.commands += 1
         status = self.controller.status()
         if status.level != self._last_level:
@@ -448,6 +471,33 @@ class ControllerNode(Node):
             return
         stamp, values = read
         self._send(stamp, self.controller.command(stamp * 1e-9, odometry_state_values(values)))
+
+    def _connect_in_process(self) -> None:
+        """intra_process: the estimator's estimates and the simulator's command input."""
+        estimates = intra_process.find(self.context, self.resolve_topic_name(ESTIMATE_TOPIC))
+        sink = intra_process.find(self.context, self.resolve_topic_name(COMMAND_TOPIC))
+        if not isinstance(estimates, intra_process.Channel):
+            self.get_logger().warning(
+                'intra_process: no estimator in this process (create it first): subscribing'
+            )
+            return
+        if isinstance(sink, intra_process.CommandSink):
+            self._command_input = sink.attach(self.get_name())
+        estimates.connect(self._on_estimate_values, self.get_name())
+        self.estimates = estimates
+
+    def destroy_node(self) -> None:
+        """Disconnect from an estimator of this process, then destroy the node."""
+        if self.estimates is not None:
+            self.estimates.disconnect(self._on_estimate_values)
+            self.estimates = None
+        super().destroy_node()
+
+    def _on_estimate_values(self, stamp: int, x: np.ndarray) -> None:
+        """intra_process: one command per estimate, in the estimator's thread."""
+        self._last_sample_ns = self._last_estimate_ns = self.get_clock().now().nanoseconds
+        self._estimates_seen = True
+        self._send(stamp, self.controller.command(stamp * 1e-9, x))
 
     def _check_stale(self) -> None:
         """``trigger: estimate``: no estimate for ``input_timeout`` of the node's clock.

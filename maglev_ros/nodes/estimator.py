@@ -49,6 +49,7 @@ from sensor_msgs.msg import JointState, MagneticField
 from maglev_ros.cdr import CURRENT_VALUES, FIELD_VALUES
 from maglev_ros.cdr.reader import RawFieldReader
 from maglev_ros.estimation import FILTERS, EstimatorConfig, EstimatorConfigError, make_estimator
+from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.messages import diagnostic_array
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
 from maglev_ros.nodes.params import integer as integer_rule
@@ -287,7 +288,7 @@ class EstimatorNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self.streams = self.source = None
+        self.streams = self.source = self.estimates = None
         self.config = cfg = build_config(PARAMETERS.declare(self))
         from maglev_ros.physics import make_model
 
@@ -323,8 +324,13 @@ class EstimatorNode(Node):
             'sensor_msgs/msg/JointState', CURRENT_VALUES[: self.estimator.n_inputs]
         )
         self.source = None  # intra_process: the simulator's samples, not its messages
+        self.estimates = None  # intra_process: the estimates, for a controller of this process
         if cfg.intra_process:
             self.source = self._connect_source()
+            self.estimates = intra_process.Channel()
+            self.estimates.on_error = self._on_listener_error
+            self._estimates_topic = self.resolve_topic_name(ESTIMATE_TOPIC)
+            intra_process.register(self.context, self._estimates_topic, self.estimates)
         if self.source is None:
             self._subscribe_streams(cfg)
         self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
@@ -336,11 +342,12 @@ class EstimatorNode(Node):
 
     def _connect_source(self):
         """Connect to the simulator of this process (intra_process); None if there is none."""
-        from maglev_ros.nodes.intra_process import find_source
-
-        source = find_source(self.context, self.resolve_topic_name(CURRENTS_TOPIC))
+        source = intra_process.find(self.context, self.resolve_topic_name(CURRENTS_TOPIC))
         wanted = tuple(range(self.n_sensors))
-        if source is None or source.sensors[: self.n_sensors] != wanted:
+        if (
+            not isinstance(source, intra_process.Channel)
+            or source.sensors[: self.n_sensors] != wanted
+        ):
             self.get_logger().warning(
                 'intra_process: no simulator publishing sensors '
                 f'{list(wanted)} in this process (create it first): subscribing instead'
@@ -348,6 +355,11 @@ class EstimatorNode(Node):
             return None
         source.connect(self._on_batch, NODE_NAME)
         return source
+
+    def _on_listener_error(self, name: str, err: Exception) -> None:
+        self.get_logger().error(
+            f'{name}: estimate not taken in this process: {err}', throttle_duration_sec=1.0
+        )
 
     def _on_batch(self, batch) -> None:
         """Estimate a batch of the simulator's samples (intra_process; its thread)."""
@@ -374,6 +386,8 @@ class EstimatorNode(Node):
                 continue  # not a publishing sample (publish_rate)
             self._pub.publish(self._encoder.encode(stamp, x[i], p[i]))
             self.published += 1
+            if self.estimates is not None and self.estimates.listeners:
+                self.estimates.deliver(stamp, x[i])
 
     def _subscribe_streams(self, cfg: EstimatorNodeConfig) -> None:
         # the 5 kHz streams in a thread of their own, a burst per wake-up (sample_streams)
@@ -390,6 +404,8 @@ class EstimatorNode(Node):
             self.streams.close()
         if self.source is not None:
             self.source.disconnect(self._on_batch)
+        if self.estimates is not None:
+            intra_process.unregister(self.context, self._estimates_topic, self.estimates)
         super().destroy_node()
 
     def _unreadable(self, topic: str, what: str) -> None:
@@ -446,6 +462,8 @@ class EstimatorNode(Node):
             return  # not a publishing sample (publish_rate)
         self._pub.publish(self._encoder.encode(stamp, x, self.estimator._out_p))
         self.published += 1
+        if self.estimates is not None and self.estimates.listeners:
+            self.estimates.deliver(stamp, x)
 
     def publish_diagnostics(self) -> None:
         """Publish the NIS window, rejected/missing readings and frozen sensors."""

@@ -1,25 +1,33 @@
-"""Samples handed from the simulator to the estimator inside one process.
+"""Samples, estimates and commands handed over inside one process.
 
 rclpy has no intra-process communication: two composed nodes exchange
 messages through the middleware, serialised, as if they ran in two
 processes. At 5 kHz that is most of the cost of a composed closed loop (the
-field of each sensor and the currents, 20 000 messages a second, each
-serialised, sent, taken and decoded), and with it a composed simulator,
-estimator and controller do not keep up with real time in Python. rclcpp's
-answer is intra-process communication (``use_intra_process_comms``):
-a publisher hands its message to the subscriptions of its own process
-directly. This module does the same for the one stream that needs it:
+field of each sensor and the currents, 20 000 messages a second), and the
+hops between the simulator's stepping thread and the executor's thread wait
+for the GIL: a command then reaches the simulator milliseconds late, and the
+loop, whose x and y modes grow e-fold in 20-35 ms, is lost. rclcpp's answer
+is intra-process communication (``use_intra_process_comms``): a publisher
+hands its message to the subscriptions of its own process directly. This
+module does the same for the closed loop's three streams:
 
-- the simulator node registers a :class:`SampleSource` under its context and
-  the resolved name of its ``maglev/currents`` topic;
-- a node created after it in the same context (the estimator with
-  ``intra_process: true``) finds it with :func:`find_source` and connects a
-  listener, which then receives each published batch of samples (the very
-  arrays the messages are serialised from, so the same numbers) in the
-  simulator's publishing thread, after the batch's messages went out;
-- the topics are still published for every other subscriber (recorder,
-  plots, the ROS tools), and the node that connected does not subscribe
-  to them.
+- the **simulator** registers a :class:`Channel` of its published sample
+  batches under the resolved name of its ``maglev/currents`` topic, and a
+  :class:`CommandSink` under ``maglev/currents/command``;
+- the **estimator** (``intra_process: true``, created after the simulator)
+  connects to the samples and registers a channel of its estimates under
+  ``maglev/state/estimate``;
+- the **controller** (``intra_process: true``, ``trigger: estimate``, created
+  after both) connects to the estimates and attaches to the sink: its
+  commands go to the simulator directly, and the simulator stops taking
+  commands from the middleware (one command source, no command twice).
+
+Then one burst is stepped, estimated and answered in the simulator's thread,
+and the command drives the next burst: the loop's latency is one burst
+whatever the CPU load (a busy machine slows the simulation, not the loop).
+Every topic is still published for the other subscribers (recorder, plots,
+the ROS tools). A node that finds nothing to connect to uses the middleware
+as usual.
 """
 
 from __future__ import annotations
@@ -27,30 +35,25 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
-__all__ = ['SampleSource', 'find_source', 'register_source', 'unregister_source']
+__all__ = ['Channel', 'CommandSink', 'find', 'register', 'unregister']
 
 _lock = threading.Lock()
-_sources: dict[tuple[int, str], SampleSource] = {}
+_registry: dict[tuple[int, str], object] = {}
 
 
-class SampleSource:
-    """The samples one simulator node publishes, for listeners in its process.
+class Channel:
+    """What one node publishes on a topic, for listeners in its process.
 
     Parameters
     ----------
-    sensors : tuple of int
-        The sensors whose fields the simulator publishes.
+    sensors : tuple of int, optional
+        A sample channel: the sensors whose fields the simulator publishes.
     """
 
-    def __init__(self, sensors: tuple[int, ...]) -> None:
+    def __init__(self, sensors: tuple[int, ...] = ()) -> None:
         self.sensors = tuple(sensors)
-        self._listeners: tuple[Callable, ...] = ()
+        self._listeners: tuple[tuple[str, Callable], ...] = ()
         self.on_error: Callable[[str, Exception], None] | None = None
-
-    @property
-    def connected(self) -> bool:
-        """Whether a listener is connected."""
-        return bool(self._listeners)
 
     @property
     def listeners(self) -> int:
@@ -58,12 +61,12 @@ class SampleSource:
         return len(self._listeners)
 
     def connect(self, listener: Callable, name: str) -> None:
-        """Add ``listener``: called with each published batch (a ``SampleBatch``).
+        """Add ``listener``, called with what is delivered, in the publisher's thread.
 
         Parameters
         ----------
         listener : callable
-            Takes the batch; runs in the simulator's publishing thread.
+            Takes the delivered arguments.
         name : str
             Who listens (for error messages).
         """
@@ -81,64 +84,97 @@ class SampleSource:
         with _lock:
             self._listeners = tuple(item for item in self._listeners if item[1] != listener)
 
-    def deliver(self, batch) -> None:
-        """Hand ``batch`` to every listener; one that raises is reported, the rest still run.
+    def deliver(self, *args) -> None:
+        """Call every listener; one that raises is reported, the rest still run.
 
         Parameters
         ----------
-        batch : maglev_ros.physics.session.SampleBatch
-            The samples just published.
+        *args
+            What the listeners take (a sample batch; a stamp and an estimate).
         """
         for name, listener in self._listeners:
             try:
-                listener(batch)
-            except Exception as err:  # noqa: BLE001 - the simulator goes on
+                listener(*args)
+            except Exception as err:  # noqa: BLE001 - the publisher goes on
                 if self.on_error is not None:
                     self.on_error(name, err)
+
+
+class CommandSink:
+    """The simulator's command input, for one controller of its process.
+
+    Parameters
+    ----------
+    take : callable
+        Applies one command (a sequence of currents, A).
+    on_attach : callable
+        Called once a controller attaches (the simulator then drops its
+        middleware subscription).
+    """
+
+    def __init__(self, take: Callable, on_attach: Callable[[str], None]) -> None:
+        self.take = take
+        self._on_attach = on_attach
+        self.attached: str | None = None
+
+    def attach(self, name: str) -> Callable | None:
+        """Become the simulator's command source; return the command input (None: taken).
+
+        Parameters
+        ----------
+        name : str
+            The controller's node name.
+        """
+        with _lock:
+            if self.attached is not None:
+                return None
+            self.attached = name
+        self._on_attach(name)
+        return self.take
 
 
 def _key(context, topic: str) -> tuple[int, str]:
     return id(context), topic
 
 
-def register_source(context, topic: str, source: SampleSource) -> None:
-    """Make ``source`` the samples of ``topic`` (resolved name) in ``context``.
+def register(context, topic: str, obj) -> None:
+    """Register ``obj`` (a Channel or CommandSink) for ``topic`` (resolved name) in ``context``.
 
     Parameters
     ----------
     context : rclpy.context.Context
         The nodes' context.
     topic : str
-        Fully qualified name of the simulator's currents topic.
-    source : SampleSource
-        The simulator's source.
+        Fully qualified topic name.
+    obj : Channel or CommandSink
+        What a node of this process may connect to.
     """
     with _lock:
-        _sources[_key(context, topic)] = source
+        _registry[_key(context, topic)] = obj
 
 
-def unregister_source(context, topic: str, source: SampleSource) -> None:
-    """Remove ``source`` (a later simulator's registration is left alone).
+def unregister(context, topic: str, obj) -> None:
+    """Remove ``obj`` (a later registration for the topic is left alone).
 
     Parameters
     ----------
     context : rclpy.context.Context
     topic : str
-    source : SampleSource
+    obj : Channel or CommandSink
     """
     with _lock:
-        if _sources.get(_key(context, topic)) is source:
-            del _sources[_key(context, topic)]
+        if _registry.get(_key(context, topic)) is obj:
+            del _registry[_key(context, topic)]
 
 
-def find_source(context, topic: str) -> SampleSource | None:
-    """Return the source of ``topic`` in ``context``, or None (no simulator in this process).
+def find(context, topic: str):
+    """Return what is registered for ``topic`` in ``context``, or None.
 
     Parameters
     ----------
     context : rclpy.context.Context
     topic : str
-        Fully qualified name of the currents topic.
+        Fully qualified topic name.
     """
     with _lock:
-        return _sources.get(_key(context, topic))
+        return _registry.get(_key(context, topic))

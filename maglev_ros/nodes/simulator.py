@@ -74,8 +74,7 @@ from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from maglev_ros.nodes import contract
-from maglev_ros.nodes.intra_process import SampleSource, register_source, unregister_source
+from maglev_ros.nodes import contract, intra_process
 from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
 from maglev_ros.nodes.params import (
     NodeParameterError,
@@ -311,10 +310,17 @@ class SimulatorNode(Node):
         )
         self._wire_publishing(cfg)
         # composed nodes of this process may take the samples directly (intra_process)
-        self.samples_source = SampleSource(self.sensors)
+        self.samples_source = intra_process.Channel(self.sensors)
         self.samples_source.on_error = self._on_listener_error
-        self._samples_topic = self.resolve_topic_name(contract.CURRENTS_TOPIC)
-        register_source(self.context, self._samples_topic, self.samples_source)
+        self._intra = [
+            (self.resolve_topic_name(contract.CURRENTS_TOPIC), self.samples_source),
+            (
+                self.resolve_topic_name(contract.COMMAND_TOPIC),
+                intra_process.CommandSink(self._take_command, self._command_source_attached),
+            ),
+        ]
+        for topic, obj in self._intra:
+            intra_process.register(self.context, topic, obj)
         command_qos = (
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
         )
@@ -376,8 +382,11 @@ class SimulatorNode(Node):
 
         Discovery is matched from each side separately: a command publisher may
         see this subscription before this subscription sees it, and a command
-        sent in between is lost (a lockstep timeout). Wait on both sides.
+        sent in between is lost (a lockstep timeout). Wait on both sides. A
+        controller of this process attached directly counts as one.
         """
+        if self._command_sub is None:  # intra_process: the attached controller
+            return 1
         return self._command_sub.get_publisher_count()
 
     @property
@@ -446,7 +455,7 @@ class SimulatorNode(Node):
             calls = [c for c, a in zip(self._publish_calls, active, strict=True) if a]
             for publish, message in zip(calls * n, messages, strict=True):
                 publish(message)
-            if self.samples_source.connected:
+            if self.samples_source.listeners:
                 self.samples_source.deliver(batch)
         if batch.crashed:
             self._on_crash()
@@ -496,9 +505,21 @@ class SimulatorNode(Node):
     # -- stepping ---------------------------------------------------------------
 
     def _on_command(self, msg: Float64MultiArray) -> None:
+        self._take_command(msg.data)
+
+    def _command_source_attached(self, name: str) -> None:
+        """Drop the command subscription: a controller of this process sends them directly."""
+        self.destroy_subscription(self._command_sub)
+        self._command_sub = None
+        with self._lock:  # the loop is closed in this thread: each burst is answered first
+            self.session.max_batch = self.session.burst
+        self.get_logger().info(f'commands from {name} in this process (intra_process)')
+
+    def _take_command(self, values) -> None:
+        """Apply one command (from the subscription or a controller of this process)."""
         with self._lock:
             try:
-                batch = self.session.command(msg.data, time.monotonic())
+                batch = self.session.command(values, time.monotonic())
             except CommandError as err:
                 self.get_logger().warning(
                     f'rejected command: {err}', throttle_duration_sec=WARN_THROTTLE_S
@@ -623,7 +644,8 @@ class SimulatorNode(Node):
         self._stop.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
-        unregister_source(self.context, self._samples_topic, self.samples_source)
+        for topic, obj in self._intra:
+            intra_process.unregister(self.context, topic, obj)
 
     def destroy_node(self) -> None:
         """Stop stepping, then destroy the node."""

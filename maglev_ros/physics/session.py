@@ -181,6 +181,8 @@ class SimulationSession:
         # samples stepped per real-time wake-up: waking 5000 times a second costs
         # more than the step itself; the board's driver also publishes in bursts
         self.burst = max(1, int(round(pace_period / self.dt)))
+        #: real time: most samples a pace() call steps (None: all that are due)
+        self.max_batch: int | None = None
         self.counters = dict.fromkeys(COUNTERS, 0)
         self.paused = bool(paused)
         self.started = False
@@ -396,6 +398,12 @@ class SimulationSession:
         wait : float
             s from ``now`` to the next burst (after a burst too: stepping
             takes part of it; 0 when behind: call again at once).
+
+        Notes
+        -----
+        With :attr:`max_batch` set, a call steps at most that many samples
+        (behind, the next call follows at once): a loop closed in the same
+        thread answers each burst before the next is stepped.
         """
         if self.paused or self.sim.crashed:
             self._pace = None  # pacing restarts on resume
@@ -410,6 +418,8 @@ class SimulationSession:
             self.counters['overruns'] += 1
             base, done = now - dt, 0
             due = 1
+        if self.max_batch is not None:
+            due = min(due, self.max_batch)
         batch = self._burst(due)
         done += len(batch) + batch.crashed
         self._pace = (base, done)

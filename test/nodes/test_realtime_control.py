@@ -156,3 +156,65 @@ def test_realtime_simulator_waits_for_its_controller(ctx):
     finally:
         spinner.close()
         sim.destroy_node()
+
+
+def test_composed_loop_in_process_levitates_in_real_time_and_publishes_its_topics(ctx):
+    """intra_process: samples, estimates and commands handed over in the simulator's thread.
+
+    The loop is closed in one thread, so it holds whatever the machine's load
+    (a busy machine slows the simulation, not the loop); the topics still go out.
+    """
+    sim = SimulatorNode(
+        context=ctx,
+        parameter_overrides=_params(
+            mode='realtime',
+            magnet='free',
+            marker_rate=0.0,
+            coil_dynamics=True,
+            sensor_delay=1,
+            sensor_noise=1e-4,
+            sensor_quantization=0.098e-3,
+            wait_for_controller=True,
+            start_subscribers=1,
+        ),
+    )
+    est = EstimatorNode(
+        context=ctx,
+        parameter_overrides=_params(
+            sensor_noise=1e-4, quantization=0.098e-3, publish_rate=1000.0, intra_process=True
+        ),
+    )
+    ctrl = ControllerNode(
+        context=ctx,
+        parameter_overrides=_params(
+            sample_rate=1000.0, trigger='estimate', input_timeout=0.02, intra_process=True
+        ),
+    )
+    assert est.source is sim.samples_source and est.streams is None
+    assert ctrl.estimates is est.estimates and sim._command_sub is None  # one command source
+    assert sim.session.max_batch == sim.session.burst
+    listener, estimates = _listener(ctx, Odometry, topics.ESTIMATE_TOPIC, SENSOR_QOS)
+    commands = []
+    listener.create_subscription(
+        Float64MultiArray, topics.COMMAND_TOPIC, commands.append, LOCKSTEP_COMMAND_QOS
+    )
+    true = []
+    listener.create_subscription(Odometry, topics.TRUE_STATE_TOPIC, true.append, SENSOR_QOS)
+    spinner = Spinner(ctx, [sim, est, ctrl, listener])
+    try:
+        wait_for(lambda: sim.counters['samples'] >= 5000, timeout=120.0, what='1 s simulated')
+    finally:
+        sim.set_paused(True)
+        spinner.close()
+    assert not sim.session.crashed
+    assert ctrl.controller.status().level == 'OK', ctrl.controller.status().message
+    z_eq = find_equilibria(make_model('maggy_v2'))[0].z
+    x = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z]
+                  for m in true[-2500:]])  # fmt: skip
+    assert len(true) >= 4000 and np.all(np.abs(x - [0.0, 0.0, z_eq]) < 4e-4)  # held
+    # every estimate answered by a command (and ready zeros before the first), all on
+    # the topics too
+    assert est.published >= 900 and ctrl.commands >= est.published
+    assert len(estimates) >= 900 and len(commands) >= len(estimates)
+    for node in (ctrl, est, sim, listener):
+        node.destroy_node()

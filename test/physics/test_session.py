@@ -118,6 +118,20 @@ def test_realtime_paces_bursts_to_the_wall_clock(v2):
     assert s.counters['overruns'] == 0
 
 
+def test_realtime_max_batch_catches_up_a_burst_at_a_time(v2):
+    s = session(v2, mode='realtime', pace_period=0.001)
+    s.max_batch = s.burst  # a loop closed in the stepping thread answers each burst
+    s.start(now=0.0)
+    s.pace(0.0)
+    batch, wait = s.pace(0.0031)  # 15 samples due: one burst now, the rest at once after
+    assert batch.indices.tolist() == [1, 2, 3, 4, 5] and wait == 0.0
+    batch, wait = s.pace(0.0031)
+    assert batch.indices.tolist() == [6, 7, 8, 9, 10] and wait == 0.0
+    batch, wait = s.pace(0.0031)
+    assert batch.indices.tolist() == [11, 12, 13, 14, 15]
+    assert wait == pytest.approx(0.0009)  # caught up: the next burst at 0.004 s
+
+
 def test_realtime_drops_a_backlog(v2):
     s = session(v2, mode='realtime')
     s.start(now=0.0)
