@@ -68,6 +68,7 @@ Still exactly one command per sample.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, fields
 
 import numpy as np
@@ -120,6 +121,8 @@ __all__ = [
 ]
 
 NODE_NAME = 'maglev_controller'
+#: s an estimator's publisher is matched before ``trigger: estimate`` says it is ready
+READY_AFTER_S = 0.5
 TRIGGERS = ('sample', 'estimate')
 _DEFAULT = ControllerConfig()
 _LEVELS = {
@@ -385,8 +388,10 @@ class ControllerNode(Node):
             self._estimate_reader = RawFieldReader('nav_msgs/msg/Odometry', ODOMETRY_VALUES)
             if cfg.intra_process:
                 self._connect_in_process()
+            self._estimate_sub = None
+            self._heard_since: float | None = None  # monotonic s: estimator matched since
             if self.estimates is None:
-                self.create_subscription(
+                self._estimate_sub = self.create_subscription(
                     Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS, raw=True
                 )
             self.create_timer(cfg.controller.input_timeout, self._check_stale)
@@ -505,15 +510,29 @@ class ControllerNode(Node):
         The core's watchdog sees only the stamps of the estimates that come;
         when they stop, this timer commands zero currents (once) and reports
         the ERROR. The first estimate after it re-arms the core's way
-        (``rearm_samples`` in a row). Before the first estimate it commands
-        zero currents every period: the controller is up and spinning (a
-        simulator with ``wait_for_controller`` starts on it).
+        (``rearm_samples`` in a row). Before the first estimate, once an
+        estimator's publisher has been matched for ``READY_AFTER_S``, it
+        commands zero currents every period: the controller is up, spinning
+        and hears the estimates (a simulator with ``wait_for_controller``
+        starts on it).
         """
         last = self._last_estimate_ns
         if not self.context.ok():
             return
         if last is None:
-            if not self._estimates_seen:  # ready: zero currents until the first estimate
+            # ready (zero currents until the first estimate) once an estimator is heard:
+            # a simulator waiting for the controller must not step while the estimates
+            # cannot reach it yet (the magnet's x and y modes grow e-fold in 20-35 ms).
+            # Discovery matches each side on its own: the estimator's publisher may
+            # match this subscription only tens of ms after this side did, and
+            # estimates published before are lost; so hear it for READY_AFTER_S first
+            now_s = time.monotonic()
+            if self._estimate_sub is not None and self._estimate_sub.get_publisher_count() == 0:
+                self._heard_since = None
+            elif self._heard_since is None:
+                self._heard_since = now_s
+            ready = self._heard_since is not None and now_s - self._heard_since >= READY_AFTER_S
+            if not self._estimates_seen and ready:
                 self._publish(np.zeros(self.controller.n_inputs))
             return
         now = self.get_clock().now().nanoseconds

@@ -363,31 +363,83 @@ class EstimatorNode(Node):
 
     def _on_batch(self, batch) -> None:
         """Estimate a batch of the simulator's samples (intra_process; its thread)."""
-        n = len(batch)
-        if n == 0:
-            return
-        stamps = batch.stamps_ns
-        try:
-            x, p = self.estimator.step_many(
+        if len(batch):
+            self._estimate_many(
+                [int(t) for t in batch.stamps_ns],
                 batch.readings[:, : 3 * self.n_sensors],
                 batch.currents[:, : self.estimator.n_inputs],
             )
-        except ValueError as err:  # not from a simulator: say so, keep running
+
+    def _estimate_many(self, stamps: list[int], ys: np.ndarray, currents: np.ndarray) -> None:
+        """Step the estimator with complete samples in order; publish their estimates."""
+        try:
+            x, p = self.estimator.step_many(ys, currents)
+        except ValueError as err:  # not finite: say so, keep running
             self.get_logger().error(
                 f'samples {stamps[0]}..{stamps[-1]} ns not estimated: {err}',
                 throttle_duration_sec=1.0,
             )
             return
-        self.last_stamp = int(stamps[-1])
+        self.last_stamp = stamps[-1]
         every = self.config.publish_every
-        for i in range(n):
-            stamp = int(stamps[i])
+        for i, stamp in enumerate(stamps):
             if every > 1 and round(stamp / self._period_ns) % every:
                 continue  # not a publishing sample (publish_rate)
             self._pub.publish(self._encoder.encode(stamp, x[i], p[i]))
             self.published += 1
             if self.estimates is not None and self.estimates.listeners:
                 self.estimates.deliver(stamp, x[i])
+
+    def _on_burst(self, taken: list[list[bytes]]) -> None:
+        """Estimate a wake-up's messages: whole samples at once, else one message at a time.
+
+        The usual burst: the first n messages of every part (the fields, the
+        currents; n the fewest any part has) carry the same stamps in the same
+        order, newer than the last sample, and no sample is pending. Those n
+        samples are read and estimated in one call
+        (:meth:`~maglev_ros.estimation.Estimator.step_many`); the rest wait for
+        the next wake-up (a thread behind takes more of one topic than of
+        another). Anything else (a sample pending, stamps that differ, an
+        unreadable message, a part with no message while another has more than
+        ``sample_wait``: a silent sensor) goes through the assembler one
+        message at a time, as on the executor.
+        """
+        waiting = self._waiting
+        for part, raws in enumerate(taken):
+            waiting[part].extend(raws)
+        lengths = [len(w) for w in waiting]
+        n = min(lengths)
+        if self._samples.pending == 0 and n == 0 and max(lengths) <= self.config.sample_wait:
+            return  # part of a burst: the rest comes with the next wake-up
+        if self._samples.pending == 0 and n:
+            readers = self._readers
+            reads = [
+                [reader.read(raw) for raw in w[:n]]
+                for reader, w in zip(readers, waiting, strict=True)
+            ]
+            stamps = [r[0] if r is not None else None for r in reads[-1]]
+            if (
+                None not in stamps
+                and stamps[0] > self._samples.released
+                and all(stamps[i] < stamps[i + 1] for i in range(n - 1))
+                and all([r[0] if r else None for r in rs] == stamps for rs in reads[:-1])
+            ):
+                ys = np.array([sum((rs[i][1] for rs in reads[:-1]), ()) for i in range(n)])
+                currents = np.array([r[1] for r in reads[-1]])
+                self._samples.handled(stamps[-1])
+                for w in waiting:
+                    del w[:n]
+                self._estimate_many(stamps, ys, currents)
+                return
+        # one message at a time, round robin (a sample's parts together), as on the executor
+        handlers = [self._field_handlers[k] for k in range(self.n_sensors)]
+        handlers.append(self._on_currents)
+        for i in range(max(lengths)):
+            for part, w in enumerate(waiting):
+                if i < len(w):
+                    handlers[part](w[i])
+        for w in waiting:
+            w.clear()
 
     def _subscribe_streams(self, cfg: EstimatorNodeConfig) -> None:
         # the 5 kHz streams in a thread of their own, a burst per wake-up (sample_streams)
@@ -396,7 +448,12 @@ class EstimatorNode(Node):
             for k in range(self.n_sensors)
         ]
         streams.append(Stream(JointState, CURRENTS_TOPIC, self._on_currents))
-        self.streams = open_streams(self, streams, SENSOR_QOS, own_thread=cfg.stream_thread)
+        self._field_handlers = [stream.callback for stream in streams[:-1]]
+        self._readers = [*self._field_readers, self._currents_reader]
+        self._waiting: list[list[bytes]] = [[] for _ in streams]  # burst: per part
+        self.streams = open_streams(
+            self, streams, SENSOR_QOS, own_thread=cfg.stream_thread, burst=self._on_burst
+        )
 
     def destroy_node(self) -> None:
         """Stop the sample streams' thread, then destroy the node."""

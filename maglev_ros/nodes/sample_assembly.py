@@ -122,6 +122,31 @@ class SampleAssembler:
             return [ReleasedSample(stamp, tuple(row))]
         return self._release()
 
+    def handled(self, stamp: int) -> None:
+        """Record complete samples up to ``stamp`` handled without :meth:`add` (a burst path).
+
+        Their parts count as seen and their stamps as released: a later part
+        of one of them is late, as if it had come through :meth:`add`.
+
+        Parameters
+        ----------
+        stamp : int
+            The newest such sample's stamp, ns (newer than :attr:`released`).
+
+        Raises
+        ------
+        ValueError
+            If samples are pending (release them first) or ``stamp`` is not newer
+            than the last released one.
+        """
+        if self._pending:
+            raise ValueError(f'{len(self._pending)} samples pending: add() their parts first')
+        if stamp <= self.released:
+            raise ValueError(f'stamp {stamp} is not newer than the released {self.released}')
+        self.released = stamp
+        self._newest = max(self._newest, stamp)
+        self._newest_part = [max(v, stamp) for v in self._newest_part]
+
     def _release(self) -> list[ReleasedSample]:
         pending = self._pending
         newest_complete = max(

@@ -60,6 +60,11 @@ class SampleStreams:
     on_error : callable, optional
         Called with an exception a callback raised (the thread keeps running);
         default: the node's logger, throttled.
+    burst : callable, optional
+        Called once per wake-up with every message taken, a list of raw
+        messages per stream (in the order of ``streams``, each in arrival
+        order), instead of the streams' own callbacks: the node handles a
+        burst at once.
 
     Raises
     ------
@@ -73,6 +78,7 @@ class SampleStreams:
         streams: Sequence[Stream],
         qos,
         on_error: Callable[[Exception], None] | None = None,
+        burst: Callable[[list[list[bytes]]], None] | None = None,
     ) -> None:
         from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
         from rclpy.type_support import check_is_valid_msg_type
@@ -81,6 +87,7 @@ class SampleStreams:
         self._context = node.context
         self._streams = list(streams)
         self._on_error = on_error or self._log_error
+        self._burst = burst
         self._handles = []
         c_qos = qos.get_c_qos_profile()
         for stream in self._streams:
@@ -130,6 +137,10 @@ class SampleStreams:
             if self._stop.is_set():
                 return
             self.wake_ups += 1
+            if self._burst is not None:
+                if not self._take_burst(pairs):
+                    return
+                continue
             # round robin, a message per topic per round: the messages of one
             # sample are handled together, in the order the topics were given
             active = pairs
@@ -151,6 +162,29 @@ class SampleStreams:
                         self._on_error(err)
                 active = still
 
+    def _take_burst(self, pairs) -> bool:
+        """Take every waiting message of each stream, hand them over at once; False: stop."""
+        lists: list[list[bytes]] = []
+        for handle, msg_type, _ in pairs:
+            here: list[bytes] = []
+            while True:
+                try:
+                    taken = handle.take_message(msg_type, True)
+                except Exception:  # noqa: BLE001 - the subscription is being destroyed
+                    return False
+                if taken is None:
+                    break
+                here.append(taken[0])
+            lists.append(here)
+            self.taken += len(here)
+        if not any(lists):  # woken by the timeout or the stop guard
+            return True
+        try:
+            self._burst(lists)
+        except Exception as err:  # noqa: BLE001 - a node never dies on a message
+            self._on_error(err)
+        return True
+
     def close(self) -> None:
         """Stop the thread and destroy the subscriptions (before the node)."""
         if self._closed:
@@ -165,7 +199,7 @@ class SampleStreams:
         self._wait_set.destroy_when_not_in_use()
 
 
-def open_streams(node, streams: Sequence[Stream], qos, own_thread: bool = True):
+def open_streams(node, streams: Sequence[Stream], qos, own_thread: bool = True, burst=None):
     """Subscribe to ``streams``: in a :class:`SampleStreams` thread, else on the executor.
 
     Parameters
@@ -178,6 +212,9 @@ def open_streams(node, streams: Sequence[Stream], qos, own_thread: bool = True):
         QoS of every subscription.
     own_thread : bool
         False: ordinary subscriptions on the node's executor.
+    burst : callable, optional
+        The burst callback of :class:`SampleStreams` (the executor's
+        subscriptions call the streams' own callbacks).
 
     Returns
     -------
@@ -187,7 +224,7 @@ def open_streams(node, streams: Sequence[Stream], qos, own_thread: bool = True):
     """
     if own_thread:
         try:
-            return SampleStreams(node, streams, qos)
+            return SampleStreams(node, streams, qos, burst=burst)
         except (AttributeError, TypeError, ImportError) as err:
             node.get_logger().warning(
                 f'sample streams on the executor (this rclpy has no wait-set handles: {err})'

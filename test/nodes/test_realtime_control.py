@@ -3,7 +3,7 @@
 * the estimator's ``publish_rate``: only the estimates of samples whose stamp
   is a multiple of the publishing period go out (the filter steps every sample);
 * the controller's ``trigger: estimate``: zero commands while no estimate came
-  (it is up), one command per estimate, and when the estimates stop for
+  (it is up and hears an estimator), one command per estimate, and when the estimates stop for
   ``input_timeout`` one zero command and an ERROR;
 * the simulator's ``wait_for_controller``: real time starts only at the first
   command.
@@ -25,7 +25,7 @@ from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
 
 from maglev_ros import topics
-from maglev_ros.nodes.controller import ControllerNode
+from maglev_ros.nodes.controller import READY_AFTER_S, ControllerNode
 from maglev_ros.nodes.estimator import EstimatorNode
 from maglev_ros.nodes.messages import odometry_message
 from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
@@ -103,9 +103,14 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
     spinner = Spinner(ctx, [listener, ctrl])
     try:
         wait_for(lambda: ctrl._pub.get_subscription_count() >= 1, what='discovery')
-        # up and spinning, no estimate yet: zero commands every input_timeout (the
-        # simulator's wait_for_controller starts on the first)
+        time.sleep(2 * READY_AFTER_S)  # no estimator heard: not ready, no command
+        assert commands == []
+        listener.create_publisher(Odometry, topics.ESTIMATE_TOPIC, SENSOR_QOS)  # one now
+        heard = time.monotonic()
+        # up, spinning, an estimator heard for READY_AFTER_S, no estimate yet: zero
+        # commands every input_timeout (the simulator's wait_for_controller starts on them)
         wait_for(lambda: len(commands) >= 2, what='the ready commands')
+        assert time.monotonic() - heard >= READY_AFTER_S
         assert all(list(c.data) == [0.0] * 4 for c in commands)
         x = x_eq.copy()
         x[0] += 2e-4  # 0.2 mm off in x: the LQR pushes back

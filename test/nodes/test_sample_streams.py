@@ -119,3 +119,75 @@ def test_estimate_encoder_bytes_are_the_estimate_message():
             atol=1e-18,
         )
         assert got.twist.twist.angular == want.twist.twist.angular
+
+
+def _sample_messages(n, seed=0):
+    """Raw messages of n samples: the field of sensors 0, 1, 2 and the currents."""
+    from rclpy.serialization import serialize_message
+    from sensor_msgs.msg import JointState, MagneticField
+
+    from maglev_ros.physics import make_model
+    from maglev_ros.physics.equilibria import find_equilibria
+
+    model = make_model('maggy_v2')
+    y0 = model.measurement(model.hover_state(find_equilibria(model)[0].z), np.zeros(4))
+    rng = np.random.default_rng(seed)
+    out = []
+    for k in range(n):
+        sec, nanosec = divmod(1_000_000_000 + k * 200_000, 1_000_000_000)
+        row = []
+        for s in range(3):
+            m = MagneticField()
+            m.header.stamp.sec, m.header.stamp.nanosec = sec, nanosec
+            m.header.frame_id = f'maglev_sensor_{s}'
+            v = y0[3 * s : 3 * s + 3] + 1e-4 * rng.standard_normal(3)
+            m.magnetic_field.x, m.magnetic_field.y, m.magnetic_field.z = map(float, v)
+            row.append(bytes(serialize_message(m)))
+        j = JointState()
+        j.header.stamp.sec, j.header.stamp.nanosec = sec, nanosec
+        j.name = ['x+', 'x-', 'y+', 'y-']
+        j.effort = [float(v) for v in 0.05 * rng.standard_normal(4)]
+        row.append(bytes(serialize_message(j)))
+        out.append(row)
+    return out
+
+
+def test_estimator_bursts_give_the_numbers_of_one_message_at_a_time(ctx):
+    """The burst path (whole samples at once) against the per-message path, odd bursts included."""
+    from rclpy.parameter import Parameter
+
+    from maglev_ros.nodes.estimator import EstimatorNode
+
+    params = [Parameter('sensor_noise', value=1e-4), Parameter('stream_thread', value=False)]
+    one = EstimatorNode(context=ctx, parameter_overrides=params)
+    many = EstimatorNode(context=ctx, parameter_overrides=params)
+    msgs = _sample_messages(400)
+    del msgs[130][1]  # sensor 1 of sample 130 never comes: missing
+    for row in msgs:  # per message, round robin (the executor's order)
+        for part, raw in enumerate(row):
+            if part < len(row) - 1:
+                k = part if part < 1 or len(row) == 4 else part + 1
+                one._on_field(k, raw)
+            else:
+                one._on_currents(raw)
+    cuts = [0, 1, 6, 7, 60, 128, 133, 200, 201, 400]  # bursts of 1 to 67 samples
+    for lo, hi in zip(cuts[:-1], cuts[1:], strict=True):
+        burst = [[], [], [], []]
+        for row in msgs[lo:hi]:
+            parts = row if len(row) == 4 else [row[0], None, row[1], row[2]]
+            for part, raw in enumerate(parts):
+                if raw is not None:
+                    burst[part].append(raw)
+        if lo == 200:  # a burst whose currents come a wake-up late
+            many._on_burst([burst[0], burst[1], burst[2], []])
+            many._on_burst([[], [], [], burst[3]])
+        else:
+            many._on_burst(burst)
+    assert many.last_stamp == one.last_stamp
+    assert np.array_equal(many.estimator.state, one.estimator.state)
+    assert np.array_equal(many.estimator.state_covariance, one.estimator.state_covariance)
+    assert many.estimator.status() == one.estimator.status()
+    assert many.estimator.status().missing[1] == 1 and many.published == one.published
+    assert many.lost_samples == one.lost_samples == 0
+    one.destroy_node()
+    many.destroy_node()
