@@ -7,7 +7,9 @@ sample of sensor delay), the estimator (KF) and the controller (LQR) run for
 
 ``composed``
     the three nodes in one process, on one executor (a child process of this
-    script, ``--composed-child``);
+    script, ``--composed-child``), the estimator and the controller with
+    ``intra_process: true``: samples, estimates and commands handed over in
+    the simulator's thread, one burst of latency;
 ``launch``
     ``ros2 launch maglev_ros closed_loop.launch.xml``: one process per node.
     Needs ``ros2`` and the package's install tree: ``source install/setup.bash``

@@ -202,12 +202,16 @@ def currents_layout(names: Sequence[str] = COIL_NAMES) -> RawLayout:
     return raw_layout(msg, msgtype, CURRENT_VALUES)
 
 
-def odometry_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) -> RawLayout:
+def odometry_layout(
+    frame: str = BASE_FRAME,
+    child_frame: str = MAGNET_FRAME,
+    values: Sequence[Path] = ODOMETRY_VALUES,
+) -> RawLayout:
     """Raw layout of a nav_msgs/Odometry of ``child_frame`` in ``frame``.
 
-    13 values, in the order of :data:`ODOMETRY_VALUES`: position (m),
-    orientation quaternion x y z w, linear velocity in the child frame (m/s),
-    angular velocity (rad/s).
+    By default 13 values, in the order of :data:`ODOMETRY_VALUES`: position
+    (m), orientation quaternion x y z w, linear velocity in the child frame
+    (m/s), angular velocity (rad/s).
 
     Parameters
     ----------
@@ -215,12 +219,14 @@ def odometry_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) ->
         ``header.frame_id`` (default ``maglev_base``).
     child_frame : str, optional
         ``child_frame_id`` (default ``maglev_magnet``).
+    values : sequence of tuple, optional
+        The float64 fields that vary (e.g. :data:`ESTIMATE_VALUES`).
     """
     msgtype = 'nav_msgs/msg/Odometry'
     msg = default_message(msgtype)
     msg.header.frame_id = frame
     msg.child_frame_id = child_frame
-    return raw_layout(msg, msgtype, ODOMETRY_VALUES)
+    return raw_layout(msg, msgtype, values)
 
 
 def estimate_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) -> RawLayout:
@@ -236,11 +242,7 @@ def estimate_layout(frame: str = BASE_FRAME, child_frame: str = MAGNET_FRAME) ->
     child_frame : str, optional
         ``child_frame_id`` (default ``maglev_magnet``).
     """
-    msgtype = 'nav_msgs/msg/Odometry'
-    msg = default_message(msgtype)
-    msg.header.frame_id = frame
-    msg.child_frame_id = child_frame
-    return raw_layout(msg, msgtype, ESTIMATE_VALUES)
+    return odometry_layout(frame, child_frame, ESTIMATE_VALUES)
 
 
 def clock_layout() -> RawLayout:

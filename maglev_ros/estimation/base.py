@@ -301,20 +301,31 @@ class Estimator:
         p : ndarray, shape (n, n_states, n_states)
             Its covariance (:attr:`state_covariance`).
         """
-        ys = np.asarray(ys, dtype=float)
-        currents = np.asarray(currents, dtype=float)
-        n = ys.shape[0] if ys.ndim == 2 else -1
-        if n < 0 or currents.shape[:1] != (n,):
-            raise ValueError(
-                f'ys (n, {self.n_outputs}) and currents (n, {self.n_inputs}) must have as '
-                f'many rows, got shapes {ys.shape} and {currents.shape}'
-            )
+        ys, currents = self._checked_many(ys, currents)
+        n = ys.shape[0]
         x = np.empty((n, 12))
         p = np.empty((n, self.n_states, self.n_states))
         for i in range(n):
             x[i] = self.step(ys[i], currents[i])
             p[i] = self._out_p
         return x, p
+
+    def _checked_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``ys`` (n, 3 k) and ``currents`` (n, n_s) as C arrays; ValueError if not."""
+        ys = np.ascontiguousarray(ys, dtype=float)
+        currents = np.ascontiguousarray(currents, dtype=float)
+        n = ys.shape[0] if ys.ndim == 2 else -1
+        if ys.shape[1:] != (self.n_outputs,) or currents.shape != (n, self.n_inputs):
+            raise ValueError(
+                f'ys (n, {self.n_outputs}) and currents (n, {self.n_inputs}) must have as '
+                f'many rows, got shapes {ys.shape} and {currents.shape}'
+            )
+        if not math.isfinite(currents.sum()):
+            bad = int(np.nonzero(~np.isfinite(currents).all(axis=1))[0][0])
+            raise ValueError(
+                f'currents must be finite numbers, got {currents[bad]!r} in row {bad}'
+            )
+        return ys, currents
 
     def _record(self, currents, accepted, nis_sensor, nis, dof) -> None:
         """Keep a stepped sample's NIS, acceptance and currents; restart when lost."""

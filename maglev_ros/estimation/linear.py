@@ -161,35 +161,9 @@ class KalmanEstimator(Estimator):
             raise ValueError(f'y must have {self.n_outputs} readings, got shape {y.shape}')
         if currents.shape != (self.n_inputs,) or not math.isfinite(currents.sum()):
             raise ValueError(f'currents must be {self.n_inputs} finite numbers, got {currents!r}')
-        f = self.freeze
         out_x = np.empty(12)
-        prev = self._no_currents if self._prev_currents is None else self._prev_currents
         self._x, self._P, self._out_p, accepted, nis_sensor, nis, dof = kf_step(
-            y,
-            currents,
-            prev,
-            self.config.sensor_delay == 1,
-            self._x,
-            self._P,
-            self.F,
-            self.B,
-            self.H,
-            self.D,
-            self.y_eq,
-            self.u_eq,
-            self.r_diag,
-            self.Q,
-            self.gate,
-            f._last,
-            f.runs,
-            f.run,
-            f.frozen,
-            f.events,
-            self.missing,
-            self.rejected,
-            self.x_eq,
-            self.reduced,
-            out_x,
+            y, currents, self._previous_currents(), *self._kernel_args(), out_x
         )
         self._out_x = out_x
         self._record(currents, accepted, nis_sensor, nis, dof)
@@ -219,30 +193,44 @@ class KalmanEstimator(Estimator):
         """
         if self.strength_index is not None:
             return super().step_many(ys, currents)
-        ys = np.ascontiguousarray(ys, dtype=float)
-        currents = np.ascontiguousarray(currents, dtype=float)
-        n = ys.shape[0] if ys.ndim == 2 else -1
-        if ys.shape[1:] != (self.n_outputs,) or currents.shape != (n, self.n_inputs):
-            raise ValueError(
-                f'ys (n, {self.n_outputs}) and currents (n, {self.n_inputs}) must have as '
-                f'many rows, got shapes {ys.shape} and {currents.shape}'
-            )
-        if not math.isfinite(currents.sum()):
-            bad = int(np.nonzero(~np.isfinite(currents).all(axis=1))[0][0])
-            raise ValueError(
-                f'currents must be finite numbers, got {currents[bad]!r} in row {bad}'
-            )
+        ys, currents = self._checked_many(ys, currents)
+        n = ys.shape[0]
         x = np.empty((n, 12))
         p = np.empty((n, self.n_states, self.n_states))
         if n == 0:
             return x, p
-        f = self.freeze
-        prev = self._no_currents if self._prev_currents is None else self._prev_currents
         counters = np.array([self.samples, self.unaccepted, self.restarts], dtype=np.int64)
         self._x, self._P, accepted, nis_sensor, nis, dof = kf_steps(
             ys,
             currents,
-            np.ascontiguousarray(prev, dtype=float),
+            self._previous_currents(),
+            *self._kernel_args(),
+            self._nis_ring,
+            self._dof_ring,
+            counters,
+            self.config.lost_samples,
+            self._p_init,
+            x,
+            p,
+        )
+        self.samples, self.unaccepted, self.restarts = (int(v) for v in counters)
+        self.last_nis, self.last_dof = nis, dof
+        self.last_accepted, self.last_nis_sensor = accepted, nis_sensor
+        self._prev_currents = currents[-1].copy()
+        self._out_x = x[-1].copy()
+        self._out_p = p[-1].copy()
+        return x, p
+
+    def _previous_currents(self) -> np.ndarray:
+        """Return the last sample's currents for the kernels (NaN before the first), A."""
+        if self._prev_currents is None:
+            return self._no_currents
+        return np.ascontiguousarray(self._prev_currents, dtype=float)
+
+    def _kernel_args(self) -> tuple:
+        """Arguments of kf_step and kf_steps after the currents: model, gate, counts."""
+        f = self.freeze
+        return (
             self.config.sensor_delay == 1,
             self._x,
             self._P,
@@ -264,21 +252,7 @@ class KalmanEstimator(Estimator):
             self.rejected,
             self.x_eq,
             self.reduced,
-            self._nis_ring,
-            self._dof_ring,
-            counters,
-            self.config.lost_samples,
-            self._p_init,
-            x,
-            p,
         )
-        self.samples, self.unaccepted, self.restarts = (int(v) for v in counters)
-        self.last_nis, self.last_dof = nis, dof
-        self.last_accepted, self.last_nis_sensor = accepted, nis_sensor
-        self._prev_currents = currents[-1].copy()
-        self._out_x = x[-1].copy()
-        self._out_p = p[-1].copy()
-        return x, p
 
     def _sample(self, y, held, across, available, delayed):
         """Run the whole sample in one compiled call (:func:`kernels.kf_sample`)."""
