@@ -113,8 +113,15 @@ class Observer:
         rclpy.init(context=self.context, args=[])
         self.node = rclpy.create_node('closed_loop_realtime_observer', context=self.context)
         self.raw: list[bytes] = []
-        self.node.create_subscription(
-            Odometry, TRUE_STATE_TOPIC, self.raw.append, SENSOR_QOS, raw=True
+        # taken in a thread of its own, a burst per wake-up (no executor callback per
+        # message): the observer's CPU is taken from the graph it observes
+        from maglev_ros.nodes.sample_streams import Stream, open_streams
+
+        self.streams = open_streams(
+            self.node,
+            [Stream(Odometry, TRUE_STATE_TOPIC, self.raw.append)],
+            SENSOR_QOS,
+            burst=lambda taken: self.raw.extend(taken[0]),
         )
         from maglev_ros.nodes.runtime import Spinner
 
@@ -136,6 +143,8 @@ class Observer:
         import rclpy
 
         self.spinner.close()
+        if self.streams is not None:
+            self.streams.close()
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
 
