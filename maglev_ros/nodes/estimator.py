@@ -34,6 +34,15 @@ controller in real time at a lower rate (``trigger: estimate``) gets the
 estimate of the last sample of each 1 ms burst of the simulator at 1000 Hz,
 and the graph's CPU goes with the control rate, not the sample rate. The
 filter still steps every sample.
+
+The fields and currents are taken in a thread of their own
+(``stream_thread``, :mod:`~maglev_ros.nodes.sample_streams`): every message
+waiting at a wake-up, and a burst's complete samples estimated in one call
+(:meth:`~maglev_ros.estimation.Estimator.step_many`); anything unusual goes
+through the assembler a message at a time, with the same numbers.
+``intra_process`` (composed after the simulator) takes the simulator's
+batches directly and offers the estimates to a controller of the same
+process (:mod:`~maglev_ros.nodes.intra_process`).
 """
 
 from __future__ import annotations
