@@ -65,7 +65,7 @@ from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.nodes.sample_assembly import ReleasedSample, SampleAssembler
-from maglev_ros.nodes.sample_streams import Stream, open_streams
+from maglev_ros.nodes.sample_streams import Stream, dispatch_round_robin, open_streams
 from maglev_ros.nodes.state_messages import EstimateEncoder
 from maglev_ros.topics import CURRENTS_TOPIC, DIAGNOSTICS_TOPIC, ESTIMATE_TOPIC, field_topic
 
@@ -390,14 +390,18 @@ class EstimatorNode(Node):
             )
             return
         self.last_stamp = stamps[-1]
-        every = self.config.publish_every
         for i, stamp in enumerate(stamps):
-            if every > 1 and round(stamp / self._period_ns) % every:
-                continue  # not a publishing sample (publish_rate)
-            self._pub.publish(self._encoder.encode(stamp, x[i], p[i]))
-            self.published += 1
-            if self.estimates is not None and self.estimates.listeners:
-                self.estimates.deliver(stamp, x[i])
+            self._publish_estimate(stamp, x[i], p[i])
+
+    def _publish_estimate(self, stamp: int, x: np.ndarray, p: np.ndarray) -> None:
+        """Publish the estimate of the sample at ``stamp`` if ``publish_rate`` wants it."""
+        every = self.config.publish_every
+        if every > 1 and round(stamp / self._period_ns) % every:
+            return  # not a publishing sample (publish_rate)
+        self._pub.publish(self._encoder.encode(stamp, x, p))
+        self.published += 1
+        if self.estimates is not None and self.estimates.listeners:
+            self.estimates.deliver(stamp, x)
 
     def _on_burst(self, taken: list[list[bytes]]) -> None:
         """Estimate a wake-up's messages: whole samples at once, else one message at a time.
@@ -441,12 +445,7 @@ class EstimatorNode(Node):
                 self._estimate_many(stamps, ys, currents)
                 return
         # one message at a time, round robin (a sample's parts together), as on the executor
-        handlers = [self._field_handlers[k] for k in range(self.n_sensors)]
-        handlers.append(self._on_currents)
-        for i in range(max(lengths)):
-            for part, w in enumerate(waiting):
-                if i < len(w):
-                    handlers[part](w[i])
+        dispatch_round_robin(waiting, self._handlers)
         for w in waiting:
             w.clear()
 
@@ -457,7 +456,7 @@ class EstimatorNode(Node):
             for k in range(self.n_sensors)
         ]
         streams.append(Stream(JointState, CURRENTS_TOPIC, self._on_currents))
-        self._field_handlers = [stream.callback for stream in streams[:-1]]
+        self._handlers = [stream.callback for stream in streams]
         self._readers = [*self._field_readers, self._currents_reader]
         self._waiting: list[list[bytes]] = [[] for _ in streams]  # burst: per part
         self.streams = open_streams(
@@ -523,13 +522,7 @@ class EstimatorNode(Node):
             )
             return
         self.last_stamp = stamp
-        every = self.config.publish_every
-        if every > 1 and round(stamp / self._period_ns) % every:
-            return  # not a publishing sample (publish_rate)
-        self._pub.publish(self._encoder.encode(stamp, x, self.estimator._out_p))
-        self.published += 1
-        if self.estimates is not None and self.estimates.listeners:
-            self.estimates.deliver(stamp, x)
+        self._publish_estimate(stamp, x, self.estimator._out_p)
 
     def publish_diagnostics(self) -> None:
         """Publish the NIS window, rejected/missing readings and frozen sensors."""

@@ -8,8 +8,10 @@ other thread of the process runs), and an estimator process at 5 kHz fell
 behind the samples at a whole core. :class:`SampleStreams` takes those
 subscriptions out of the executor: a thread waits on one wait set for all of
 them and, when it wakes, takes every message already there (raw CDR, ~5 us
-each), a message per topic per round in the order the topics were given (so
-a sample's messages are handled together), then waits again. The simulator
+each) and hands them to the node at once (``burst``) or to the streams'
+callbacks a message per topic per round, in the order the topics were given
+(:func:`dispatch_round_robin`: a sample's messages are handled together),
+then waits again. The simulator
 and the driver publish a millisecond's samples at once, so one wake-up
 serves a burst. The node's other entities (timers, services, low-rate
 topics) stay on its executor.
@@ -31,7 +33,7 @@ import threading
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-__all__ = ['SampleStreams', 'Stream', 'open_streams']
+__all__ = ['SampleStreams', 'Stream', 'dispatch_round_robin', 'open_streams']
 
 _WAIT_NS = 100_000_000  # a wake-up at least every 0.1 s: close() is seen
 
@@ -88,6 +90,7 @@ class SampleStreams:
         self._streams = list(streams)
         self._on_error = on_error or self._log_error
         self._burst = burst
+        self._callbacks = [stream.callback for stream in self._streams]
         self._handles = []
         c_qos = qos.get_c_qos_profile()
         for stream in self._streams:
@@ -137,30 +140,8 @@ class SampleStreams:
             if self._stop.is_set():
                 return
             self.wake_ups += 1
-            if self._burst is not None:
-                if not self._take_burst(pairs):
-                    return
-                continue
-            # round robin, a message per topic per round: the messages of one
-            # sample are handled together, in the order the topics were given
-            active = pairs
-            while active:
-                still = []
-                for pair in active:
-                    handle, msg_type, callback = pair
-                    try:
-                        taken = handle.take_message(msg_type, True)
-                    except Exception:  # noqa: BLE001 - the subscription is being destroyed
-                        return
-                    if taken is None:
-                        continue
-                    still.append(pair)
-                    self.taken += 1
-                    try:
-                        callback(taken[0])
-                    except Exception as err:  # noqa: BLE001 - a node never dies on a message
-                        self._on_error(err)
-                active = still
+            if not self._take_burst(pairs):
+                return
 
     def _take_burst(self, pairs) -> bool:
         """Take every waiting message of each stream, hand them over at once; False: stop."""
@@ -178,6 +159,9 @@ class SampleStreams:
             lists.append(here)
             self.taken += len(here)
         if not any(lists):  # woken by the timeout or the stop guard
+            return True
+        if self._burst is None:  # the streams' own callbacks, each message on its own
+            dispatch_round_robin(lists, self._callbacks, self._on_error)
             return True
         try:
             self._burst(lists)
@@ -197,6 +181,34 @@ class SampleStreams:
             handle.destroy_when_not_in_use()
         self._guard.destroy_when_not_in_use()
         self._wait_set.destroy_when_not_in_use()
+
+
+def dispatch_round_robin(lists, callbacks, on_error=None) -> None:
+    """Call each stream's callback on its messages, a message per stream per round.
+
+    The messages of one sample (one per stream, in stream order) are handled
+    together, as an executor taking them as they arrive would.
+
+    Parameters
+    ----------
+    lists : sequence of list of bytes
+        The raw messages of each stream, in arrival order.
+    callbacks : sequence of callable
+        The callback of each stream.
+    on_error : callable, optional
+        Called with an exception a callback raised, then the next message is
+        handled (default: the exception propagates).
+    """
+    for i in range(max((len(raws) for raws in lists), default=0)):
+        for raws, callback in zip(lists, callbacks, strict=True):
+            if i < len(raws):
+                if on_error is None:
+                    callback(raws[i])
+                    continue
+                try:
+                    callback(raws[i])
+                except Exception as err:  # noqa: BLE001 - a node never dies on a message
+                    on_error(err)
 
 
 def open_streams(node, streams: Sequence[Stream], qos, own_thread: bool = True, burst=None):
