@@ -65,7 +65,7 @@ from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.nodes.sample_assembly import ReleasedSample, SampleAssembler
-from maglev_ros.nodes.sample_streams import Stream, dispatch_round_robin, open_streams
+from maglev_ros.nodes.sample_streams import Stream, open_streams
 from maglev_ros.nodes.state_messages import EstimateEncoder
 from maglev_ros.topics import CURRENTS_TOPIC, DIAGNOSTICS_TOPIC, ESTIMATE_TOPIC, field_topic
 
@@ -415,39 +415,63 @@ class EstimatorNode(Node):
         another). Anything else (a sample pending, stamps that differ, an
         unreadable message, a part with no message while another has more than
         ``sample_wait``: a silent sensor) goes through the assembler one
-        message at a time, as on the executor.
+        message at a time, oldest stamp first, until no sample is pending;
+        then whole samples again (unless they did not line up in this
+        wake-up).
         """
         waiting = self._waiting
         for part, raws in enumerate(taken):
             waiting[part].extend(raws)
-        lengths = [len(w) for w in waiting]
-        n = min(lengths)
-        if self._samples.pending == 0 and n == 0 and max(lengths) <= self.config.sample_wait:
-            return  # part of a burst: the rest comes with the next wake-up
-        if self._samples.pending == 0 and n:
-            readers = self._readers
-            reads = [
-                [reader.read(raw) for raw in w[:n]]
-                for reader, w in zip(readers, waiting, strict=True)
-            ]
-            stamps = [r[0] if r is not None else None for r in reads[-1]]
-            if (
-                None not in stamps
-                and stamps[0] > self._samples.released
-                and all(stamps[i] < stamps[i + 1] for i in range(n - 1))
-                and all([r[0] if r else None for r in rs] == stamps for rs in reads[:-1])
-            ):
-                ys = np.array([sum((rs[i][1] for rs in reads[:-1]), ()) for i in range(n)])
-                currents = np.array([r[1] for r in reads[-1]])
-                self._samples.handled(stamps[-1])
-                for w in waiting:
-                    del w[:n]
-                self._estimate_many(stamps, ys, currents)
-                return
-        # one message at a time, round robin (a sample's parts together), as on the executor
-        dispatch_round_robin(waiting, self._handlers)
+        aligned = True  # False once whole samples did not line up: the rest one at a time
+        while any(waiting):
+            if self._samples.pending == 0 and aligned:
+                lengths = [len(w) for w in waiting]
+                n = min(lengths)
+                if n == 0 and max(lengths) <= self.config.sample_wait:
+                    return  # part of a burst: the rest comes with the next wake-up
+                if n:
+                    aligned = self._estimate_aligned(n)
+                    continue
+            # the oldest message first (by stamp; for one stamp, in part order), until no
+            # sample is pending: a topic that came late within the wake-up (more than
+            # sample_wait behind the others) is merged in, not handled sample_wait late
+            part = min((self._head_stamp(p), p) for p, w in enumerate(waiting) if w)[1]
+            self._handlers[part](waiting[part].pop(0))
+
+    def _head_stamp(self, part: int) -> int:
+        """Return the stamp of the oldest waiting message of ``part``, ns (-1: unreadable)."""
+        read = self._readers[part].read(self._waiting[part][0])
+        return -1 if read is None else read[0]
+
+    def _estimate_aligned(self, n: int) -> bool:
+        """Estimate the first ``n`` messages of every part as ``n`` whole samples.
+
+        Returns
+        -------
+        bool
+            False (nothing consumed) when they are not ``n`` whole samples in
+            order, newer than the last one released.
+        """
+        waiting = self._waiting
+        reads = [
+            [reader.read(raw) for raw in w[:n]]
+            for reader, w in zip(self._readers, waiting, strict=True)
+        ]
+        stamps = [r[0] if r is not None else None for r in reads[-1]]
+        if not (
+            None not in stamps
+            and stamps[0] > self._samples.released
+            and all(stamps[i] < stamps[i + 1] for i in range(n - 1))
+            and all([r[0] if r else None for r in rs] == stamps for rs in reads[:-1])
+        ):
+            return False
+        ys = np.array([sum((rs[i][1] for rs in reads[:-1]), ()) for i in range(n)])
+        currents = np.array([r[1] for r in reads[-1]])
+        self._samples.handled(stamps[-1])
         for w in waiting:
-            w.clear()
+            del w[:n]
+        self._estimate_many(stamps, ys, currents)
+        return True
 
     def _subscribe_streams(self, cfg: EstimatorNodeConfig) -> None:
         # the 5 kHz streams in a thread of their own, a burst per wake-up (sample_streams)

@@ -191,3 +191,48 @@ def test_estimator_bursts_give_the_numbers_of_one_message_at_a_time(ctx):
     assert many.lost_samples == one.lost_samples == 0
     one.destroy_node()
     many.destroy_node()
+
+
+def test_estimator_burst_merges_a_late_topic_and_returns_to_whole_samples(ctx):
+    """Two topics 12 samples ahead of the others (a slow wake-up), the rest a wake-up later.
+
+    The burst path releases the oldest sample (sample_wait exceeded), then merges
+    the late topics by stamp: one lost sample, not one per sample of the skew;
+    then whole samples again.
+    """
+    from rclpy.parameter import Parameter
+
+    from maglev_ros.nodes.estimator import EstimatorNode
+
+    params = [Parameter('sensor_noise', value=1e-4), Parameter('stream_thread', value=False)]
+    one = EstimatorNode(context=ctx, parameter_overrides=params)
+    many = EstimatorNode(context=ctx, parameter_overrides=params)
+    msgs = _sample_messages(80)
+    wake_ups = [
+        [[r[0] for r in msgs[:12]], [r[1] for r in msgs[:12]], [], []],
+        [[r[0] for r in msgs[12:]], [r[1] for r in msgs[12:]]]
+        + [[r[k] for r in msgs] for k in (2, 3)],
+    ]
+    # the reference: each wake-up's messages one at a time, oldest stamp first
+    index = {raw: k for k, row in enumerate(msgs) for raw in row}
+    for lists in wake_ups:
+        for _, part, raw in sorted(
+            (index[raw], part, raw) for part, w in enumerate(lists) for raw in w
+        ):
+            if part < 3:
+                one._on_field(part, raw)
+            else:
+                one._on_currents(raw)
+    single = []  # samples the burst node stepped one at a time
+    step = many.estimator.step
+    many.estimator.step = lambda *a: single.append(1) or step(*a)
+    for lists in wake_ups:
+        many._on_burst([list(w) for w in lists])
+    assert many.lost_samples == one.lost_samples == 1  # sample 0: its currents came late
+    assert many._samples.late == one._samples.late == 2  # sample 0's sensor 2, currents
+    assert len(single) <= 11  # samples 1-11; 12-79 whole
+    assert many.last_stamp == one.last_stamp
+    assert np.allclose(many.estimator.state, one.estimator.state, rtol=1e-12, atol=1e-15)
+    assert many.published == one.published
+    one.destroy_node()
+    many.destroy_node()
