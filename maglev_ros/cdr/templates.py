@@ -40,6 +40,7 @@ __all__ = [
     'currents_layout',
     'default_message',
     'field_layout',
+    'float_array_prefix',
     'odometry_layout',
     'raw_layout',
 ]
@@ -249,3 +250,26 @@ def clock_layout() -> RawLayout:
     """Raw layout of rosgraph_msgs/Clock (the stamp only, no values)."""
     msgtype = 'rosgraph_msgs/msg/Clock'
     return raw_layout(default_message(msgtype), msgtype, (), stamp=('clock',))
+
+
+def float_array_prefix(n: int) -> bytes:
+    """CDR bytes of a std_msgs/Float64MultiArray of ``n`` values, up to its data.
+
+    The message has an empty layout (as the command topics publish it), so
+    ``prefix + struct.pack(f'<{n}d', *values)`` is the whole serialised
+    message (the data, a float64 sequence, is its last field).
+
+    Parameters
+    ----------
+    n : int
+        Number of values.
+
+    Returns
+    -------
+    bytes
+    """
+    msgtype = 'std_msgs/msg/Float64MultiArray'
+    msg = default_message(msgtype)
+    msg.data = np.zeros(n)
+    raw = bytes(jazzy_typestore().serialize_cdr(msg, msgtype))
+    return raw[: len(raw) - 8 * n]

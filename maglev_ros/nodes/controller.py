@@ -68,6 +68,8 @@ Still exactly one command per sample.
 
 from __future__ import annotations
 
+import struct
+import threading
 import time
 from dataclasses import dataclass, fields
 
@@ -82,6 +84,7 @@ from std_srvs.srv import SetBool
 
 from maglev_ros.cdr import ODOMETRY_VALUES
 from maglev_ros.cdr.reader import RawFieldReader
+from maglev_ros.cdr.templates import float_array_prefix
 from maglev_ros.control import MODES, ControllerConfig, ControllerConfigError, make_controller
 from maglev_ros.control.excitation import (
     EXCITATION_SIGNALS,
@@ -97,6 +100,7 @@ from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.nodes.sample_assembly import SampleAssembler
+from maglev_ros.nodes.sample_streams import Stream, open_streams
 from maglev_ros.nodes.state_messages import odometry_state
 from maglev_ros.physics.kernels import odometry_state_values
 from maglev_ros.topics import (
@@ -161,6 +165,10 @@ class ControllerNodeConfig:
         ``trigger: estimate``: take the estimates from an estimator of this
         process and send the commands to its simulator directly
         (:mod:`~maglev_ros.nodes.intra_process`).
+    stream_thread : bool
+        ``trigger: estimate``: take the estimates in a thread of their own
+        (:mod:`~maglev_ros.nodes.sample_streams`), answering the newest of
+        each wake-up.
     """
 
     params: str
@@ -171,6 +179,7 @@ class ControllerNodeConfig:
     trigger: str = 'sample'
     excitation: CommandExcitation = CommandExcitation()
     intra_process: bool = False
+    stream_thread: bool = True
 
 
 def _parameter_set(name: str, value: str) -> str:
@@ -268,6 +277,12 @@ PARAMETERS = ParameterTable(
             'publish_rate; sample_rate is then that rate)',
             check=choice(*TRIGGERS),
         ),
+        'stream_thread': Param(
+            True,
+            'trigger estimate: take the estimates in a thread of their own, the newest '
+            'of each wake-up answered (older ones waiting are obsolete), not one '
+            'executor callback each',
+        ),
         'intra_process': Param(
             False,
             'trigger estimate, composed after the estimator and the simulator (same '
@@ -307,6 +322,7 @@ def build_config(values: dict) -> ControllerNodeConfig:
     period = v.pop('diagnostics_period')
     trigger = v.pop('trigger')
     intra = v.pop('intra_process')
+    streams = v.pop('stream_thread')
     settings = {name[len('excitation_') :]: v.pop(name) for name in _EXCITATION_PARAMETERS}
     try:
         excitation = CommandExcitation(**settings)
@@ -321,7 +337,7 @@ def build_config(values: dict) -> ControllerNodeConfig:
             f"trigger 'estimate' needs mode 'lqr' (the PD reads the fields), got {config.mode!r}"
         )
     return ControllerNodeConfig(
-        params, config, delay, start_enabled, period, trigger, excitation, intra
+        params, config, delay, start_enabled, period, trigger, excitation, intra, streams
     )
 
 
@@ -353,6 +369,10 @@ class ControllerNode(Node):
         self.lqr = cfg.controller.mode == 'lqr'
         self.n_sensors = model.n_outputs // 3
         self.commands = 0  # commands published
+        self.skipped_estimates = 0  # stream_thread: older estimates of a wake-up, not answered
+        # the estimate input (stream thread, in-process) and the executor's callbacks
+        # (stale check, enable, reference) change the core and publish: one at a time
+        self._lock = threading.RLock()
         self.last_command = np.zeros(model.n_inputs)
         # the parts of each sample (LQR: currents, estimate; PD: each field, currents),
         # released in stamp order whatever order the callbacks run in
@@ -363,7 +383,8 @@ class ControllerNode(Node):
         self._last_level = 'OK'
         self._last_sample_ns: int | None = None  # node clock at the last sample message
         self._pending = np.zeros(model.n_inputs)  # delay_commands: computed, not yet sent
-        self._msg = Float64MultiArray()
+        self._command_prefix = float_array_prefix(model.n_inputs)  # + the currents' bytes
+        self._pack = struct.Struct(f'<{model.n_inputs}d').pack
         self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         try:
             self.excitation = ExcitationSchedule(cfg.excitation, cfg.controller.sample_rate)
@@ -372,7 +393,6 @@ class ControllerNode(Node):
         self._first_stamp: int | None = None  # the excitation's sample 0
         self._pending_excitation = np.zeros(model.n_inputs)
         self.last_excitation = np.zeros(model.n_inputs)
-        self._excitation_msg = Float64MultiArray()
         self._excitation_pub = None
         if self.excitation.enabled:
             self._excitation_pub = self.create_publisher(
@@ -388,11 +408,15 @@ class ControllerNode(Node):
             self._estimate_reader = RawFieldReader('nav_msgs/msg/Odometry', ODOMETRY_VALUES)
             if cfg.intra_process:
                 self._connect_in_process()
-            self._estimate_sub = None
+            self._estimate_streams = None
             self._heard_since: float | None = None  # monotonic s: estimator matched since
             if self.estimates is None:
-                self._estimate_sub = self.create_subscription(
-                    Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS, raw=True
+                self._estimate_streams = open_streams(
+                    self,
+                    [Stream(Odometry, ESTIMATE_TOPIC, self._on_estimate_only)],
+                    SENSOR_QOS,
+                    own_thread=cfg.stream_thread,
+                    burst=self._on_estimates,
                 )
             self.create_timer(cfg.controller.input_timeout, self._check_stale)
         else:
@@ -427,13 +451,13 @@ class ControllerNode(Node):
             if excitation is None:  # a zero command of the safety or ready checks
                 excitation = np.zeros(self.controller.n_inputs)
             self.last_excitation = excitation
-            self._excitation_msg.data = [float(v) for v in excitation]
-            self._excitation_pub.publish(self._excitation_msg)
+            self._excitation_pub.publish(self._command_prefix + self._pack(*excitation))
         self.last_command = command
-        self._msg.data = [float(v) for v in command]
-        self._pub.publish(self._msg)
+        values = [float(v) for v in command]
+        # serialised here (template + 4 doubles): rclpy's message object cost ~3x the bytes
+        self._pub.publish(self._command_prefix + self._pack(*values))
         if self._command_input is not None:  # intra_process: the simulator, directly
-            self._command_input(self._msg.data)
+            self._command_input(values)
         self.commands += 1
         status = self.controller.status()
         if status.level != self._last_level:
@@ -477,6 +501,25 @@ class ControllerNode(Node):
         stamp, values = read
         self._send(stamp, self.controller.command(stamp * 1e-9, odometry_state_values(values)))
 
+    def _on_estimates(self, taken: list[list[bytes]]) -> None:
+        """``stream_thread``: answer the newest estimate of a wake-up (the others are obsolete)."""
+        raws = taken[0]
+        if raws:
+            self.skipped_estimates += len(raws) - 1
+            with self._lock:
+                self._on_estimate_only(raws[-1])
+
+    def _estimator_matched(self) -> bool:
+        """Return True while an estimator's publisher is matched to the estimate input."""
+        if self._estimate_streams is not None:
+            return self._estimate_streams.publisher_count(0) > 0
+        if self.estimates is not None:
+            return True  # in-process: the estimator's channel
+        topic = self.resolve_topic_name(ESTIMATE_TOPIC)
+        return any(
+            sub.topic_name == topic and sub.get_publisher_count() > 0 for sub in self.subscriptions
+        )
+
     def _connect_in_process(self) -> None:
         """intra_process: the estimator's estimates and the simulator's command input."""
         estimates = intra_process.find(self.context, self.resolve_topic_name(ESTIMATE_TOPIC))
@@ -488,6 +531,8 @@ class ControllerNode(Node):
             return
         if isinstance(sink, intra_process.CommandSink):
             self._command_input = sink.attach(self.get_name())
+            if self._command_input is not None and sink.lock is not None:
+                self._lock = sink.lock  # its commands take the simulator's lock: share it
         estimates.connect(self._on_estimate_values, self.get_name())
         self.estimates = estimates
 
@@ -496,15 +541,24 @@ class ControllerNode(Node):
         if self.estimates is not None:
             self.estimates.disconnect(self._on_estimate_values)
             self.estimates = None
+        if getattr(self, '_estimate_streams', None) is not None:
+            self._estimate_streams.close()
+            self._estimate_streams = None
         super().destroy_node()
 
     def _on_estimate_values(self, stamp: int, x: np.ndarray) -> None:
         """intra_process: one command per estimate, in the estimator's thread."""
         self._last_sample_ns = self._last_estimate_ns = self.get_clock().now().nanoseconds
         self._estimates_seen = True
-        self._send(stamp, self.controller.command(stamp * 1e-9, x))
+        with self._lock:
+            self._send(stamp, self.controller.command(stamp * 1e-9, x))
 
     def _check_stale(self) -> None:
+        """``trigger: estimate``: the stale check, under the node's lock (:meth:`_stale`)."""
+        with self._lock:
+            self._stale()
+
+    def _stale(self) -> None:
         """``trigger: estimate``: no estimate for ``input_timeout`` of the node's clock.
 
         The core's watchdog sees only the stamps of the estimates that come;
@@ -527,7 +581,7 @@ class ControllerNode(Node):
             # match this subscription only tens of ms after this side did, and
             # estimates published before are lost; so hear it for READY_AFTER_S first
             now_s = time.monotonic()
-            if self._estimate_sub is not None and self._estimate_sub.get_publisher_count() == 0:
+            if not self._estimator_matched():
                 self._heard_since = None
             elif self._heard_since is None:
                 self._heard_since = now_s
@@ -588,6 +642,10 @@ class ControllerNode(Node):
         return self.excitation.value(index)
 
     def _on_reference(self, msg: PoseStamped) -> None:
+        with self._lock:
+            self._set_reference(msg)
+
+    def _set_reference(self, msg: PoseStamped) -> None:
         if not self.lqr:
             self.get_logger().error(f'{REFERENCE_TOPIC} ignored: the PD holds the equilibrium')
             return
@@ -617,10 +675,11 @@ class ControllerNode(Node):
         queued before N.
         """
         enable = bool(request.data)
-        self.controller.set_enabled(enable)
-        if not enable:
-            self._pending = np.zeros(self.controller.n_inputs)  # computed while enabled
-            self._pending_excitation = np.zeros(self.controller.n_inputs)
+        with self._lock:
+            self.controller.set_enabled(enable)
+            if not enable:
+                self._pending = np.zeros(self.controller.n_inputs)  # computed while enabled
+                self._pending_excitation = np.zeros(self.controller.n_inputs)
         response.success = True
         state = 'enabled' if enable else 'disabled: zero currents'
         response.message = f'{state} from command {self.commands} on'
@@ -655,6 +714,8 @@ class ControllerNode(Node):
             'timeouts': s.timeouts,
             'saturated commands': s.saturated,
         }
+        if self.per_estimate:
+            values['estimates skipped (older in a wake-up)'] = self.skipped_estimates
         if self._excitation_pub is not None:
             values['excitation'] = self.config.excitation.describe()
             values['last excitation (A)'] = ' '.join(f'{v:.6g}' for v in self.last_excitation)

@@ -110,11 +110,16 @@ class CommandSink:
     on_attach : callable
         Called once a controller attaches (the simulator then drops its
         middleware subscription).
+    lock : threading.RLock, optional
+        The lock ``take`` acquires (the simulator's). A controller that
+        attaches guards its own state with it too: one lock, one order, for
+        its commands from the simulator's thread and from its executor's.
     """
 
-    def __init__(self, take: Callable, on_attach: Callable[[str], None]) -> None:
+    def __init__(self, take: Callable, on_attach: Callable[[str], None], lock=None) -> None:
         self.take = take
         self._on_attach = on_attach
+        self.lock = lock
         self.attached: str | None = None
 
     def attach(self, name: str) -> Callable | None:

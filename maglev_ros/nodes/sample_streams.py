@@ -169,6 +169,16 @@ class SampleStreams:
             self._on_error(err)
         return True
 
+    def publisher_count(self, index: int) -> int:
+        """Return how many publishers are matched to a stream's subscription.
+
+        Parameters
+        ----------
+        index : int
+            The stream's position in the ``streams`` given.
+        """
+        return self._handles[index].get_publisher_count()
+
     def close(self) -> None:
         """Stop the thread and destroy the subscriptions (before the node)."""
         if self._closed:

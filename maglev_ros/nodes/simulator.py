@@ -316,7 +316,9 @@ class SimulatorNode(Node):
             (self.resolve_topic_name(contract.CURRENTS_TOPIC), self.samples_source),
             (
                 self.resolve_topic_name(contract.COMMAND_TOPIC),
-                intra_process.CommandSink(self._take_command, self._command_source_attached),
+                intra_process.CommandSink(
+                    self._take_command, self._command_source_attached, self._lock
+                ),
             ),
         ]
         for topic, obj in self._intra:

@@ -161,3 +161,19 @@ def test_values_as_one_matrix_and_wrong_shapes(stamps):
     ]
     with pytest.raises(ValueError, match=r'values must have shape \(50, 7\)'):
         serialiser.serialise(stamps, values[:, :6])
+
+
+@pytest.mark.parametrize('values', [[0.0, 0.0, 0.0, 0.0], [1.0, -0.25, 3e-7, -1.0], [0.5]])
+def test_float_array_prefix_plus_values_is_the_message(values):
+    """The command's bytes (template + doubles) equal rclpy's Float64MultiArray, and read back."""
+    from std_msgs.msg import Float64MultiArray
+
+    from maglev_ros.cdr.templates import float_array_prefix
+
+    raw = float_array_prefix(len(values)) + struct.pack(f'<{len(values)}d', *values)
+    msg = Float64MultiArray()
+    msg.data = values
+    ref = bytes(serialize_message(msg))
+    # equal but for the 4 alignment bytes before the doubles (rclpy leaves them unset)
+    assert len(raw) == len(ref) and raw[:16] == ref[:16] and raw[20:] == ref[20:]
+    assert list(deserialize_message(raw, Float64MultiArray).data) == values
