@@ -135,6 +135,43 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
         ctrl.destroy_node()
 
 
+def test_controller_stream_thread_answers_the_newest_estimate_of_a_wake_up(ctx):
+    """Estimates published together reach the stream thread as one wake-up: one answer."""
+    model = make_model('maggy_v2')
+    x_eq = model.hover_state(find_equilibria(model)[0].z)
+    ctrl = ControllerNode(
+        context=ctx,
+        parameter_overrides=_params(trigger='estimate', sample_rate=1000.0, input_timeout=0.5),
+    )
+    listener, commands = _listener(
+        ctx, Float64MultiArray, topics.COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS
+    )
+    spinner = Spinner(ctx, [listener])
+    try:
+        assert ctrl._estimate_streams is not None  # the default: a thread of its own
+        wait_for(lambda: ctrl._pub.get_subscription_count() >= 1, what='discovery')
+        x = x_eq.copy()
+        raws = []
+        for k in range(3):
+            x[0] = x_eq[0] + 1e-4 * (k + 1)  # the newest is the farthest off
+            raws.append(serialize_message(odometry_message((k + 1) * 1_000_000, x)))
+        ctrl._on_estimates([raws])  # one wake-up that took three estimates
+        wait_for(lambda: len(commands) >= 1, what='the command')
+        time.sleep(0.2)
+        assert len(commands) == 1 and ctrl.skipped_estimates == 2
+        want = ctrl.controller.last_command
+        fresh = ControllerNode(
+            context=ctx,
+            parameter_overrides=_params(trigger='estimate', sample_rate=1000.0, input_timeout=0.5),
+        )
+        fresh._on_estimate_only(raws[-1])  # the newest alone gives the same command
+        assert np.array_equal(fresh.controller.last_command, want) and np.any(want != 0)
+        fresh.destroy_node()
+    finally:
+        spinner.close()
+        ctrl.destroy_node()
+
+
 def test_realtime_simulator_waits_for_its_controller(ctx):
     import rclpy
 
