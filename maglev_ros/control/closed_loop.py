@@ -20,6 +20,7 @@ import numpy as np
 
 from ..estimation.base import nis_band
 from ..physics.kernels import odometry_round_trip
+from .config import MAX_COMMAND_DELAY
 from .pd import PdController
 
 __all__ = ['ClosedLoop', 'LoopResult', 'make_closed_loop', 'moving_rms']
@@ -216,7 +217,7 @@ class ClosedLoop:
     command_delay : int, optional
         Samples before a command drives the coils (default: the controller's
         ``command_delay``; 1 is the board: the command computed from sample k
-        is applied from k+1).
+        is applied from k+1; at most ``MAX_COMMAND_DELAY``).
     """
 
     def __init__(self, simulator, estimator, controller, command_delay: int | None = None):
@@ -227,8 +228,10 @@ class ClosedLoop:
         if estimator is None and not self.pd:
             raise ValueError('the LQR needs an estimator')
         delay = controller.config.command_delay if command_delay is None else command_delay
-        if delay not in (0, 1):
-            raise ValueError(f'command_delay must be 0 or 1, got {delay!r}')
+        if isinstance(delay, bool) or delay not in range(MAX_COMMAND_DELAY + 1):
+            raise ValueError(
+                f'command_delay must be an integer from 0 to {MAX_COMMAND_DELAY}, got {delay!r}'
+            )
         self.command_delay = delay
         from ..physics.equilibria import find_equilibria
 
@@ -291,7 +294,7 @@ class ClosedLoop:
         if est is not None:
             est.reset()
         ctrl.reset()
-        pending = np.zeros(n_s)
+        pending = [np.zeros(n_s) for _ in range(self.command_delay)]  # oldest first
         current_ref = None
         cut_start, cut_end = (cut[0], cut[0] + cut[1]) if cut else (np.inf, -np.inf)
         done = n
@@ -345,7 +348,8 @@ class ClosedLoop:
             else:
                 level[k] = 'OK'
             if self.command_delay:
-                applied, pending = pending, command
+                pending.append(command)
+                applied = pending.pop(0)
             else:
                 applied = command
             y = sim.step(applied)

@@ -6,10 +6,17 @@ import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-__all__ = ['MODES', 'ControllerConfig', 'ControllerConfigError', 'load_controller_config']
+__all__ = [
+    'MAX_COMMAND_DELAY',
+    'MODES',
+    'ControllerConfig',
+    'ControllerConfigError',
+    'load_controller_config',
+]
 
 #: ``lqr``: state feedback on the estimate; ``pd``: the firmware's PD on the raw field.
 MODES = ('lqr', 'pd')
+MAX_COMMAND_DELAY = 20  # samples of command delay the LQR design takes as states
 
 
 class ControllerConfigError(ValueError):
@@ -30,9 +37,11 @@ class ControllerConfig:
     sample_rate : float
         Control rate, Hz (one command per sample).
     command_delay : int
-        Samples before a command takes effect (0 or 1): 1 on the board and in
-        real time (the command computed from sample k drives the coils from
-        k+1); the LQR design includes it as a state (the pending command).
+        Samples before a command takes effect (0 to ``MAX_COMMAND_DELAY``): 1
+        on the board (the command computed from sample k drives the coils
+        from k+1); more for a loop through separate processes, whose
+        commands arrive milliseconds late. The LQR design includes the
+        pending commands as states.
     sensor_delay : int
         Samples of reading delay (0 or 1): the PD removes the coils' direct
         field with the currents of the reading's instant. (The LQR gets an
@@ -108,10 +117,14 @@ class ControllerConfig:
             raise ControllerConfigError(
                 f'mode must be one of {", ".join(MODES)}, got {self.mode!r}'
             )
-        for name in ('command_delay', 'sensor_delay'):
-            value = getattr(self, name)
-            if isinstance(value, bool) or value not in (0, 1):
-                raise ControllerConfigError(f'{name} must be 0 or 1, got {value!r}')
+        value = self.command_delay
+        if isinstance(value, bool) or value not in range(MAX_COMMAND_DELAY + 1):
+            raise ControllerConfigError(
+                f'command_delay must be an integer from 0 to {MAX_COMMAND_DELAY}, got {value!r}'
+            )
+        value = self.sensor_delay
+        if isinstance(value, bool) or value not in (0, 1):
+            raise ControllerConfigError(f'sensor_delay must be 0 or 1, got {value!r}')
         for name in ('coil_dynamics', 'integral', 'pd_feedthrough'):
             if not isinstance(getattr(self, name), bool):
                 raise ControllerConfigError(

@@ -2,13 +2,14 @@
 
 The controller's state (all known at sample k)::
 
-    xi = [dx (10), i (4) if coil_dynamics, c_prev (4) if command_delay, e (3) if integral]
+    xi = [dx (10), i (4) if coil_dynamics, c_prev (4 N) for command_delay N, e (3) if integral]
 
 ``dx``: the estimate's deviation from the equilibrium (the estimator has
 already predicted across the sensor's sample of delay); ``i``: measured coil
 currents (each follows its command with ``L di/dt = R (c - i)``); ``c_prev``:
-the command computed at k-1, which drives the coils over the sample k -> k+1
-when commands take effect one sample late; ``e``: the integral of the
+the commands computed at k-1, ..., k-N, newest first (a shift register): with
+commands taking effect N samples late, the one of k-N drives the coils over
+k -> k+1; ``e``: the integral of the
 position error (m s). The continuous [dx, i] model is discretised exactly
 (ZOH) and the gain comes from python-control's ``dlqr``.
 """
@@ -133,13 +134,15 @@ def design_lqr(linear, config: ControllerConfig, tau: float = 0.0) -> LqrDesign:
     layout = {'dx': slice(0, nx)}
     if use_coil:
         layout['i'] = slice(nx, nx + m)
-    if config.command_delay:
-        n1 = n_plant + m
+    delay = config.command_delay
+    if delay:
+        n1 = n_plant + delay * m
         A1 = np.zeros((n1, n1))
         A1[:n_plant, :n_plant] = phi
-        A1[:n_plant, n_plant:] = gamma
+        A1[:n_plant, n1 - m :] = gamma  # the oldest pending command drives the plant
+        A1[n_plant + m :, n_plant : n1 - m] = np.eye((delay - 1) * m)  # the register shifts
         B1 = np.zeros((n1, m))
-        B1[n_plant:] = np.eye(m)
+        B1[n_plant : n_plant + m] = np.eye(m)  # the new command enters first
         layout['c_prev'] = slice(n_plant, n1)
     else:
         A1, B1 = phi, gamma

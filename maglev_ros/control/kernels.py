@@ -16,17 +16,20 @@ def lqr_law(x, i, c_prev, e, Kx, Ki, Kc, Ke, bias, limit):  # pragma: no cover -
     ----------
     x : ndarray, shape (12,)
         Estimated full state.
-    i, c_prev : ndarray, shape (m,)
-        Measured coil currents and the pending command, A.
+    i : ndarray, shape (m,)
+        Measured coil currents, A.
+    c_prev : ndarray, shape (N m,)
+        The pending commands, newest first, A.
     e : ndarray, shape (3,)
         Integrated position error, m s.
     Kx : ndarray, shape (m, 12)
         The gain on the full state (zero columns for gamma and wz).
-    Ki, Kc : ndarray, shape (m, m)
+    Ki : ndarray, shape (m, m)
+    Kc : ndarray, shape (m, N m)
     Ke : ndarray, shape (m, 3)
         Gains (zero when the design has no such state).
     bias : ndarray, shape (m,)
-        ``u_ss + Kx x_ss + Ki u_ss + Kc u_ss``: the set-point's share.
+        ``u_ss + Kx x_ss + Ki u_ss + Kc [u_ss ... u_ss]``: the set-point's share.
     limit : float
         A.
 
@@ -43,7 +46,9 @@ def lqr_law(x, i, c_prev, e, Kx, Ki, Kc, Ke, bias, limit):  # pragma: no cover -
         for j in range(x.shape[0]):
             acc -= Kx[r, j] * x[j]
         for j in range(m):
-            acc -= Ki[r, j] * i[j] + Kc[r, j] * c_prev[j]
+            acc -= Ki[r, j] * i[j]
+        for j in range(c_prev.shape[0]):
+            acc -= Kc[r, j] * c_prev[j]
         for j in range(3):
             acc -= Ke[r, j] * e[j]
         if acc > limit:

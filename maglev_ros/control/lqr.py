@@ -60,6 +60,8 @@ class LqrController:
         self._Kx = np.zeros((m, 12))
         self._Kx[:, self.reduced] = K[:, layout['dx']]
         self._Ki = np.ascontiguousarray(K[:, layout['i']]) if 'i' in layout else np.zeros((m, m))
+        # the pending commands, newest first (command_delay N: N of them; none: one zero)
+        self._n_pending = max(self.config.command_delay, 1)
         self._Kc = (
             np.ascontiguousarray(K[:, layout['c_prev']])
             if 'c_prev' in layout
@@ -74,7 +76,7 @@ class LqrController:
     def reset(self) -> None:
         """Clear the integrators, the pending command and the watchdog."""
         self.watchdog.reset()
-        self._c_prev = np.zeros(self.n_inputs)
+        self._c_prev = np.zeros(self._n_pending * self.n_inputs)
         self._e = np.zeros(3)
         self.saturated = 0
         self.active = False
@@ -119,7 +121,7 @@ class LqrController:
         x_ss = self.x_eq.copy()
         x_ss[self.reduced] += self._dx_ss
         u = self._u_ss
-        self._bias = u + self._Kx @ x_ss + self._Ki @ u + self._Kc @ u
+        self._bias = u + self._Kx @ x_ss + self._Ki @ u + self._Kc @ np.tile(u, self._n_pending)
 
     def command(self, t: float, state=None, currents=None) -> np.ndarray:
         """Return the coil command for time ``t``.
@@ -158,7 +160,9 @@ class LqrController:
             )
             self._e[:] = 0.0
             return self._zero()
-        i = self._c_prev if currents is None or not self._has_i else currents
+        m = self.n_inputs
+        # the coils follow the oldest pending command (no measurement: that command)
+        i = self._c_prev[-m:] if currents is None or not self._has_i else currents
         clipped, saturated = lqr_law(
             x,
             np.asarray(i, dtype=float),
@@ -175,14 +179,15 @@ class LqrController:
             self.saturated += 1
         elif self._has_e:  # conditional integration (anti-windup)
             self._e += self.config.dt * (x[:3] - self.reference)
-        self._c_prev = clipped
+        self._c_prev[m:] = self._c_prev[:-m]  # the register shifts; the newest first
+        self._c_prev[:m] = clipped
         self.last_command = clipped
         self.active = True
         return clipped.copy()
 
     def _zero(self) -> np.ndarray:
-        self._c_prev = np.zeros(self.n_inputs)
-        self.last_command = self._c_prev
+        self._c_prev = np.zeros(self._n_pending * self.n_inputs)
+        self.last_command = np.zeros(self.n_inputs)
         self.active = False
         return np.zeros(self.n_inputs)
 

@@ -86,6 +86,7 @@ from maglev_ros.cdr import ODOMETRY_VALUES
 from maglev_ros.cdr.reader import RawFieldReader
 from maglev_ros.cdr.templates import float_array_prefix
 from maglev_ros.control import MODES, ControllerConfig, ControllerConfigError, make_controller
+from maglev_ros.control.config import MAX_COMMAND_DELAY
 from maglev_ros.control.excitation import (
     EXCITATION_SIGNALS,
     CommandExcitation,
@@ -191,7 +192,11 @@ def _parameter_set(name: str, value: str) -> str:
 _DESCRIPTIONS = {
     'mode': ('lqr (state feedback on the estimate) or pd (firmware PD on the field)', None),
     'sample_rate': ('control rate, Hz (one command per sample)', number(0, above=True)),
-    'command_delay': ('samples before a command drives the coils (0 or 1)', integer_rule(0, 1)),
+    'command_delay': (
+        f'samples before a command drives the coils (0 to {MAX_COMMAND_DELAY}; 1: the board; '
+        'the LQR designs for it)',
+        integer_rule(0, MAX_COMMAND_DELAY),
+    ),
     'sensor_delay': ('samples of reading delay (0 or 1)', integer_rule(0, 1)),
     'coil_dynamics': ("LQR models the coils' L/R lag", None),
     'current_limit': ('largest command per coil, A', number(0, above=True)),

@@ -19,7 +19,7 @@ from maglev_ros.control import (
 CONFIG = Path(__file__).resolve().parents[2] / 'config' / 'controller.yaml'
 
 
-@pytest.mark.parametrize('delay', [0, 1])
+@pytest.mark.parametrize('delay', [0, 1, 3])
 @pytest.mark.parametrize('coil', [False, True])
 @pytest.mark.parametrize('integral', [False, True])
 def test_lqr_designs_stabilise_both_sets(v2_linear, v4_linear, delay, coil, integral):
@@ -31,6 +31,41 @@ def test_lqr_designs_stabilise_both_sets(v2_linear, v4_linear, delay, coil, inte
         assert design.stable
         # the open loop is unstable: the gain does the work
         assert np.max(np.abs(np.linalg.eigvals(design.A))) > 1.0
+
+
+@pytest.mark.parametrize('delay', [1, 2, 5])
+def test_delay_states_are_a_register_the_plant_reads_at_its_end(v2_linear, delay):
+    """The augmented model equals the plant driven by the command of ``delay`` samples ago."""
+    from maglev_ros.physics.discretization import zoh
+
+    lin = v2_linear.reduced()
+    config = ControllerConfig(command_delay=delay, sample_rate=1000.0)
+    design = design_lqr(lin, config)
+    phi, gamma = zoh(lin.A, lin.B, config.dt)
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((12, 4))
+    x = np.zeros(10)
+    xi = np.zeros(design.A.shape[0])
+    xi[:10] = x = 1e-4 * rng.standard_normal(10)
+    for k in range(12):
+        xi = design.A @ xi + design.B @ u[k]
+        x = phi @ x + gamma @ (u[k - delay] if k >= delay else np.zeros(4))
+        assert np.allclose(xi[:10], x, rtol=1e-12, atol=1e-18)
+        pending = [u[k - j] if k >= j else np.zeros(4) for j in range(delay)]
+        assert np.allclose(xi[design.layout['c_prev']], np.concatenate(pending), atol=0)
+    assert design.stable
+
+
+def test_lqr_for_three_samples_of_delay_holds_where_commands_come_three_late(v2):
+    """The whole loop (noisy sensors, coils), commands applied 3 samples late, 2 s."""
+    from maglev_ros.control.closed_loop import make_closed_loop
+
+    loop = make_closed_loop(v2, controller=ControllerConfig(command_delay=3))
+    assert loop.command_delay == 3
+    result = loop.run(2.0)
+    assert not result.crashed
+    tail = result.x[len(result.t) // 2 :, :3] - [0.0, 0.0, result.z_eq]
+    assert np.all(np.sqrt(np.mean(tail**2, axis=0)) < 1e-4)
 
 
 def test_steady_state_holds_an_offset(v2_linear):
@@ -105,6 +140,9 @@ def test_bad_settings_name_the_value_and_the_file(tmp_path):
         ControllerConfig(current_limit=0.0)
     with pytest.raises(ControllerConfigError, match='mode must be one of lqr, pd'):
         ControllerConfig(mode='mpc')
+    for delay in (-1, 21, True, 1.5):
+        with pytest.raises(ControllerConfigError, match='command_delay must be an integer from'):
+            ControllerConfig(command_delay=delay)
     bad = tmp_path / 'c.yaml'
     bad.write_text('controller:\n  position_scal: 1.0e-4\n')
     with pytest.raises(ControllerConfigError, match=r'c\.yaml: unknown controller setting'):
