@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from ..physics import linearize
@@ -152,7 +154,8 @@ class LqrController:
         if was_safe:  # just re-armed: start clean
             self._e[:] = 0.0
         x = np.asarray(state, dtype=float)
-        off = float(np.linalg.norm(x[:3] - self.x_eq[:3]))
+        d0, d1, d2 = x[0] - self.x_eq[0], x[1] - self.x_eq[1], x[2] - self.x_eq[2]
+        off = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
         if not off <= self.config.loss_distance:  # also NaN
             self.lost = (
                 f'magnet lost: estimate {1e3 * off:.1f} mm from the equilibrium '

@@ -137,6 +137,66 @@ def euler_to_quaternion(alpha: float, beta: float, gamma: float) -> tuple[float,
     )
 
 
+@njit(cache=True)
+def sensor_reading(y, offset, noise, noise_rms, quantization, out):  # pragma: no cover - jitted
+    """Write a sensor reading: ``round((y + offset + noise_rms noise) / q) q``, q the LSB.
+
+    The arithmetic of numpy's ``y + offset``, ``+ noise_rms * noise`` and
+    ``np.round(r / q) * q`` in that order (round half to even), element by
+    element.
+
+    Parameters
+    ----------
+    y, offset, noise : ndarray, shape (n,)
+        True field (T), sensor offsets (T) and standard normal noise.
+    noise_rms : float
+        Noise, T rms (0: none added).
+    quantization : float
+        T per LSB (0: none).
+    out : ndarray, shape (n,)
+        Written: the reading, T.
+    """
+    for j in range(y.shape[0]):
+        r = y[j] + offset[j]
+        if noise_rms > 0:
+            r = r + noise_rms * noise[j]
+        if quantization > 0:
+            r = np.round(r / quantization) * quantization
+        out[j] = r
+
+
+@njit(cache=True)
+def _odometry_fill(x, out):  # pragma: no cover - jitted
+    """Write the 13 Odometry numbers of state ``x`` (12,) into ``out`` (13,)."""
+    out[0:3] = x[0:3]
+    out[3], out[4], out[5], out[6] = euler_to_quaternion(x[3], x[4], x[5])
+    rot = rotation_matrix(x[3], x[4], x[5])
+    for i in range(3):  # R^T v: the world velocity in the magnet frame
+        out[7 + i] = rot[0, i] * x[6] + rot[1, i] * x[7] + rot[2, i] * x[8]
+    out[10:13] = x[9:12]
+
+
+@njit(cache=True)
+def _odometry_state_fill(values, x):  # pragma: no cover - jitted
+    """Write the 12-state that the 13 Odometry numbers ``values`` carry into ``x``."""
+    qx, qy, qz, qw = values[3], values[4], values[5], values[6]
+    alpha = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
+    beta = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
+    gamma = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
+    x[0:3] = values[0:3]
+    x[3], x[4], x[5] = alpha, beta, gamma
+    rot = rotation_matrix(alpha, beta, gamma)
+    for i in range(3):  # R v: the magnet-frame velocity in the world
+        x[6 + i] = rot[i, 0] * values[7] + rot[i, 1] * values[8] + rot[i, 2] * values[9]
+    x[9:12] = values[10:13]
+
+
+@njit(cache=True)
+def _odometry_round_trip(x, values, out):  # pragma: no cover - jitted
+    _odometry_fill(x, values)
+    _odometry_state_fill(values, out)
+
+
 def odometry_values(x: np.ndarray) -> np.ndarray:
     """Return the 13 varying numbers of the true-state Odometry of state ``x``.
 
@@ -152,13 +212,8 @@ def odometry_values(x: np.ndarray) -> np.ndarray:
         Position (3), quaternion x y z w (4), linear velocity in the magnet
         frame (3, nav_msgs puts the twist in the child frame), body rates (3).
     """
-    alpha, beta, gamma = float(x[3]), float(x[4]), float(x[5])
-    rot = rotation_matrix(alpha, beta, gamma)
     out = np.empty(13)
-    out[0:3] = x[0:3]
-    out[3:7] = euler_to_quaternion(alpha, beta, gamma)
-    out[7:10] = rot.T @ np.asarray(x[6:9], dtype=float)
-    out[10:13] = x[9:12]
+    _odometry_fill(np.ascontiguousarray(x, dtype=float), out)
     return out
 
 
@@ -178,15 +233,8 @@ def odometry_state_values(values) -> np.ndarray:
     ndarray, shape (12,)
         Position m, ZYX Euler angles rad, world velocity m/s, body rates rad/s.
     """
-    qx, qy, qz, qw = (float(v) for v in values[3:7])
-    alpha = math.atan2(2 * (qw * qx + qy * qz), 1 - 2 * (qx * qx + qy * qy))
-    beta = math.asin(max(-1.0, min(1.0, 2 * (qw * qy - qz * qx))))
-    gamma = math.atan2(2 * (qw * qz + qx * qy), 1 - 2 * (qy * qy + qz * qz))
     x = np.empty(12)
-    x[0:3] = values[0:3]
-    x[3:6] = alpha, beta, gamma
-    x[6:9] = rotation_matrix(alpha, beta, gamma) @ np.asarray(values[7:10], dtype=float)
-    x[9:12] = values[10:13]
+    _odometry_state_fill(np.ascontiguousarray(values, dtype=float), x)
     return x
 
 
@@ -196,7 +244,9 @@ def odometry_round_trip(x: np.ndarray) -> np.ndarray:
     A consumer of ``maglev/state/estimate`` gets the state through the
     quaternion and the magnet-frame velocity, which round the Euler angles and
     the world velocity by about 1e-16 relative; the ROS-free closed loop passes
-    its estimate through this so that it steps exactly as the nodes do.
+    its estimate through this so that it steps exactly as the nodes do (one
+    compiled call: the same arithmetic as :func:`odometry_values` then
+    :func:`odometry_state_values`).
 
     Parameters
     ----------
@@ -207,7 +257,9 @@ def odometry_round_trip(x: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (12,)
     """
-    return odometry_state_values(odometry_values(x))
+    values, out = np.empty(13), np.empty(12)
+    _odometry_round_trip(np.ascontiguousarray(x, dtype=float), values, out)
+    return out
 
 
 @njit(cache=True, fastmath=FASTMATH, error_model='numpy')

@@ -35,6 +35,7 @@ __all__ = [
 
 MAGNET_MODES = ('free', 'fixed', 'absent')
 _OK = kernels.STATUS_OK
+_NOISE_BLOCK = 256  # samples of sensor noise drawn at once
 CRASH_REASONS = {
     kernels.STATUS_CRASH_BASE: 'touched the base',
     kernels.STATUS_CRASH_WORKSPACE: 'left the workspace',
@@ -294,7 +295,8 @@ class Simulator:
             self._coil_mode = _COIL_MODES[coil.drive]
             self._electrical = np.array([coil.resistance, coil.inductance, coil.supply_voltage])
         offset = np.broadcast_to(np.asarray(self.sensor.offset, dtype=float), (model.n_outputs,))
-        self._offset = np.array(offset)
+        self._offset = np.array(offset, dtype=float)
+        self._no_noise = np.zeros(self._offset.shape[0])
         self.freeze = freeze or SensorFreeze()
         n_sensors = model.n_outputs // 3
         for sensor, _, _ in self.freeze.schedule:
@@ -362,7 +364,7 @@ class Simulator:
         self.reason = ''
         self.crash_time: float | None = None
         self.crash_state: np.ndarray | None = None
-        self._rng = np.random.default_rng(self.seed)
+        self._seed_noise()
         self._reset_freeze()
         self._pending = []
         self._last_input = np.zeros(n_s)
@@ -488,7 +490,7 @@ class Simulator:
             truth = np.array(truth)
         if progress is not None:
             progress(total, total)
-        self._rng = np.random.default_rng(self.seed)
+        self._seed_noise()
         self._reset_freeze()
         self._pending = []
         outputs = self._observe_many(truth)
@@ -573,11 +575,9 @@ class Simulator:
         fx = self.sensor
         if self._ideal_sensor:
             return y
-        reading = y + self._offset
-        if fx.noise_rms > 0:
-            reading = reading + fx.noise_rms * self._rng.standard_normal(reading.shape)
-        if fx.quantization > 0:
-            reading = np.round(reading / fx.quantization) * fx.quantization
+        noise = self._noise_row(y.shape[0]) if fx.noise_rms > 0 else self._no_noise
+        reading = np.empty(y.shape[0])
+        kernels.sensor_reading(y, self._offset, noise, fx.noise_rms, fx.quantization, reading)
         if self.freeze.active:
             reading = self._apply_freeze(reading)
         if fx.delay_samples:
@@ -586,6 +586,25 @@ class Simulator:
                 return self._pending[0].copy()
             return self._pending.pop(0)
         return reading
+
+    def _noise_row(self, n: int) -> np.ndarray:
+        """Return the next sample's standard normal noise, shape (n,).
+
+        Drawn a block of samples at a time: the same numbers, in the same
+        order, as one ``standard_normal(n)`` per sample (numpy's Generator
+        fills an array element by element from its stream).
+        """
+        block = self._noise_block
+        if block is None or self._noise_next == block.shape[0] or block.shape[1] != n:
+            block = self._noise_block = self._rng.standard_normal((_NOISE_BLOCK, n))
+            self._noise_next = 0
+        self._noise_next += 1
+        return block[self._noise_next - 1]
+
+    def _seed_noise(self) -> None:
+        self._rng = np.random.default_rng(self.seed)
+        self._noise_block: np.ndarray | None = None
+        self._noise_next = 0
 
     @property
     def frozen_sensors(self) -> tuple[int, ...]:

@@ -102,7 +102,10 @@ def test_holds_through_a_frozen_sensor_and_names_it(name, request):
     rms, worst = r.hold(0.8)
     assert np.all(rms < 0.1 * MM) and np.all(worst < 0.4 * MM), (rms, worst)
     during = (r.t >= 1.0 + 4 * r.dt) & (r.t < 1.1)
-    assert np.all(r.frozen[during, 1]) and not np.any(r.frozen[during][:, [0, 2]])
+    # sensor 1 throughout; the others at most a sample each: a still magnet's quantised
+    # readings repeat freeze_samples times by chance (README: ~1 in 1e5 samples per sensor)
+    assert np.all(r.frozen[during, 1])
+    assert np.all(np.sum(r.frozen[during][:, [0, 2]], axis=0) <= 1)
     assert any('frozen sensor_1 at t = 1.00' in m for m in r.messages), r.messages
     assert np.sum(r.frozen[:, 1]) < 0.1 / r.dt + 10
 
