@@ -264,6 +264,7 @@ class RecorderNode(Node):
         # set while one parameter's request waits for its answer (not while the
         # list of names is still on its way: that answer may come late at start-up)
         self._metadata_skip = None
+        self._metadata_items: dict[str, object] = {}  # metadata_node's parameters answered
         self._closed = False
         self.create_timer(0.1, self._discover)
         self._discover()
@@ -364,7 +365,7 @@ class RecorderNode(Node):
             self._metadata_pending = False
             return
 
-        items: dict[str, object] = {}
+        items = self._metadata_items  # kept: a bag closed before the last answer gets these
         self._metadata_since = time.monotonic()
 
         def ask(names):
@@ -408,6 +409,11 @@ class RecorderNode(Node):
         if self._closed:
             return
         self._closed = True
+        if not self._metadata_done and self._metadata_items:
+            # stopped while the metadata node's parameters were still being asked for:
+            # the answers so far are stored (a partial set beats none)
+            self.writer.set_metadata(dict(self._metadata_items))
+            self._metadata_done = True
         self.writer.close()
         total = sum(self.counts.values())
         self.get_logger().info(f'bag {self.config.path} closed: {total} messages')

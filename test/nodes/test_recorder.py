@@ -263,3 +263,54 @@ def test_metadata_node_answering_late_does_not_kill_the_recorder(ctx, tmp_path):
         peer.close()
         slow.destroy_node()
     assert recorder.writer.metadata['slow_metadata.answer'] == 42
+
+
+def test_a_bag_closed_while_metadata_is_asked_for_keeps_the_answers_so_far(ctx, tmp_path):
+    """Stopped before the metadata node answered every parameter: the answers so far are kept.
+
+    Under load (a launch file's graph on 2 cores) a run stopped after a few seconds
+    had all its parameters asked for but not yet answered, and the bag got none.
+    """
+    from rcl_interfaces.msg import ParameterValue
+    from rcl_interfaces.srv import GetParameters, ListParameters
+
+    slow = rclpy.create_node('slow_params', context=ctx, start_parameter_services=False)
+
+    def names(request, response):
+        response.result.names = ['fast', 'slow']
+        return response
+
+    def get(request, response):
+        if request.names == ['slow']:
+            time.sleep(2.0)  # answered after the bag is closed
+        response.values = [ParameterValue(type=2, integer_value=7) for _ in request.names]
+        return response
+
+    slow.create_service(ListParameters, '/slow_params/list_parameters', names)
+    slow.create_service(GetParameters, '/slow_params/get_parameters', get)
+    peer = contract.Spinner(ctx, [slow])
+    path = tmp_path / 'partial'
+    recorder = RecorderNode(
+        context=ctx,
+        parameter_overrides=params(
+            path=str(path), topics=['/maglev/currents'], metadata_node='slow_params'
+        ),
+    )
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(recorder)
+    try:
+        deadline = time.monotonic() + TIMEOUT
+        while 'slow_params.fast' not in recorder._metadata_items:
+            assert time.monotonic() < deadline, 'the first parameter never came'
+            executor.spin_once(timeout_sec=0.05)
+        assert not recorder.metadata_complete  # 'slow' still on its way
+        recorder.close()
+    finally:
+        executor.shutdown()
+        recorder.destroy_node()
+        peer.close()
+        slow.destroy_node()
+
+    assert recorder.writer.metadata['slow_params.fast'] == 7
+    assert 'slow_params.slow' not in recorder.writer.metadata
+    assert 'slow_params.fast' in (path / 'metadata.yaml').read_text()  # written with the bag
