@@ -607,16 +607,10 @@ def estimate_values(x, p, unobserved, out):  # pragma: no cover - jitted
         Variance of the unobservable yaw and yaw rate.
     out : ndarray, shape (85,)
         Written: position (3), quaternion x y z w (4), magnet-frame velocity
-        (3), body rates (3) (as ``physics.kernels.odometry_values``), then the
+        (3), body rates (3) (``physics.kernels.odometry_fill``), then the
         pose and twist covariances of :func:`odometry_covariances`, row-major.
     """
-    out[0:3] = x[0:3]
-    qx, qy, qz, qw = phys.euler_to_quaternion(x[3], x[4], x[5])
-    out[3], out[4], out[5], out[6] = qx, qy, qz, qw
-    rot = phys.rotation_matrix(x[3], x[4], x[5])
-    for i in range(3):
-        out[7 + i] = rot[0, i] * x[6] + rot[1, i] * x[7] + rot[2, i] * x[8]
-    out[10:13] = x[9:12]
+    phys.odometry_fill(x, out[:13])
     pose, twist = odometry_covariances(x, p, unobserved)
     out[13:49] = pose.ravel()
     out[49:85] = twist.ravel()

@@ -37,6 +37,7 @@ from .loop import FASTMATH, LOOP_WORK_ROWS, loop_batch
 
 __all__ = [
     'euler_to_quaternion',
+    'odometry_fill',
     'odometry_round_trip',
     'odometry_state_values',
     'odometry_values',
@@ -166,8 +167,18 @@ def sensor_reading(y, offset, noise, noise_rms, quantization, out):  # pragma: n
 
 
 @njit(cache=True)
-def _odometry_fill(x, out):  # pragma: no cover - jitted
-    """Write the 13 Odometry numbers of state ``x`` (12,) into ``out`` (13,)."""
+def odometry_fill(x, out):  # pragma: no cover - jitted
+    """Write the 13 Odometry numbers of state ``x`` into ``out`` (:func:`odometry_values`).
+
+    Parameters
+    ----------
+    x : ndarray, shape (12,)
+        State: position (m), ZYX Euler angles (rad), world velocity (m/s),
+        body rates (rad/s).
+    out : ndarray, shape (13,)
+        Written: position (3), quaternion x y z w (4), magnet-frame velocity
+        (3), body rates (3).
+    """
     out[0:3] = x[0:3]
     out[3], out[4], out[5], out[6] = euler_to_quaternion(x[3], x[4], x[5])
     rot = rotation_matrix(x[3], x[4], x[5])
@@ -193,7 +204,7 @@ def _odometry_state_fill(values, x):  # pragma: no cover - jitted
 
 @njit(cache=True)
 def _odometry_round_trip(x, values, out):  # pragma: no cover - jitted
-    _odometry_fill(x, values)
+    odometry_fill(x, values)
     _odometry_state_fill(values, out)
 
 
@@ -213,7 +224,7 @@ def odometry_values(x: np.ndarray) -> np.ndarray:
         frame (3, nav_msgs puts the twist in the child frame), body rates (3).
     """
     out = np.empty(13)
-    _odometry_fill(np.ascontiguousarray(x, dtype=float), out)
+    odometry_fill(np.ascontiguousarray(x, dtype=float), out)
     return out
 
 
