@@ -423,6 +423,7 @@ class EstimatorNode(Node):
         for part, raws in enumerate(taken):
             waiting[part].extend(raws)
         aligned = True  # False once whole samples did not line up: the rest one at a time
+        heads: list[int | None] = [None] * len(waiting)  # stamp of each part's first, once read
         while any(waiting):
             if self._samples.pending == 0 and aligned:
                 lengths = [len(w) for w in waiting]
@@ -431,11 +432,17 @@ class EstimatorNode(Node):
                     return  # part of a burst: the rest comes with the next wake-up
                 if n:
                     aligned = self._estimate_aligned(n)
+                    if aligned:  # n of each consumed
+                        heads = [None] * len(waiting)
                     continue
             # the oldest message first (by stamp; for one stamp, in part order), until no
             # sample is pending: a topic that came late within the wake-up (more than
             # sample_wait behind the others) is merged in, not handled sample_wait late
-            part = min((self._head_stamp(p), p) for p, w in enumerate(waiting) if w)[1]
+            for p, w in enumerate(waiting):
+                if w and heads[p] is None:
+                    heads[p] = self._head_stamp(p)
+            part = min((heads[p], p) for p, w in enumerate(waiting) if w)[1]
+            heads[part] = None
             self._handlers[part](waiting[part].pop(0))
 
     def _head_stamp(self, part: int) -> int:
