@@ -404,6 +404,16 @@ class ControllerNode(Node):
                 Float64MultiArray, EXCITATION_TOPIC, LOCKSTEP_COMMAND_QOS
             )
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
+        # the commands' bytes for composed recorders and identifiers (intra_process taps)
+        self._command_tap = intra_process.tap(self.context, self.resolve_topic_name(COMMAND_TOPIC))
+        self._excitation_tap = intra_process.tap(
+            self.context, self.resolve_topic_name(EXCITATION_TOPIC)
+        )
+        self._own_taps = [self._command_tap]
+        if self._excitation_pub is not None:
+            self._own_taps.append(self._excitation_tap)
+        for tap in self._own_taps:
+            tap.add_publisher(Float64MultiArray)
         self.estimates = None  # intra_process: the estimator's channel
         self._command_input = None  # intra_process: the simulator's command input
         self.per_estimate = cfg.trigger == 'estimate'
@@ -456,11 +466,17 @@ class ControllerNode(Node):
             if excitation is None:  # a zero command of the safety or ready checks
                 excitation = np.zeros(self.controller.n_inputs)
             self.last_excitation = excitation
-            self._excitation_pub.publish(self._command_prefix + self._pack(*excitation))
+            data = self._command_prefix + self._pack(*excitation)
+            self._excitation_pub.publish(data)
+            if self._excitation_tap.listeners:
+                self._excitation_tap.deliver([data])
         self.last_command = command
         values = [float(v) for v in command]
         # serialised here (template + 4 doubles): rclpy's message object cost ~3x the bytes
-        self._pub.publish(self._command_prefix + self._pack(*values))
+        data = self._command_prefix + self._pack(*values)
+        self._pub.publish(data)
+        if self._command_tap.listeners:  # a composed recorder or identifier
+            self._command_tap.deliver([data])
         if self._command_input is not None:  # intra_process: the simulator, directly
             self._command_input(values)
         self.commands += 1
@@ -543,6 +559,9 @@ class ControllerNode(Node):
 
     def destroy_node(self) -> None:
         """Disconnect from an estimator of this process, then destroy the node."""
+        for tap in getattr(self, '_own_taps', ()):
+            tap.remove_publisher()
+        self._own_taps = []
         if self.estimates is not None:
             self.estimates.disconnect(self._on_estimate_values)
             self.estimates = None

@@ -25,9 +25,15 @@ module does the same for the closed loop's three streams:
 Then one burst is stepped, estimated and answered in the simulator's thread,
 and the command drives the next burst: the loop's latency is one burst
 whatever the CPU load (a busy machine slows the simulation, not the loop).
-Every topic is still published for the other subscribers (recorder, plots,
-the ROS tools). A node that finds nothing to connect to uses the middleware
-as usual.
+Every topic is still published for the other subscribers (plots, the ROS
+tools). A node that finds nothing to connect to uses the middleware as usual.
+
+The **recorder** and the **identifier** (``intra_process: true``) take any
+topic's messages as the publishing node serialised them: a
+:class:`MessageTap` per topic (:func:`tap`) that the simulator (its samples,
+``/clock``) and the controller (commands, excitation) feed with each burst's
+bytes when someone listens. A tap with a publisher in the process replaces the
+subscription (messages from other processes on that topic are then not taken).
 """
 
 from __future__ import annotations
@@ -35,10 +41,11 @@ from __future__ import annotations
 import threading
 from collections.abc import Callable
 
-__all__ = ['Channel', 'CommandSink', 'find', 'register', 'unregister']
+__all__ = ['Channel', 'CommandSink', 'MessageTap', 'find', 'register', 'tap', 'unregister']
 
 _lock = threading.Lock()
 _registry: dict[tuple[int, str], object] = {}
+_taps: dict[tuple[int, str], MessageTap] = {}
 
 
 class Channel:
@@ -98,6 +105,39 @@ class Channel:
             except Exception as err:  # noqa: BLE001 - the publisher goes on
                 if self.on_error is not None:
                     self.on_error(name, err)
+
+
+class MessageTap(Channel):
+    """The serialised messages of one topic inside a process (see the module docstring).
+
+    Publishers call :meth:`add_publisher` (with their message class) when created and
+    :meth:`remove_publisher` when destroyed, and :meth:`deliver` a list of
+    CDR messages (``bytes``, in publishing order) when :attr:`listeners` is
+    not zero; a listener takes that list, in the publisher's thread.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.publishers = 0
+        self.msgtype = ''
+
+    def add_publisher(self, msg_class: type) -> None:
+        """Count a publisher of this process.
+
+        Parameters
+        ----------
+        msg_class : type
+            Its message class (e.g. ``sensor_msgs.msg.MagneticField``): the
+            tap's :attr:`msgtype` becomes ``sensor_msgs/msg/MagneticField``.
+        """
+        with _lock:
+            self.publishers += 1
+            self.msgtype = f'{msg_class.__module__.split(".")[0]}/msg/{msg_class.__name__}'
+
+    def remove_publisher(self) -> None:
+        """Uncount a publisher (destroyed)."""
+        with _lock:
+            self.publishers = max(self.publishers - 1, 0)
 
 
 class CommandSink:
@@ -183,3 +223,21 @@ def find(context, topic: str):
     """
     with _lock:
         return _registry.get(_key(context, topic))
+
+
+def tap(context, topic: str) -> MessageTap:
+    """Return the :class:`MessageTap` of ``topic`` in ``context`` (created at first use).
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        The nodes' context.
+    topic : str
+        Fully qualified topic name.
+    """
+    key = _key(context, topic)
+    with _lock:
+        found = _taps.get(key)
+        if found is None:
+            found = _taps[key] = MessageTap()
+        return found

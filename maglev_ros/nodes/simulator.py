@@ -432,8 +432,27 @@ class SimulatorNode(Node):
         pubs[contract.CLOCK_TOPIC] = self._clock_pub
         self._publish_calls = [pubs[topic].handle.publish_raw for topic in self._encoder.topics]
         self._sample_pubs = [pubs[topic] for topic in self._encoder.topics]
+        # the same bytes for composed recorders and identifiers (intra_process taps)
+        self._taps = [
+            intra_process.tap(self.context, self.resolve_topic_name(topic))
+            for topic in self._encoder.topics
+        ]
+        self._clock_tap = None
         if self._clock_pub is not None:
             self._publish_clock = self._clock_pub.handle.publish_raw
+            if clock == 'burst':
+                self._clock_tap = intra_process.tap(
+                    self.context, self.resolve_topic_name(contract.CLOCK_TOPIC)
+                )
+        classes = [pub.msg_type for pub in self._sample_pubs]
+        if self._clock_tap is not None:
+            classes.append(self._clock_pub.msg_type)
+        for tap, cls in zip(self._own_taps(), classes, strict=True):
+            tap.add_publisher(cls)
+            tap.on_error = self._on_listener_error
+
+    def _own_taps(self) -> list:
+        return self._taps + ([self._clock_tap] if self._clock_tap is not None else [])
 
     def _publish(self, batch: SampleBatch | None) -> None:
         """Publish a batch of samples (lockstep: usually one); report a crash.
@@ -446,21 +465,50 @@ class SimulatorNode(Node):
             return
         n = len(batch)
         if n:
-            for message in self._encoder.clock_messages(batch):
+            clocks = self._encoder.clock_messages(batch)
+            for message in clocks:
                 self._publish_clock(message)
+            if clocks and self._clock_tap.listeners:
+                self._clock_tap.deliver(clocks)
             # a topic nobody subscribes to is neither serialised nor published
             # (volatile: no subscriber joining later could get the message; a composed
             # estimator that takes the samples in this process leaves the fields and
             # the currents without any)
             active = self._active_topics()
-            messages = self._encoder.sample_messages(batch, active)
-            calls = [c for c, a in zip(self._publish_calls, active, strict=True) if a]
-            for publish, message in zip(calls * n, messages, strict=True):
-                publish(message)
+            tapped = tuple(tap.listeners > 0 for tap in self._taps)
+            if any(tapped):
+                self._publish_tapped(batch, active, tapped)
+            else:
+                messages = self._encoder.sample_messages(batch, active)
+                calls = [c for c, a in zip(self._publish_calls, active, strict=True) if a]
+                for publish, message in zip(calls * n, messages, strict=True):
+                    publish(message)
             if self.samples_source.listeners:
                 self.samples_source.deliver(batch)
         if batch.crashed:
             self._on_crash()
+
+    def _publish_tapped(self, batch: SampleBatch, active, tapped) -> None:
+        """Publish a batch to the middleware's subscribers and hand it to the taps' listeners.
+
+        The middleware gets the messages sample after sample (as without taps);
+        each tap gets its topic's messages of the batch as one list.
+        """
+        wanted = tuple(a or t for a, t in zip(active, tapped, strict=True))
+        messages = self._encoder.sample_messages(batch, wanted)
+        k = sum(wanted)
+        position = {}
+        for i, w in enumerate(wanted):
+            if w:
+                position[i] = len(position)
+        published = [(self._publish_calls[i], position[i]) for i, a in enumerate(active) if a]
+        if published:
+            for start in range(0, len(messages), k):
+                for publish, j in published:
+                    publish(messages[start + j])
+        for i, t in enumerate(tapped):
+            if t:
+                self._taps[i].deliver(messages[position[i] :: k])
 
     def _active_topics(self) -> tuple[bool, ...]:
         """Return which sample topics have subscribers now.
@@ -648,6 +696,8 @@ class SimulatorNode(Node):
             self._thread.join(timeout=2.0)
         for topic, obj in self._intra:
             intra_process.unregister(self.context, topic, obj)
+        for tap in self._own_taps():
+            tap.remove_publisher()
 
     def destroy_node(self) -> None:
         """Stop stepping, then destroy the node."""
