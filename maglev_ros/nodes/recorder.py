@@ -11,12 +11,27 @@ Log times: ``log_clock = ros`` uses the node's clock (wall time, or ``/clock``
 with ``use_sim_time``); ``topic`` uses the newest ``/clock`` message the
 recorder received itself (``/clock`` must be among ``topics``): every message
 of a lockstep run is then logged at the simulated time of its sample, which is
-what the bag converter needs for header-less commands. ``record_from`` (s of
+what the bag converter needs for header-less commands. ``stamp`` logs each
+message with a header (and ``/clock``) at its own stamp and a header-less one
+(commands) at the newest stamp recorded before it: with the simulator in real
+time, where ``/clock`` goes once per burst, a command that answers a burst is
+logged at the burst's last sample, which it follows. ``record_from`` (s of
 log time, default 0: everything) drops the messages logged before it: a
 lockstep recording can then start at a given sample with subscriptions that
 were matched long before (``maglev-lab``'s closed loop: the first messages on a
 freshly matched subscription may be handled after those of other topics, and
-would be logged at the previous clock).
+would be logged at the previous clock). ``record_until`` (s of log time,
+default 0: no end) drops those logged after it: exactly the samples in
+between, from a simulation that runs on.
+
+Composed (``intra_process: true``, in one process with the simulator and the
+controller): a topic published by a node of this process is taken from its
+:func:`~maglev_ros.nodes.intra_process.tap` (the bytes the publisher
+serialised, handed over in its thread) instead of a subscription: no
+middleware hop, no executor callback per message, which a 5 kHz recording in
+a composed real-time loop cannot afford. Messages of other processes on such
+a topic are then not recorded; use ``log_clock: stamp`` (a tap hands over a
+burst topic by topic).
 
 Metadata (the bag's ``custom_data``): package version, storage, topics,
 recording start, and every parameter of ``metadata_node`` (default the
@@ -31,6 +46,7 @@ SIGKILL leaves a bag that ``maglev-bag2data BAG --reindex`` rebuilds.
 from __future__ import annotations
 
 import struct
+import threading
 import time
 from dataclasses import dataclass
 from importlib import metadata as importlib_metadata
@@ -42,6 +58,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 from maglev_ros.bags import BagError, BagWriter
+from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -101,11 +118,15 @@ class RecorderConfig:
     depth : int
         Subscription queue depth.
     log_clock : str
-        ``ros`` or ``topic``.
+        ``ros``, ``topic`` or ``stamp``.
     metadata_node : str
         Node whose parameters go into the metadata ('' for none).
     record_from : float
         Log time from which messages are written, s (0: all).
+    record_until : float
+        Log time after which messages are not written, s (0: no end).
+    intra_process : bool
+        Take the topics published in this process from their taps.
     """
 
     path: str
@@ -115,6 +136,8 @@ class RecorderConfig:
     log_clock: str
     metadata_node: str
     record_from: float = 0.0
+    record_until: float = 0.0
+    intra_process: bool = False
 
 
 def _topics(name: str, topics: tuple[str, ...]) -> tuple[str, ...]:
@@ -136,8 +159,9 @@ PARAMETERS = ParameterTable(
         'depth': Param(10000, 'subscription queue depth (messages)', check=integer(1)),
         'log_clock': Param(
             'ros',
-            f'log time: ros (node clock) or topic (newest {CLOCK_TOPIC} received)',
-            check=choice('ros', 'topic'),
+            f'log time: ros (node clock), topic (newest {CLOCK_TOPIC} received) or stamp '
+            '(header stamp; header-less messages: the newest stamp recorded)',
+            check=choice('ros', 'topic', 'stamp'),
         ),
         'metadata_node': Param('maglev_simulator', "node whose parameters are stored ('' : none)"),
         'record_from': Param(
@@ -146,6 +170,16 @@ PARAMETERS = ParameterTable(
             'lockstep: a recording that starts at a given sample, its subscriptions already '
             'established)',
             check=number(0),
+        ),
+        'record_until': Param(
+            0.0,
+            'log time after which messages are not written, s (0: no end)',
+            check=number(0),
+        ),
+        'intra_process': Param(
+            False,
+            'take the topics that nodes of this process publish from them directly, not '
+            'through the middleware (composed real-time loops)',
         ),
     },
 )
@@ -177,6 +211,11 @@ def build_config(values: dict) -> RecorderConfig:
     if v['log_clock'] == 'topic' and CLOCK_TOPIC not in v['topics']:
         raise RecorderParameterError(
             f'log_clock topic needs {CLOCK_TOPIC} among topics, got {list(v["topics"])}'
+        )
+    if v['record_until'] and v['record_until'] < v['record_from']:
+        raise RecorderParameterError(
+            f'record_until must be 0 (no end) or >= record_from {v["record_from"]:g}, '
+            f'got {v["record_until"]:g}'
         )
     path = v['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
     if Path(path).exists():
@@ -249,6 +288,8 @@ class RecorderNode(Node):
             'recorder.topics': ' '.join(cfg.topics),
             'recorder.log_clock': cfg.log_clock,
             'recorder.record_from': cfg.record_from,
+            'recorder.record_until': cfg.record_until,
+            'recorder.intra_process': cfg.intra_process,
             'recorder.started': time.strftime('%Y-%m-%dT%H:%M:%S%z'),
         }
         try:
@@ -258,6 +299,9 @@ class RecorderNode(Node):
             raise RecorderParameterError(f'path {cfg.path!r}: {err}') from err
         self.counts = dict.fromkeys(cfg.topics, 0)
         self._handles = {}
+        self._taps: list[tuple[object, object]] = []  # (tap, listener): intra_process
+        self._write_lock = threading.Lock()  # taps write from their publishers' threads
+        self._held: dict[str, tuple[object, bytes]] = {}  # log_clock stamp, before record_from
         self._clock_ns = 0
         self._metadata_done = not cfg.metadata_node
         self._metadata_pending = False
@@ -287,12 +331,19 @@ class RecorderNode(Node):
             return
         types = dict(self.get_topic_names_and_types())
         for topic in self.config.topics:
-            if topic in self._handles or not types.get(topic):
+            if topic in self._handles:
+                continue
+            tap = None
+            if self.config.intra_process:
+                tap = intra_process.tap(self.context, self.resolve_topic_name(topic))
+            if tap is not None and tap.publishers > 0:  # published in this process
+                self._record(topic, tap.msgtype, tap=tap)
+                continue
+            if not types.get(topic):
                 continue
             publishers = self.get_publishers_info_by_topic(topic)
             if not publishers:
                 continue
-            msgtype = types[topic][0]
             reliable = all(
                 p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers
             )
@@ -303,18 +354,7 @@ class RecorderNode(Node):
                 if reliable
                 else ReliabilityPolicy.BEST_EFFORT,
             )
-            try:
-                handle = self.writer.add_topic(topic, msgtype)
-                cls = message_class(msgtype)
-            except (BagError, ImportError, AttributeError, ValueError) as err:
-                self.get_logger().error(f'cannot record {topic} ({msgtype}): {err}')
-                self._handles[topic] = None
-                continue
-            self._handles[topic] = handle
-            is_clock = topic == CLOCK_TOPIC
-            self.create_subscription(
-                cls, topic, self._writer_for(handle, topic, is_clock), qos, raw=True
-            )
+            self._record(topic, types[topic][0], qos=qos)
         if not self._metadata_done and not self._metadata_pending:
             self._request_metadata()
         elif (
@@ -323,32 +363,99 @@ class RecorderNode(Node):
         ):
             self._metadata_skip()  # no answer (an unset parameter): skip it
 
-    def _writer_for(self, handle, topic: str, is_clock: bool):
+    def _record(self, topic: str, msgtype: str, qos=None, tap=None) -> None:
+        """Add ``topic`` to the bag; take it from ``tap`` or subscribe with ``qos``."""
+        try:
+            handle = self.writer.add_topic(topic, msgtype)
+            cls = message_class(msgtype)
+        except (BagError, ImportError, AttributeError, ValueError) as err:
+            self.get_logger().error(f'cannot record {topic} ({msgtype}): {err}')
+            self._handles[topic] = None
+            return
+        self._handles[topic] = handle
+        is_clock = topic == CLOCK_TOPIC
+        stamped = is_clock or hasattr(cls, 'header')
+        write = self._writer_for(handle, topic, is_clock, stamped)
+        if tap is not None:
+            listener = self._tap_listener(write)
+            tap.connect(listener, NODE_NAME)
+            self._taps.append((tap, listener))
+            self.get_logger().info(f'{topic}: taken in this process (intra_process)')
+        else:
+            self.create_subscription(cls, topic, write, qos, raw=True)
+
+    def _writer_for(self, handle, topic: str, is_clock: bool, stamped: bool):
+        """Return the callback that logs one raw message of ``topic`` (module docstring)."""
         write = self.writer.write
         counts = self.counts
-        by_topic = self.config.log_clock == 'topic'
+        log_clock = self.config.log_clock
         clock = self.get_clock()
         start_ns = round(self.config.record_from * 1e9)
+        end_ns = round(self.config.record_until * 1e9) or None
+        lock = self._write_lock
+        held = self._held
 
         def on_message(data: bytes) -> None:
-            if is_clock:
+            if is_clock and log_clock == 'topic':
                 sec, nanosec = _CLOCK.unpack_from(data, 4)
                 self._clock_ns = sec * 1_000_000_000 + nanosec
-            if by_topic:
+            if log_clock == 'stamp':
+                if stamped:  # the header's stamp (a Clock's time) follows the CDR header
+                    sec, nanosec = _CLOCK.unpack_from(data, 4)
+                    stamp = sec * 1_000_000_000 + nanosec
+                    self._clock_ns = max(self._clock_ns, stamp)
+                else:
+                    stamp = self._clock_ns
+            elif log_clock == 'topic':
                 stamp = self._clock_ns
             elif clock.ros_time_is_active:  # use_sim_time: the newest /clock
                 stamp = clock.now().nanoseconds
             else:  # system time, as clock.now() gives it, without its Time object (3 us)
                 stamp = time.time_ns()
-            if stamp < start_ns:  # before the recording (record_from): not written
-                return
-            try:
-                write(handle, stamp, data)
-            except BagError:  # closed while this message was in flight
-                return
-            counts[topic] += 1
+            if stamp < start_ns:
+                if log_clock == 'stamp' and not stamped:  # in force when the recording starts
+                    held[topic] = (handle, data)
+                return  # before the recording (record_from): not written
+            if end_ns is not None and stamp > end_ns:
+                return  # after it (record_until)
+            if held:
+                self._write_held(start_ns)
+            with lock:
+                try:
+                    write(handle, stamp, data)
+                except BagError:  # closed while this message was in flight
+                    return
+                counts[topic] += 1
 
         return on_message
+
+    def _write_held(self, stamp: int) -> None:
+        """Log the header-less messages held from before ``record_from`` at its ``stamp``.
+
+        ``log_clock: stamp``: the newest command (and any header-less message)
+        before the recording is the one in force at its first sample; the bag
+        converter holds inputs from their log time, so it is written at the
+        recording's start rather than lost.
+        """
+        with self._write_lock:
+            held = list(self._held.items())
+            self._held.clear()  # the same dict the callbacks hold
+            for topic, (handle, data) in held:
+                try:
+                    self.writer.write(handle, stamp, data)
+                except BagError:
+                    return
+                self.counts[topic] += 1
+
+    @staticmethod
+    def _tap_listener(on_message):
+        """Return a tap listener: a publisher's list of raw messages, logged in order."""
+
+        def on_messages(messages: list) -> None:
+            for data in messages:
+                on_message(data)
+
+        return on_messages
 
     def _request_metadata(self) -> None:
         name = self.config.metadata_node
@@ -409,12 +516,16 @@ class RecorderNode(Node):
         if self._closed:
             return
         self._closed = True
+        for tap, listener in self._taps:
+            tap.disconnect(listener)
+        self._taps = []
         if not self._metadata_done and self._metadata_items:
             # stopped while the metadata node's parameters were still being asked for:
             # the answers so far are stored (a partial set beats none)
             self.writer.set_metadata(dict(self._metadata_items))
             self._metadata_done = True
-        self.writer.close()
+        with self._write_lock:  # a tap's listener may be writing in its publisher's thread
+            self.writer.close()
         total = sum(self.counts.values())
         self.get_logger().info(f'bag {self.config.path} closed: {total} messages')
 
