@@ -23,7 +23,8 @@ the fields (rclpy messages or rosbags dataclasses); nothing here imports rclpy.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import math
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -168,14 +169,45 @@ class ChannelSampler:
         if readers is None:
             return None
         try:
-            values = [(k, read(message)) for k, read in readers]
+            values = [read(message) for _, read in readers]
         except (AttributeError, IndexError, KeyError, TypeError, ValueError):
             self._bad += 1
             return None
-        if not all(np.isfinite(v) for _, v in values):
+        return self.add_values(topic, values)
+
+    def field_paths(self, topic: str) -> tuple[tuple[str | int, ...], ...]:
+        """Field paths the channels read from ``topic``, in :meth:`add_values` order.
+
+        Parameters
+        ----------
+        topic : str
+            Absolute topic name, one of :attr:`topics`.
+        """
+        return tuple(r.path for r in self._refs if r.topic == topic)
+
+    def add_values(self, topic: str, values) -> tuple[np.ndarray, np.ndarray] | None:
+        """Take one message's field values; as :meth:`add` (values read already).
+
+        Parameters
+        ----------
+        topic : str
+            Absolute topic name.
+        values : sequence of float
+            The values of :meth:`field_paths`, in order (e.g. from a
+            :class:`~maglev_ros.cdr.reader.RawFieldReader` on the raw message).
+
+        Returns
+        -------
+        tuple of ndarray or None
+            As :meth:`add`.
+        """
+        readers = self._by_topic.get(topic)
+        if readers is None:
+            return None
+        if not all(math.isfinite(v) for v in values):
             self._bad += 1
             return None
-        for k, v in values:
+        for (k, _), v in zip(readers, values, strict=True):
             self._values[k] = v
         self._seen[topic] = self._fresh[topic] = True
         if topic != self.trigger:
@@ -204,6 +236,20 @@ class StampAligner:
     time. A stamp still incomplete when a newer stamp completes is dropped
     (counted in :attr:`dropped`); at most ``depth`` incomplete stamps are kept.
 
+    ``complete_on_next``: a completed stamp's set is not released at once but
+    held until the first stamped message of a newer stamp arrives; that call
+    returns the held set first, then what the new message itself releases
+    (normally nothing, or nothing but its own set held in turn). Unstamped
+    messages that arrive between a sample's stamped messages and the next
+    sample's are then released *before* the sample's set, so the sampler
+    pairs the sample with them: the command that answers sample ``t`` is
+    sample ``t``'s input, as the bag converter pairs a header-less command
+    logged at ``t``'s stamp (it drives the coils over ``[t, t + 1)``). This is
+    the order of a real-time simulator that publishes a burst of samples and
+    then the command computed from them: without it, a burst's last sample
+    would be paired with the previous burst's command. The newest completed
+    set waits for the next sample (one sample of latency).
+
     Parameters
     ----------
     topics : sequence of str
@@ -214,19 +260,30 @@ class StampAligner:
         The sampler's trigger topic (released last in a stamp's set).
     depth : int
         Incomplete stamps kept at most.
+    complete_on_next : bool
+        Hold a completed set until a newer stamp's first message (see above).
     """
 
-    def __init__(self, topics, stamped, trigger: str, depth: int = 64) -> None:
+    def __init__(
+        self,
+        topics: Sequence[str],
+        stamped: Collection[str],
+        trigger: str,
+        depth: int = 64,
+        complete_on_next: bool = False,
+    ) -> None:
         stamped = set(stamped)
         self.stamped = tuple(t for t in topics if t in stamped and t != trigger)
         if trigger in stamped:
             self.stamped += (trigger,)  # released last
         self.depth = int(depth)
+        self.complete_on_next = bool(complete_on_next)
         self.reset()
 
     def reset(self) -> None:
-        """Forget the pending messages and the count of dropped stamps."""
+        """Forget the pending and held messages and the count of dropped stamps."""
         self._pending: dict[int, dict[str, object]] = {}
+        self._held: list[tuple[str, object]] = []
         self._last: int | None = None
         self.dropped = 0
 
@@ -247,26 +304,33 @@ class StampAligner:
         list of (str, object)
             Empty while the message's stamp is incomplete; a stamp's full set
             (trigger last) when this message completes it; the message itself
-            for an unstamped topic.
+            for an unstamped topic. With ``complete_on_next``, a completed set
+            comes with the first message of a newer stamp instead, before
+            what that message releases.
         """
         if topic not in self.stamped or stamp_ns is None:
             return [(topic, message)]
         if self._last is not None and stamp_ns <= self._last:
             self.dropped += 1  # late: its stamp was completed or dropped already
             return []
+        released, self._held = self._held, []  # a newer stamp: the held set goes first
         group = self._pending.setdefault(stamp_ns, {})
         group[topic] = message
         if len(group) < len(self.stamped):
             while len(self._pending) > self.depth:
                 del self._pending[min(self._pending)]
                 self.dropped += 1
-            return []
+            return released
         for old in [s for s in self._pending if s <= stamp_ns]:
             if old != stamp_ns:
                 self.dropped += 1
             del self._pending[old]
         self._last = stamp_ns
-        return [(t, group[t]) for t in self.stamped]
+        complete = [(t, group[t]) for t in self.stamped]
+        if self.complete_on_next:
+            self._held = complete
+            return released
+        return released + complete
 
 
 class ChannelIdentifier:

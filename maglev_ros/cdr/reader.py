@@ -37,8 +37,9 @@ class RawFieldReader:
     paths : sequence of tuple
         Field paths of the numeric fields to read, e.g. ``('magnetic_field', 'x')``
         or ``('effort', 2)``.
-    stamp : tuple, optional
-        Path of the stamp (default the header's).
+    stamp : tuple or None, optional
+        Path of the stamp (default the header's; None: a message without one,
+        e.g. ``std_msgs/msg/Float64MultiArray``).
 
     Attributes
     ----------
@@ -53,10 +54,14 @@ class RawFieldReader:
     (1200000, (1.2e-05, -3.0e-06, 0.0211))
     """
 
-    def __init__(self, msgtype: str, paths: Sequence[Path], stamp: Path = HEADER_STAMP) -> None:
+    def __init__(
+        self, msgtype: str, paths: Sequence[Path], stamp: Path | None = HEADER_STAMP
+    ) -> None:
         self.msgtype = msgtype
         self.paths = tuple(tuple(p) for p in paths)
-        self._wanted = [(*stamp, 'sec'), (*stamp, 'nanosec'), *self.paths]
+        self._stamped = stamp is not None
+        stamps = [(*stamp, 'sec'), (*stamp, 'nanosec')] if stamp is not None else []
+        self._wanted = [*stamps, *self.paths]
         self._store = jazzy_typestore()
         self._struct: struct.Struct | None = None
         self._size = -1
@@ -91,7 +96,7 @@ class RawFieldReader:
         self.layouts += 1
         return True
 
-    def read(self, raw: bytes) -> tuple[int, tuple[float, ...]] | None:
+    def read(self, raw: bytes) -> tuple[int | None, tuple[float, ...]] | None:
         """Return ``(stamp_ns, values)`` of one message, or None if it cannot be read.
 
         Parameters
@@ -102,9 +107,10 @@ class RawFieldReader:
 
         Returns
         -------
-        tuple of (int, tuple of float) or None
-            The stamp in ns and the values of ``paths``, in order; None for a
-            message that cannot be laid out (big-endian, a field missing).
+        tuple of (int or None, tuple of float) or None
+            The stamp in ns (None without a stamp path) and the values of
+            ``paths``, in order; None for a message that cannot be laid out
+            (big-endian, a field missing).
         """
         values = self._unpack(raw)
         if values is None and self._lay_out(raw):  # another layout: walk it once
@@ -112,6 +118,8 @@ class RawFieldReader:
         if values is None:
             return None
         order = self._order
+        if not self._stamped:
+            return None, tuple(values[i] for i in order)
         return values[order[0]] * 1_000_000_000 + values[order[1]], tuple(
             values[i] for i in order[2:]
         )

@@ -18,7 +18,31 @@ if the trigger itself is unstamped every trigger message completes a sample.
 In a lockstep simulation the simulator publishes the fields and
 ``maglev/currents`` once per sample with the sample's stamp, so the identifier
 sees exactly the samples a bag of the same run holds, paired as the bag
-converter pairs them.
+converter pairs them. ``complete_on_next`` (default false; with a stamped
+trigger) holds a completed sample until the first message of the next stamp,
+so the unstamped messages that arrive in between (the command that answers
+it) are its input: the pairing of a real-time simulator, which publishes a
+burst of samples and then gets the one command computed from them, the
+command that the bag converter pairs with the burst's last sample by its log
+time (see :class:`~maglev_ros.bags.live.StampAligner`).
+
+Window. ``identify_from`` (s of sample stamps, default 0: from the first)
+and ``identify_until`` (s, default 0: no end; else ``>= identify_from``)
+bound the samples given to the ARX: a sample whose stamp (its stamped set's;
+with an unstamped trigger the newest stamp released, the window not applying
+before any) is before ``identify_from`` or after ``identify_until`` is left
+out (counted in the diagnostics), but its messages are still held, so the
+first sample inside the window has its held input: an estimate of exactly
+the samples in between, from subscriptions matched long before and a
+simulation that runs on (as the recorder's ``record_from`` and
+``record_until``).
+
+Composed (``intra_process: true``, in one process with the simulator and the
+controller): a topic that a node of this process publishes is taken from its
+:func:`~maglev_ros.nodes.intra_process.tap` (the bytes the publisher
+serialised, deserialised here in the publisher's thread) instead of a
+subscription; messages of other processes on such a topic are then not
+taken. The other topics are subscribed as usual.
 
 At ``publish_rate`` (Hz, the node's clock: simulated time under
 ``use_sim_time``) it publishes, std_msgs/Float64MultiArray each:
@@ -49,16 +73,21 @@ from __future__ import annotations
 
 import importlib
 import re
+import threading
 from dataclasses import dataclass
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import Float64MultiArray, MultiArrayDimension
 from std_srvs.srv import Trigger
 
 from maglev_ros.bags.errors import BagError
 from maglev_ros.bags.live import ChannelIdentifier, StampAligner
+from maglev_ros.cdr.reader import RawFieldReader
+from maglev_ros.cdr.templates import HEADER_STAMP
+from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer, number
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
@@ -120,6 +149,14 @@ class IdentifierConfig:
         Topic completing a sample ('' : the first input's topic).
     publish_rate : float
         Publications per second of the node's clock, Hz.
+    complete_on_next : bool
+        Release a completed stamp's sample at the next stamp's first message.
+    identify_from : float
+        Sample stamp from which samples reach the ARX, s (0: all).
+    identify_until : float
+        Sample stamp after which samples do not reach the ARX, s (0: no end).
+    intra_process : bool
+        Take the topics published in this process from their taps.
     """
 
     outputs: tuple[str, ...]
@@ -134,6 +171,10 @@ class IdentifierConfig:
     wait_for_history: bool
     trigger: str
     publish_rate: float
+    complete_on_next: bool = False
+    identify_from: float = 0.0
+    identify_until: float = 0.0
+    intra_process: bool = False
 
 
 def _channels(name: str, specs: tuple[str, ...]) -> tuple[str, ...]:
@@ -182,6 +223,27 @@ PARAMETERS = ParameterTable(
         'publish_rate': Param(
             10.0, 'model, error, fit and diagnostics per second, Hz', check=number(0, above=True)
         ),
+        'complete_on_next': Param(
+            False,
+            "release a stamp's sample at the next stamp's first message, so the unstamped "
+            'messages (commands) in between are its input (stamped trigger; real-time bursts)',
+        ),
+        'identify_from': Param(
+            0.0,
+            'sample stamp from which samples are given to the ARX, s (0: all; earlier '
+            'samples still set the held values)',
+            check=number(0),
+        ),
+        'identify_until': Param(
+            0.0,
+            'sample stamp after which samples are not given to the ARX, s (0: no end)',
+            check=number(0),
+        ),
+        'intra_process': Param(
+            False,
+            'take the topics that nodes of this process publish from them directly, not '
+            'through the middleware (composed real-time loops)',
+        ),
     },
 )
 
@@ -213,7 +275,13 @@ def build_config(values: dict) -> IdentifierConfig:
     IdentifierParameterError
         Naming the first invalid parameter and its value.
     """
-    return IdentifierConfig(**PARAMETERS.validate(values))
+    v = PARAMETERS.validate(values)
+    if v['identify_until'] and v['identify_until'] < v['identify_from']:
+        raise IdentifierParameterError(
+            f'identify_until must be 0 (no end) or >= identify_from {v["identify_from"]:g}, '
+            f'got {v["identify_until"]:g}'
+        )
+    return IdentifierConfig(**v)
 
 
 def build_identifier(cfg: IdentifierConfig) -> ChannelIdentifier:
@@ -316,17 +384,34 @@ class IdentifierNode(Node):
         kinds = {topic: message_type_of(topic) for topic in ident.topics}
         classes = {topic: _message_class(kind) for topic, kind in kinds.items()}
         stamped = {t for t, cls in classes.items() if hasattr(cls, 'header')}
-        self.aligner = StampAligner(ident.topics, stamped, ident.sampler.trigger)
+        self.aligner = StampAligner(
+            ident.topics, stamped, ident.sampler.trigger, complete_on_next=cfg.complete_on_next
+        )
         self.rejected = 0  # samples the ARX refused (non-finite values)
+        self.outside = 0  # samples outside identify_from .. identify_until
         self.last_error: np.ndarray | None = None
+        self._from_ns = round(cfg.identify_from * 1e9)
+        self._until_ns = round(cfg.identify_until * 1e9) or None
+        self._stamp: int | None = None  # stamp of the newest stamped message released
+        # taps deliver in their publishers' threads, the executor runs the rest
+        self._lock = threading.Lock()
+        self._taps: list[tuple[intra_process.MessageTap, object]] = []
         for topic, cls in classes.items():
-            qos = SENSOR_QOS if topic in stamped else LOCKSTEP_COMMAND_QOS
+            is_stamped = topic in stamped
+            tap = None
+            if cfg.intra_process:
+                tap = intra_process.tap(self.context, self.resolve_topic_name(topic.lstrip('/')))
+            if tap is not None and tap.publishers > 0:
+                listener = self._tap_listener(topic, cls, is_stamped)
+                tap.connect(listener, NODE_NAME)
+                self._taps.append((tap, listener))
+                self.get_logger().info(f'{topic}: taken in this process (intra_process)')
+                continue
+            qos = SENSOR_QOS if is_stamped else LOCKSTEP_COMMAND_QOS
             self.create_subscription(
                 cls,
                 topic.lstrip('/'),  # relative: resolves in the node's namespace
-                lambda msg, topic=topic, stamped=topic in stamped: self._on_message(
-                    topic, msg, stamped
-                ),
+                lambda msg, topic=topic, stamped=is_stamped: self._on_message(topic, msg, stamped),
                 qos,
             )
         self._model_pub = self.create_publisher(Float64MultiArray, IDENTIFIER_MODEL_TOPIC, 10)
@@ -349,11 +434,62 @@ class IdentifierNode(Node):
         """Samples given to the ARX since the start or the last reset."""
         return self.identifier.arx.samples
 
+    def _tap_listener(self, topic: str, cls: type, stamped: bool):
+        """Return a tap listener: a publisher's list of CDR messages, handled in order.
+
+        The channels' fields and the stamp are read from the bytes
+        (:class:`~maglev_ros.cdr.reader.RawFieldReader`: a few us, where rclpy's
+        deserialisation costs about 20 us a message); a message it cannot lay
+        out is deserialised.
+        """
+        reader = RawFieldReader(
+            message_type_of(topic),
+            self.identifier.sampler.field_paths(topic),
+            HEADER_STAMP if stamped else None,
+        )
+
+        def on_messages(messages: list) -> None:
+            decoded = []
+            for data in messages:
+                read = reader.read(data)
+                if read is None:  # another layout than the reader's: the message itself
+                    msg = deserialize_message(data, cls)
+                    read = (stamp_ns(msg) if stamped else None, msg)
+                decoded.append(read)
+            with self._lock:
+                for stamp, payload in decoded:
+                    self._handle(topic, stamp, payload)
+
+        return on_messages
+
     def _on_message(self, topic: str, msg, stamped: bool) -> None:
-        stamp = stamp_ns(msg) if stamped else None
-        for name, message in self.aligner.add(topic, stamp, message=msg):
+        with self._lock:
+            self._handle(topic, stamp_ns(msg) if stamped else None, msg)
+
+    def _handle(self, topic: str, stamp: int | None, payload) -> None:
+        """Align, sample and identify one message (the caller holds the lock).
+
+        ``payload`` is the message, or the tuple of its field values
+        (:meth:`ChannelSampler.field_paths` order).
+        """
+        sampler, arx = self.identifier.sampler, self.identifier.arx
+        for name, (released_stamp, item) in self.aligner.add(topic, stamp, (stamp, payload)):
+            if name in self.aligner.stamped:
+                self._stamp = released_stamp
+            if isinstance(item, tuple):
+                sample = sampler.add_values(name, item)
+            else:
+                sample = sampler.add(name, item)
+            if sample is None:
+                continue
+            if self._stamp is not None and (
+                self._stamp < self._from_ns
+                or (self._until_ns is not None and self._stamp > self._until_ns)
+            ):
+                self.outside += 1  # its values stay held: the next sample's regressor
+                continue
             try:
-                error = self.identifier.add(name, message)
+                error = arx.update(*sample)
             except ValueError:
                 self.rejected += 1
                 continue
@@ -361,10 +497,12 @@ class IdentifierNode(Node):
                 self.last_error = error
 
     def _on_reset(self, _request, response):
-        discarded = self.samples
-        self.identifier.reset()
-        self.aligner.reset()
-        self.last_error = None
+        with self._lock:
+            discarded = self.samples
+            self.identifier.reset()
+            self.aligner.reset()
+            self.last_error = None
+            self._stamp = None
         response.success = True
         response.message = f'estimate reset; {discarded} samples discarded'
         self.get_logger().info(response.message)
@@ -374,11 +512,13 @@ class IdentifierNode(Node):
         """Publish the model, the prediction error, the fit and the diagnostics."""
         if not self.context.ok():
             return
-        status = self.identifier.status()
-        counts = self.identifier.sampler.counts
+        with self._lock:  # a consistent snapshot; published without the lock
+            status = self.identifier.status()
+            counts = self.identifier.sampler.counts
+            layout = self.identifier.layout() if status.samples else None
+            dropped, outside, rejected = self.aligner.dropped, self.outside, self.rejected
         now_ns = self.get_clock().now().nanoseconds
-        if status.samples:
-            layout = self.identifier.layout()
+        if layout is not None:
             self._model_pub.publish(_array(layout.data, layout.dims))
             outs = self.identifier.sampler.names[0]
             dims = [(name, 1, 1) for name in outs]
@@ -396,14 +536,22 @@ class IdentifierNode(Node):
             'parameter drift': f'{status.drift:.9g}',
             'relative parameter drift': f'{status.relative_drift:.9g}',
             'fit (%)': ' '.join(f'{f:.3f}' for f in status.fit),
-            'incomplete stamps dropped': self.aligner.dropped,
+            'incomplete stamps dropped': dropped,
             'samples with held values': counts.held,
             'messages without the field': counts.bad,
-            'samples rejected': self.rejected,
+            'samples rejected': rejected,
+            'samples outside the window': outside,
         }
         self._diag_pub.publish(
             diagnostic_array(now_ns, f'{NODE_NAME}: recursive ARX', level, message, values)
         )
+
+    def destroy_node(self) -> None:
+        """Disconnect from the taps, then destroy the node."""
+        for tap, listener in self._taps:
+            tap.disconnect(listener)
+        self._taps = []
+        super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:

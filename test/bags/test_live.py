@@ -124,3 +124,51 @@ def test_stamp_aligner_keeps_at_most_depth_incomplete_stamps():
     assert aligner.dropped == 2  # stamps 0 and 1 pushed out
     assert aligner.add('/b', 4, 'b4') == [('/a', 4), ('/b', 'b4')]
     assert aligner.dropped == 4  # 2 and 3 were older than the completed 4
+
+
+def _burst_run(complete_on_next):
+    """Fields of stamps 1..5, then the command c1, then fields of 6..10; samples (y, u)."""
+    sampler = ChannelSampler([BX], [UX], trigger=SENSOR)
+    aligner = StampAligner((SENSOR, COMMAND), {SENSOR}, SENSOR, complete_on_next=complete_on_next)
+    arrivals = [(COMMAND, None, command(0.0, 0.0))]  # c0: the command before the run
+    arrivals += [(SENSOR, k, field(float(k))) for k in range(1, 6)]
+    arrivals += [(COMMAND, None, command(1.0, -1.0))]  # c1 answers samples 1..5
+    arrivals += [(SENSOR, k, field(float(k))) for k in range(6, 11)]
+    samples = []
+    for topic, stamp, message in arrivals:
+        for name, released in aligner.add(topic, stamp, message):
+            sample = sampler.add(name, released)
+            if sample is not None:
+                samples.append((sample[0][0], sample[1][0]))
+    return samples
+
+
+def test_stamp_aligner_complete_on_next_pairs_a_burst_with_the_command_after_it():
+    # sample 5 is followed by c1 (ux = 1): its input; samples 1-4 keep c0 (ux = 0)
+    assert _burst_run(True) == [
+        (1, 0),
+        (2, 0),
+        (3, 0),
+        (4, 0),
+        (5, 1),
+        (6, 1),
+        (7, 1),
+        (8, 1),
+        (9, 1),
+    ]
+    # without it a sample goes at once: all of 1..5 with c0, the last (10) not held back
+    assert _burst_run(False) == [(k, 0.0 if k <= 5 else 1.0) for k in range(1, 11)]
+
+
+def test_stamp_aligner_complete_on_next_holds_until_a_newer_stamp():
+    aligner = StampAligner(('/f0', '/cur', '/cmd'), {'/f0', '/cur'}, '/cur', complete_on_next=True)
+    assert aligner.add('/f0', 10, 'a10') == []
+    assert aligner.add('/cur', 10, 'c10') == []  # complete, held
+    assert aligner.add('/cmd', None, 'u') == [('/cmd', 'u')]
+    assert aligner.add('/cur', 10, 'late') == [] and aligner.dropped == 1  # not a newer stamp
+    # the first message of stamp 20 releases 10's set; 20 is incomplete: nothing more
+    assert aligner.add('/cur', 20, 'c20') == [('/f0', 'a10'), ('/cur', 'c10')]
+    assert aligner.add('/f0', 20, 'a20') == []  # 20 complete: held in turn
+    aligner.reset()  # forgets the held set
+    assert aligner.add('/f0', 30, 'a30') == [] and aligner.add('/cur', 30, 'c30') == []
+    assert aligner.add('/f0', 40, 'a40') == [('/f0', 'a30'), ('/cur', 'c30')]

@@ -212,6 +212,12 @@ def test_published_model_is_recursive_arx_of_the_same_samples(ctx, case):
         ({'na': [-1]}, 'na must be a non-empty list of integers >= 0'),
         ({'window': -3}, 'window must be an integer >= 0, got -3'),
         ({'publish_rate': 0.0}, 'publish_rate must be a finite number > 0'),
+        ({'identify_from': -1.0}, 'identify_from must be a finite number >= 0, got -1.0'),
+        (
+            {'identify_from': 2.0, 'identify_until': 1.5},
+            r'identify_until must be 0 \(no end\) or >= identify_from 2, got 1.5',
+        ),
+        ({'complete_on_next': 1}, 'complete_on_next must be true or false, got 1'),
     ],
 )
 def test_config_errors(changes, match):
