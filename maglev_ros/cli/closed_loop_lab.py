@@ -70,6 +70,8 @@ def graph_settings(args: argparse.Namespace):
             seed=args.seed,
             length=args.length,
         ),
+        realtime=bool(getattr(args, 'realtime', False)),
+        control_rate=getattr(args, 'control_rate', 1000.0),
     )
 
 
@@ -137,9 +139,15 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
 
     settings = graph_settings(args)
     e = settings.excitation
+    clock = (
+        f'real time (composed, control at {args.control_rate:g} Hz)'
+        if settings.realtime
+        else 'lockstep'
+    )
     print(
-        f'{PROG}: closed loop, {args.samples} samples ({args.duration:g} s) of {args.params} '
-        f'recorded after {args.settle:g} s of levitation; {args.filter.upper()} + LQR, '
+        f'{PROG}: closed loop in {clock}, {args.samples} samples ({args.duration:g} s) of '
+        f'{args.params} recorded after {args.settle:g} s of levitation; '
+        f'{args.filter.upper()} + LQR, '
         f'{e.signal} {e.amplitude:g} A on {e.pattern} (band {e.band[0]:g}-{e.band[1]:g} of '
         f'Nyquist) added to the command; coil dynamics {"off" if args.no_coil else "on"}, '
         f'sensor delay {args.delay}, noise {args.noise:g} T, quantisation '
@@ -174,9 +182,12 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         f'over the last 0.1 s {rms_um} um'
     )
     rate = run.samples / args.sample_rate / max(run.wall_s, 1e-9)
+    misses = (
+        f'{run.overruns} overruns' if settings.realtime else f'{run.timeouts} command timeouts'
+    )
     print(
         f'recorded {run.samples} samples ({run.samples / args.sample_rate:.3f} s simulated in '
-        f'{run.wall_s:.1f} s, {rate:.2f} x real time; {run.timeouts} command timeouts) -> {bag}'
+        f'{run.wall_s:.1f} s, {rate:.2f} x real time; {misses}) -> {bag}'
     )
     if run.crashed:
         print(
@@ -400,7 +411,9 @@ def _summary(args, run, dataset, results, checks, band, excursion, rms) -> dict:
             'settled': run.settled,
             'simulated_s': run.simulated_s,
             'wall_s': run.wall_s,
+            'clock': 'realtime' if args.realtime else 'lockstep',
             'timeouts': run.timeouts,
+            'overruns': run.overruns,
             'crashed': run.crashed,
             'crash_reason': run.crash_reason,
             'controller': run.controller,

@@ -205,7 +205,16 @@ def build_parser() -> argparse.ArgumentParser:
     closed.add_argument(
         '--realtime',
         action='store_true',
-        help='run on the wall clock (not supported by maglev-lab yet: see the error)',
+        help='run on the wall clock: the loop composed in this process, samples, estimates '
+        "and commands handed over in the simulator's thread, control at --control-rate "
+        '(default: lockstep, exact and deterministic)',
+    )
+    closed.add_argument(
+        '--control-rate',
+        type=positive_float,
+        default=1000.0,
+        help='--realtime: estimates and commands per second, Hz (divides --sample-rate; '
+        'default 1000)',
     )
     p.add_argument('--na', type=int, default=2, help='ARX order of A (default 2)')
     p.add_argument('--nb', type=int, default=2, help='ARX order of B per input (default 2)')
@@ -422,11 +431,11 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
             'only; against a board use ros2 launch maglev_ros closed_loop_lab_board.launch.xml '
             'port:=PATH, or leave --magnet free out for the open-loop session on the board'
         )
-    if args.realtime:
+    ratio = args.sample_rate / args.control_rate
+    if args.realtime and (ratio < 1 or abs(ratio - round(ratio)) > 1e-9):
         raise UsageError(
-            '--realtime: maglev-lab runs the closed loop in lockstep (exact samples, '
-            'deterministic); on the wall clock use ros2 launch maglev_ros '
-            'closed_loop_lab.launch.xml mode:=realtime delay_commands:=false'
+            f'--control-rate must divide --sample-rate {args.sample_rate:g} Hz into whole '
+            f'samples, got {args.control_rate:g} Hz'
         )
     if args.excitation == 'none' or args.amplitude == 0:
         raise UsageError('--amplitude must be > 0: the closed-loop IV needs the excitation')

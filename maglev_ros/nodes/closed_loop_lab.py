@@ -134,6 +134,10 @@ class LabGraphSettings:
         row for :data:`IDENTIFIER_CHANNELS` (default: x 7 9 1 and y 6 6 1, decoupled).
     initial_covariance : float
         The identifier's ``P0 = p0 I`` (fields in T: large).
+    realtime : bool
+        Run on the wall clock (:func:`run_closed_loop_lab`, "Real time").
+    control_rate : float
+        Real time: estimates and commands per second, Hz (divides ``sample_rate``).
     """
 
     params: str = 'maggy_v2'
@@ -154,6 +158,23 @@ class LabGraphSettings:
     )
     identifier_orders: tuple = ((7, 0, 0, 6), (9, 0, 0, 6), (1, 1, 1, 1))
     initial_covariance: float = 1e10
+    realtime: bool = False
+    control_rate: float = 1000.0
+
+    @property
+    def control_excitation(self) -> CommandExcitation:
+        """The excitation in the controller's samples (real time: at ``control_rate``).
+
+        Its band (fractions of Nyquist) and length (samples) are given at
+        ``sample_rate``; at the control rate the same frequencies are a
+        ``sample_rate / control_rate`` times larger fraction (at most 1).
+        """
+        e = self.excitation
+        if not self.realtime:
+            return e
+        ratio = self.sample_rate / self.control_rate
+        band = (min(e.band[0] * ratio, 1.0), min(e.band[1] * ratio, 1.0))
+        return replace(e, band=band, length=max(1, int(round(e.length / ratio))))
 
     @property
     def settle_samples(self) -> int:
@@ -206,6 +227,9 @@ class LabRun:
         Wall time of the recording, s.
     timeouts : int
         Lockstep command timeouts of the simulator (0: every sample had its command).
+    overruns : int
+        Real time: times the simulator fell behind the wall clock by more than its
+        backlog allows and skipped ahead (0: it kept up).
     crashed : bool
     crash_reason : str
     controller : dict
@@ -225,6 +249,7 @@ class LabRun:
     crash_reason: str
     controller: dict
     identifier: OnlineEstimate | None
+    overruns: int = 0
 
 
 def _overrides(**values) -> list:
@@ -242,29 +267,44 @@ def _matched(node, topic: str, publisher: bool) -> int:
 
 
 class _SettleWatch:
-    """Position error of the true state over the last window, from ``maglev/state/true``."""
+    """Position error of the true state over the settling's last window.
 
-    def __init__(self, node, z_eq: float, window: int) -> None:
-        from collections import deque
+    Takes ``maglev/state/true`` from the simulator's tap
+    (:func:`~maglev_ros.nodes.intra_process.tap`: the bytes it serialised, in
+    its thread) and decodes only the messages stamped in the window, ns
+    ``[first_ns, last_ns]``: nothing else is spent on the 5 kHz stream.
+    """
+
+    def __init__(self, context, topic: str, z_eq: float, first_ns: int, last_ns: int) -> None:
+        import struct
 
         from nav_msgs.msg import Odometry
         from rclpy.serialization import deserialize_message
 
-        from maglev_ros.nodes.qos import SENSOR_QOS
+        from maglev_ros.nodes import intra_process
 
-        self._errors: deque = deque(maxlen=window)
+        self._errors: list[tuple[float, float, float]] = []
         self._z_eq = z_eq
-        self.active = True
+        self._window = (first_ns, last_ns)
+        self._stamp = struct.Struct('<iI')
         self._decode = lambda raw: deserialize_message(raw, Odometry)
-        node.create_subscription(Odometry, TRUE_STATE_TOPIC, self._on_state, SENSOR_QOS, raw=True)
+        self._tap = intra_process.tap(context, topic)
+        self._tap.connect(self._on_states, 'maglev_lab_settling')
 
-    def _on_state(self, raw: bytes) -> None:
-        if self.active:  # after settling nothing is decoded
-            p = self._decode(raw).pose.pose.position
-            self._errors.append((p.x, p.y, p.z - self._z_eq))
+    def _on_states(self, messages: list) -> None:
+        first, last = self._window
+        for raw in messages:
+            sec, nanosec = self._stamp.unpack_from(raw, 4)
+            if first <= sec * 1_000_000_000 + nanosec <= last:
+                p = self._decode(raw).pose.pose.position
+                self._errors.append((p.x, p.y, p.z - self._z_eq))
+
+    def close(self) -> None:
+        """Stop taking the states."""
+        self._tap.disconnect(self._on_states)
 
     def rms(self) -> np.ndarray:
-        """RMS of the last window's position error per axis, m, shape (3,)."""
+        """RMS of the window's position error per axis, m, shape (3,) (NaN: none yet)."""
         if not self._errors:
             return np.full(3, np.nan)
         return np.sqrt(np.mean(np.square(np.array(self._errors)), axis=0))
@@ -316,11 +356,13 @@ def run_closed_loop_lab(
     from maglev_ros.physics.equilibria import find_equilibria
 
     s = settings
+    rt = s.realtime
     settle_n = s.settle_samples
     last = settle_n + s.samples  # index of the last recorded sample
-    # the excitation starts with the command computed at sample settle_n: published
-    # (delay_commands) for sample settle_n + 1, the first recorded command
-    excitation = replace(s.excitation, start=settle_n / s.sample_rate)
+    period_ns = round(1e9 / s.sample_rate)
+    # lockstep: the excitation starts with the command computed at sample settle_n,
+    # published (delay_commands) for sample settle_n + 1, the first recorded command
+    excitation = replace(s.control_excitation, start=settle_n / s.sample_rate)
     z_eq = find_equilibria(make_model(s.params))[0].z
     topics = [
         *(field_topic(k) for k in s.sensors),
@@ -347,7 +389,7 @@ def run_closed_loop_lab(
                     sensor_noise=s.noise,
                     sensor_quantization=s.quantization,
                     seed=s.seed,
-                    mode='lockstep',
+                    mode='realtime' if rt else 'lockstep',
                     start_paused=True,
                     sensors=list(range(len(make_model(s.params).params.sensors))),
                     marker_rate=0.0,
@@ -355,6 +397,9 @@ def run_closed_loop_lab(
                 ),
             )
         )
+        # real time: samples, estimates and commands handed over in the simulator's
+        # thread (intra_process), one estimate and one command per control period
+        realtime_estimator = dict(publish_rate=s.control_rate, intra_process=True)
         est = lab.add(
             EstimatorNode(
                 context=ctx,
@@ -365,18 +410,25 @@ def run_closed_loop_lab(
                     sensor_delay=s.sensor_delay,
                     sensor_noise=max(s.noise, 1e-6),
                     quantization=s.quantization,
+                    **(realtime_estimator if rt else {}),
                 ),
             )
         )
         e = excitation
+        realtime_controller = dict(
+            sample_rate=s.control_rate,
+            trigger='estimate',
+            intra_process=True,
+            command_delay=1,
+            input_timeout=0.02,
+        )
         ctrl = lab.add(
             ControllerNode(
                 context=ctx,
                 parameter_overrides=_overrides(
                     params=s.params,
-                    sample_rate=s.sample_rate,
                     coil_dynamics=s.coil_dynamics,
-                    delay_commands=True,
+                    delay_commands=not rt,
                     excitation_signal=e.signal,
                     excitation_amplitude=e.amplitude,
                     excitation_band=list(e.band),
@@ -385,8 +437,17 @@ def run_closed_loop_lab(
                     excitation_length=e.length,
                     excitation_cycles=e.cycles,
                     excitation_start=e.start,
+                    **(realtime_controller if rt else dict(sample_rate=s.sample_rate)),
                 ),
             )
+        )
+        first_s, last_s = (settle_n + 1) / s.sample_rate, last / s.sample_rate
+        realtime_identifier = dict(
+            intra_process=True,
+            trigger=field_topic(0),  # every sample, the commands held
+            complete_on_next=True,  # a command answering a sample is its input
+            identify_from=first_s,
+            identify_until=last_s,
         )
         ident = lab.add(
             IdentifierNode(
@@ -399,9 +460,13 @@ def run_closed_loop_lab(
                     nk=list(s.identifier_orders[2]),
                     initial_covariance=s.initial_covariance,
                     publish_rate=1.0,
+                    **(realtime_identifier if rt else {}),
                 ),
             )
         )
+        recording = dict(record_from=first_s, log_clock='topic')  # the first recorded sample
+        if rt:  # taken in the simulator's thread, logged at the samples' stamps
+            recording.update(record_until=last_s, log_clock='stamp', intra_process=True)
         recorder = lab.add(
             RecorderNode(
                 context=ctx,
@@ -409,99 +474,183 @@ def run_closed_loop_lab(
                     path=str(bag),
                     storage=s.storage,
                     topics=topics,
-                    log_clock='topic',
-                    record_from=(settle_n + 1) / s.sample_rate,  # the first recorded sample
+                    **recording,
                 ),
             ),
             destroy_last=True,  # finalises the bag once the others are gone
         )
         watch_node = lab.add(Node('maglev_lab_settling', context=ctx))
-        watch = _SettleWatch(watch_node, z_eq, max(1, int(round(SETTLE_WINDOW * s.sample_rate))))
+        window = max(1, int(round(SETTLE_WINDOW * s.sample_rate)))
+        watch = _SettleWatch(
+            ctx,
+            sim.resolve_topic_name(TRUE_STATE_TOPIC),
+            z_eq,
+            (settle_n - window + 1) * period_ns,
+            settle_n * period_ns,
+        )
         reset = watch_node.create_client(Trigger, IDENTIFIER_RESET_SERVICE)
-        publishers = {  # topic: (publisher node, subscriptions it must have matched)
-            **{
-                field_topic(k): (sim, 1 + (k in s.sensors) + (k == 0))  # estimator, recorder,
-                for k in sim.sensors  # identifier
-            },
-            CURRENTS_TOPIC: (sim, 3),  # estimator, controller, recorder
-            TRUE_STATE_TOPIC: (sim, 2),  # the settling watch, recorder
-            CLOCK_TOPIC: (sim, 1),
-            ESTIMATE_TOPIC: (est, 1),
-            COMMAND_TOPIC: (ctrl, 3),  # simulator, identifier, recorder
-            EXCITATION_TOPIC: (ctrl, 1),
-        }
         lab.start()
-        lab.wait_until(
-            lambda: (
-                sim.command_publishers >= 1
-                and len(recorder.subscribed) == len(topics)
-                and recorder.metadata_complete
-                and all(
-                    count >= 1
-                    for n in (est, ctrl, ident, recorder, watch_node)
-                    for count in _subscription_counts(n)
+        try:
+            if rt:
+                run = _run_realtime(lab, s, sim, ctrl, ident, recorder, topics, report, stop)
+            else:
+                run = _run_lockstep(
+                    lab, s, sim, est, ctrl, ident, recorder, watch_node, reset, topics, report,
+                    stop,
                 )  # fmt: skip
-                and all(_matched(n, t, True) >= k for t, (n, k) in publishers.items())
-                and reset.service_is_ready()
-            ),
-            'the simulator, estimator, controller, identifier and recorder',
-            stop=stop,
-        )
-        sim.pause_after(settle_n)
-        sim.set_paused(False)
-        _wait_paused(lab, sim, ctrl, settle_n, 'settling', report, stop)
-        watch.active = False
-        rms = watch.rms()
-        # the identifier starts afresh with the first recorded sample: every settling
-        # sample reached it (one per command), then it is reset while nothing moves
-        lab.wait_until(
-            lambda: ident.samples >= settle_n + 1, 'the identifier (settling)', stop=stop
-        )
-        answer = reset.call_async(Trigger.Request())
-        lab.wait_until(answer.done, 'the identifier reset', stop=stop)
-        wall = time.monotonic()
-        sim.pause_after(last)
-        sim.set_paused(False)
-        _wait_paused(lab, sim, ctrl, last, 'recording', report, stop, first=settle_n)
-        wall = time.monotonic() - wall
-        recorded = sim.sim.samples - settle_n
-        lab.wait_until(
-            lambda: (
-                all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)
-                and ident.samples >= recorded
-            ),
-            'the recorder and the identifier',
-            stop=stop,
-        )
-        status = ctrl.controller.status()
-        online = None
-        if ident.samples:
-            st = ident.identifier.status()
-            online = OnlineEstimate(
-                ident.identifier.model(1.0 / s.sample_rate),
-                int(ident.samples),
-                float(st.covariance_trace),
-                np.asarray(st.fit),
-                ident.config.forgetting,
-            )
-        return LabRun(
-            samples=int(recorded),
-            settle_s=settle_n / s.sample_rate,
-            settle_rms=rms,
-            settled=bool(np.all(rms < 1e-4)),
-            simulated_s=float(sim.sim.time),
-            wall_s=wall,
-            timeouts=int(sim.counters['timeouts']),
-            crashed=bool(sim.sim.crashed),
-            crash_reason=sim.sim.reason,
-            controller={
-                'level': status.level,
-                'message': status.message,
-                'saturated': int(status.saturated),
-                'commands': int(ctrl.commands),
-            },
-            identifier=online,
-        )
+        finally:
+            watch.close()
+        return replace(run, settle_rms=watch.rms(), settled=bool(np.all(watch.rms() < 1e-4)))
+
+
+def _online(ident, sample_rate: float) -> OnlineEstimate | None:
+    """Return the identifier's final state (None: it got no sample)."""
+    if not ident.samples:
+        return None
+    st = ident.identifier.status()
+    return OnlineEstimate(
+        ident.identifier.model(1.0 / sample_rate),
+        int(ident.samples),
+        float(st.covariance_trace),
+        np.asarray(st.fit),
+        ident.config.forgetting,
+    )
+
+
+def _lab_run(s, sim, ctrl, ident, recorded: int, wall: float) -> LabRun:
+    """Return the figures of a finished run (the caller fills in the settling's RMS)."""
+    status = ctrl.controller.status()
+    return LabRun(
+        samples=int(recorded),
+        settle_s=s.settle_samples / s.sample_rate,
+        settle_rms=np.full(3, np.nan),
+        settled=False,
+        simulated_s=float(sim.sim.time),
+        wall_s=wall,
+        timeouts=int(sim.counters['timeouts']),
+        crashed=bool(sim.sim.crashed),
+        crash_reason=sim.sim.reason,
+        controller={
+            'level': status.level,
+            'message': status.message,
+            'saturated': int(status.saturated),
+            'commands': int(ctrl.commands),
+        },
+        identifier=_online(ident, s.sample_rate),
+        overruns=int(sim.counters['overruns']),
+    )
+
+
+def _run_lockstep(
+    lab, s, sim, est, ctrl, ident, recorder, watch_node, reset, topics, report, stop
+) -> LabRun:
+    """Lockstep: pause after the settling, reset the identifier, record exactly the samples."""
+    from std_srvs.srv import Trigger
+
+    settle_n = s.settle_samples
+    last = settle_n + s.samples
+    publishers = {  # topic: (publisher node, subscriptions it must have matched)
+        **{
+            field_topic(k): (sim, 1 + (k in s.sensors) + (k == 0))  # estimator, recorder,
+            for k in sim.sensors  # identifier
+        },
+        CURRENTS_TOPIC: (sim, 3),  # estimator, controller, recorder
+        TRUE_STATE_TOPIC: (sim, 1),  # the recorder
+        CLOCK_TOPIC: (sim, 1),
+        ESTIMATE_TOPIC: (est, 1),
+        COMMAND_TOPIC: (ctrl, 3),  # simulator, identifier, recorder
+        EXCITATION_TOPIC: (ctrl, 1),
+    }
+    lab.wait_until(
+        lambda: (
+            sim.command_publishers >= 1
+            and len(recorder.subscribed) == len(topics)
+            and recorder.metadata_complete
+            and all(
+                count >= 1
+                for n in (est, ctrl, ident, recorder, watch_node)
+                for count in _subscription_counts(n)
+            )  # fmt: skip
+            and all(_matched(n, t, True) >= k for t, (n, k) in publishers.items())
+            and reset.service_is_ready()
+        ),
+        'the simulator, estimator, controller, identifier and recorder',
+        stop=stop,
+    )
+    sim.pause_after(settle_n)
+    sim.set_paused(False)
+    _wait_paused(lab, sim, ctrl, settle_n, 'settling', report, stop)
+    # the identifier starts afresh with the first recorded sample: every settling
+    # sample reached it (one per command), then it is reset while nothing moves
+    lab.wait_until(lambda: ident.samples >= settle_n + 1, 'the identifier (settling)', stop=stop)
+    answer = reset.call_async(Trigger.Request())
+    lab.wait_until(answer.done, 'the identifier reset', stop=stop)
+    wall = time.monotonic()
+    sim.pause_after(last)
+    sim.set_paused(False)
+    _wait_paused(lab, sim, ctrl, last, 'recording', report, stop, first=settle_n)
+    wall = time.monotonic() - wall
+    recorded = sim.sim.samples - settle_n
+    lab.wait_until(
+        lambda: (
+            all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)
+            and ident.samples >= recorded
+        ),
+        'the recorder and the identifier',
+        stop=stop,
+    )
+    return _lab_run(s, sim, ctrl, ident, recorded, wall)
+
+
+def _run_realtime(lab, s, sim, ctrl, ident, recorder, topics, report, stop) -> LabRun:
+    """Real time: run on the wall clock through the settling and the recording window.
+
+    Nothing pauses between them (a paused loop would go stale): the recorder
+    (``record_from``, ``record_until``) and the identifier (``identify_from``,
+    ``identify_until``) keep exactly the window's samples, with the commands
+    in force at its start. The simulator pauses once a burst past its end.
+    """
+    settle_n = s.settle_samples
+    last = settle_n + s.samples
+    lab.wait_until(
+        lambda: (
+            len(recorder.subscribed) == len(topics)
+            and recorder.metadata_complete
+            and all(count >= 1 for count in _subscription_counts(recorder))
+        ),
+        'the simulator, estimator, controller, identifier and recorder',
+        stop=stop,
+    )
+    # one burst beyond the window: the identifier completes a sample at the next one
+    sim.pause_after(last + sim.session.burst)
+    sim.set_paused(False)
+    wall = [time.monotonic(), None]
+
+    def stepped() -> int:
+        n = sim.sim.samples
+        if n > settle_n and wall[1] is None:
+            wall[1] = time.monotonic()
+        return n
+
+    _wait_paused(
+        lab, sim, ctrl, settle_n, 'settling', report, stop, realtime=True, samples=stepped
+    )
+    _wait_paused(
+        lab, sim, ctrl, last + sim.session.burst, 'recording', report, stop, first=settle_n,
+        realtime=True, samples=stepped,
+    )  # fmt: skip
+    wall_s = time.monotonic() - (wall[1] or wall[0])
+    recorded = min(sim.sim.samples, last) - settle_n
+    per_sample = [t for t in topics if t not in (CLOCK_TOPIC, COMMAND_TOPIC, EXCITATION_TOPIC)]
+    lab.wait_until(
+        lambda: (
+            all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in per_sample)
+            and ident.samples >= recorded
+        ),
+        'the recorder and the identifier',
+        stop=stop,
+    )
+    return _lab_run(s, sim, ctrl, ident, recorded, wall_s)
 
 
 def _subscription_counts(node) -> list[int]:
@@ -510,17 +659,32 @@ def _subscription_counts(node) -> list[int]:
     return [sub.get_publisher_count() for sub in node.subscriptions if sub.topic_name != skip]
 
 
-def _wait_paused(lab, sim, ctrl, index, stage, report, stop, first: int = 0) -> None:
-    """Wait until the simulator paused after sample ``index`` and the controller answered it.
+def _wait_paused(
+    lab,
+    sim,
+    ctrl,
+    index,
+    stage,
+    report,
+    stop,
+    first: int = 0,
+    realtime: bool = False,
+    samples: Callable[[], int] | None = None,
+) -> None:
+    """Wait until the simulator stepped sample ``index`` (lockstep: paused, answered).
 
-    Raises RuntimeError when no sample is stepped for ``2 WAIT_S`` (the
-    simulator holds a missing command after ``WAIT_S``: the graph stopped).
+    Lockstep: paused after sample ``index`` and the controller's command for it
+    queued. Real time: sample ``index`` stepped (the simulator runs on unless
+    its ``pause_after`` is that sample). Raises RuntimeError when no sample is
+    stepped for ``2 WAIT_S`` (the simulator holds a missing command after
+    ``WAIT_S``: the graph stopped).
     """
     total = index - first
     last = [-1, time.monotonic()]
+    count = samples or (lambda: sim.sim.samples)
 
     def done() -> bool:
-        stepped = sim.sim.samples
+        stepped = count()
         now = time.monotonic()
         if stepped != last[0]:
             last[:] = [stepped, now]
@@ -531,6 +695,8 @@ def _wait_paused(lab, sim, ctrl, index, stage, report, stop, first: int = 0) -> 
         report(stage, min(max(stepped - first, 0), total), total)
         if sim.sim.crashed:
             return True
+        if realtime:
+            return stepped >= index
         # paused after `index`; the controller's command for it is queued at the simulator
         return sim.paused and stepped >= index and ctrl.commands >= stepped + 1
 

@@ -79,7 +79,7 @@ def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_model
 @pytest.mark.parametrize(
     'argv, match',
     [
-        (['--realtime'], '--realtime: maglev-lab runs the closed loop in lockstep'),
+        (['--realtime', '--control-rate', '3000'], '--control-rate must divide --sample-rate'),
         (['--board', '/dev/ttyACM0', '--magnet', 'free'], 'board.launch.xml port:=PATH'),
         (['--virtual-board', '--magnet', 'free'], 'runs the closed loop on the simulator only'),
         (['--sensors', '0', '1'], 'the closed-loop session records and identifies sensor 0'),
