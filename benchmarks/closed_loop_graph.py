@@ -70,6 +70,15 @@ from pathlib import Path
 import numpy as np
 from process_cpu import Processes, benchmark_environment, cpu_seconds, thread_cpu_seconds
 
+from maglev_ros.nodes.closed_loop_lab import IDENTIFIER_CHANNELS
+from maglev_ros.topics import (
+    CLOCK_TOPIC,
+    COMMAND_TOPIC,
+    CURRENTS_TOPIC,
+    TRUE_STATE_TOPIC,
+    field_topic,
+)
+
 DOMAIN = 78  # ROS_DOMAIN_ID of the runs (localhost only)
 NODES = ('simulator', 'estimator', 'controller', 'identifier', 'recorder')
 GRAPH_PARAMETERS = {
@@ -85,12 +94,53 @@ GRAPH_PARAMETERS = {
         'start_paused': True,  # resumed once every node has matched its topics
         'marker_rate': 0.0,
     },
-    'estimator': {'params': 'maggy_v2', 'sensor_noise': 1e-4, 'quantization': 0.098e-3},
-    'controller': {'params': 'maggy_v2', 'mode': 'lqr'},
-    'identifier': {},
-    'recorder': {'storage': 'mcap'},  # path: a temporary directory
+    # the real-time pattern of closed_loop.launch.xml: control at 1 kHz, one estimate and
+    # one command per 1 ms burst of samples
+    'estimator': {
+        'params': 'maggy_v2',
+        'sensor_noise': 1e-4,
+        'quantization': 0.098e-3,
+        'publish_rate': 1000.0,
+    },
+    'controller': {
+        'params': 'maggy_v2',
+        'mode': 'lqr',
+        'sample_rate': 1000.0,
+        'trigger': 'estimate',
+        'input_timeout': 0.02,
+    },
+    # the main job's identifier: x and y field of sensor 0 against the pair commands
+    # (7 9 1 and 6 6 1), a sample per field message, a command answering it its input
+    'identifier': {
+        'outputs': list(IDENTIFIER_CHANNELS[0]),
+        'inputs': list(IDENTIFIER_CHANNELS[1]),
+        'na': [7, 0, 0, 6],
+        'nb': [9, 0, 0, 6],
+        'nk': [1, 1, 1, 1],
+        'initial_covariance': 1e10,
+        'trigger': field_topic(0),
+        'complete_on_next': True,
+    },
+    # the main job's recording (path: a temporary directory)
+    'recorder': {
+        'storage': 'mcap',
+        'topics': [field_topic(0), CURRENTS_TOPIC, COMMAND_TOPIC, TRUE_STATE_TOPIC, CLOCK_TOPIC],
+    },
 }
-DEPTH = 1000  # messages kept by SENSOR_QOS
+#: per layout: composed, samples, estimates and commands are handed over in the
+#: simulator's thread and the identifier and the recorder take the topics from their
+#: publishers' taps (intra_process; the LQR designs for 1 ms of latency): what
+#: ``maglev-lab --realtime`` runs; separate, each passes the middleware (the launch
+#: file's 3 ms design)
+LAYOUT_PARAMETERS = {
+    'composed': {
+        'estimator': {'intra_process': True},
+        'controller': {'intra_process': True, 'command_delay': 1},
+        'identifier': {'intra_process': True},
+        'recorder': {'intra_process': True, 'log_clock': 'stamp'},
+    },
+    'separate': {'controller': {'command_delay': 3}},
+}
 _PROFILE_ENV = 'CLOSED_LOOP_GRAPH_PROFILE'  # composed child: cProfile dump path
 PING, ECHO, PONG = 'bench/ping', 'bench/echo', 'bench/pong'
 _PINGPONG = ('pinger', 'echo_1', 'echo_2')
@@ -131,7 +181,7 @@ def _yaml_text(value) -> str:
     return json.dumps(value) if not isinstance(value, str) else value
 
 
-def graph_parameters(overrides: list[str], bag: str) -> dict[str, dict]:
+def graph_parameters(overrides: list[str], bag: str, layout: str) -> dict[str, dict]:
     """Return the graph's parameters with the ``--param`` overrides (values parsed as YAML).
 
     Parameters
@@ -140,10 +190,14 @@ def graph_parameters(overrides: list[str], bag: str) -> dict[str, dict]:
         ``NODE:NAME:=VALUE`` texts.
     bag : str
         The recorder's bag path.
+    layout : {'composed', 'separate'}
+        Adds the layout's own parameters (:data:`LAYOUT_PARAMETERS`).
     """
     import yaml
 
     values = {node: dict(p) for node, p in GRAPH_PARAMETERS.items()}
+    for node, extra in LAYOUT_PARAMETERS[layout].items():
+        values[node].update(extra)
     values['recorder']['path'] = bag
     for text in overrides:
         node, name, value = parse_param(text)
@@ -306,15 +360,16 @@ def pingpong_child(which: list[str], rate: float) -> int:
 
 # ---------------------------------------------------------------------- observer
 class Observer:
-    """Stores the arrival time (ns, monotonic) and raw bytes of two streams.
+    """Stores the arrival time (ns, monotonic) and raw bytes of each of its streams.
 
     Parameters
     ----------
-    source, answer : (str, type, QoSProfile)
-        Topic, message class and QoS of the samples and of the answers.
+    *streams : (str, type, QoSProfile)
+        Topic, message class and QoS of each stream (the samples first, the
+        answers last); ``received[i]`` holds stream i's messages.
     """
 
-    def __init__(self, source, answer) -> None:
+    def __init__(self, *streams) -> None:
         import rclpy
 
         from maglev_ros.nodes.runtime import Spinner
@@ -322,31 +377,42 @@ class Observer:
         self.context = rclpy.Context()
         rclpy.init(context=self.context, args=[])
         self.node = rclpy.create_node('closed_loop_graph_observer', context=self.context)
-        self.samples: list[tuple[int, bytes]] = []
-        self.answers: list[tuple[int, bytes]] = []
+        self.received: list[list[tuple[int, bytes]]] = [[] for _ in streams]
         clock = time.monotonic_ns
-        for (topic, cls, qos), store in ((source, self.samples), (answer, self.answers)):
+        for (topic, cls, qos), store in zip(streams, self.received, strict=True):
             self.node.create_subscription(
                 cls, topic, lambda data, store=store: store.append((clock(), data)), qos, raw=True
             )
-        self.source_type = source[1]
+        self.types = [cls for _, cls, _ in streams]
         self.spinner = Spinner(self.context, [self.node])
 
-    def stamps(self, messages) -> np.ndarray:
-        """Header stamps of raw messages of the source's type, ns.
+    @property
+    def samples(self) -> list[tuple[int, bytes]]:
+        """The first stream's messages."""
+        return self.received[0]
+
+    @property
+    def answers(self) -> list[tuple[int, bytes]]:
+        """The last stream's messages."""
+        return self.received[-1]
+
+    def stamps(self, messages, stream: int = 0) -> np.ndarray:
+        """Header stamps of raw messages of a stream's (stamped) type, ns.
 
         Parameters
         ----------
         messages : list of (int, bytes)
             Arrival time and raw message.
+        stream : int
+            Which stream's type they are.
         """
         from rclpy.serialization import deserialize_message
 
         from maglev_ros.nodes.messages import stamp_ns
 
+        cls = self.types[stream]
         return np.array(
-            [stamp_ns(deserialize_message(d, self.source_type)) for _, d in messages],
-            dtype=np.int64,
+            [stamp_ns(deserialize_message(d, cls)) for _, d in messages], dtype=np.int64
         )
 
     def close(self) -> None:
@@ -406,8 +472,80 @@ def _window(procs: Processes, seconds: float, observer: Observer):
     return t0, t1, names, cpu, threads
 
 
+def sensor_to_command(
+    arrival: np.ndarray,
+    stamps: np.ndarray,
+    estimate_stamps: np.ndarray,
+    command_arrival: np.ndarray,
+    t0: int,
+    t1: int,
+) -> tuple[np.ndarray, str | None]:
+    """Latency from each sample's arrival to the arrival of the command computed from it.
+
+    The controller (``trigger: estimate``) answers each estimate once, in stamp
+    order: command j answers estimate j, whose stamp names the newest sample
+    it used. Commands carry no stamp, so the pairing is by count; it is void
+    when the counts differ (the controller skipped estimates) or the sample
+    was never received (lost).
+
+    Parameters
+    ----------
+    arrival, stamps : ndarray of int, shape (N,)
+        Arrival time (ns, monotonic) and stamp (ns) of each ``maglev/currents`` sample.
+    estimate_stamps : ndarray of int, shape (M,)
+        Stamps of the estimates received, in arrival order.
+    command_arrival : ndarray of int, shape (C,)
+        Arrival time of each command.
+    t0, t1 : int
+        The measured window (ns, monotonic): commands arriving in it count.
+
+    Returns
+    -------
+    latency : ndarray of int
+        ns, one per paired command in the window.
+    why : str or None
+        Why there is no valid latency (None: valid).
+    """
+    empty = np.empty(0, dtype=np.int64)
+    if not np.all(np.diff(stamps) > 0):
+        return empty, "the samples' stamps do not increase"
+    if abs(estimate_stamps.size - command_arrival.size) > 3:  # a few in flight at the stop
+        return empty, (
+            f'{estimate_stamps.size} estimates but {command_arrival.size} commands: the '
+            'controller did not answer each estimate'
+        )
+    n = min(estimate_stamps.size, command_arrival.size)
+    index = np.searchsorted(stamps, estimate_stamps[:n])
+    last = np.minimum(index, stamps.size - 1)
+    found = (index < stamps.size) & (stamps[last] == estimate_stamps[:n])
+    window = (command_arrival[:n] >= t0) & (command_arrival[:n] < t1)
+    if not found[window].all():
+        return empty, f'{int((~found[window]).sum())} estimated samples were not received'
+    latency = command_arrival[:n][window] - arrival[index[window]]
+    if latency.size and latency.min() < 0:
+        return latency, 'a command arrived before its sample: the pairing is off'
+    return latency, None
+
+
+#: per layout, the subscribers each topic must have before the simulator resumes
+#: (the observer's own counted)
+SUBSCRIBERS = {
+    'composed': {CURRENTS_TOPIC: 1, COMMAND_TOPIC: 1},
+    'separate': {  # + recorder, identifier; estimator
+        field_topic(0): 3,
+        CURRENTS_TOPIC: 3,  # observer, estimator, recorder
+        COMMAND_TOPIC: 4,  # observer, simulator, identifier, recorder
+    },
+}
+
+
 def run_graph(
-    label: str, commands: list[list[str]], env: dict, seconds: float, rate: float
+    label: str,
+    commands: list[list[str]],
+    env: dict,
+    seconds: float,
+    rate: float,
+    subscribers: dict[str, int],
 ) -> dict:
     """Run the graph, resume the simulator once matched, measure; print and return figures.
 
@@ -423,7 +561,10 @@ def run_graph(
         s of wall time measured.
     rate : float
         Samples (pings) per second expected, Hz.
+    subscribers : dict
+        Topic -> subscribers it must have matched before the simulator resumes.
     """
+    from nav_msgs.msg import Odometry
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import SetBool
@@ -433,6 +574,7 @@ def run_graph(
 
     observer = Observer(
         (topics.CURRENTS_TOPIC, JointState, SENSOR_QOS),
+        (topics.ESTIMATE_TOPIC, Odometry, SENSOR_QOS),
         (topics.COMMAND_TOPIC, Float64MultiArray, LOCKSTEP_COMMAND_QOS),
     )
     node = observer.node
@@ -441,12 +583,12 @@ def run_graph(
         client = node.create_client(SetBool, topics.SIMULATOR_PAUSE_SERVICE)
 
         def matched():
+            # composed, the estimator, the controller, the identifier and the recorder
+            # take what they need in this process: no subscriptions to wait for
             return (
-                node.count_subscribers(topics.CURRENTS_TOPIC) >= 5  # 4 nodes + observer
-                and node.count_subscribers(topics.ESTIMATE_TOPIC) >= 1
+                all(node.count_subscribers(t) >= n for t, n in subscribers.items())
                 and node.count_publishers(topics.ESTIMATE_TOPIC) >= 1
                 and node.count_publishers(topics.COMMAND_TOPIC) >= 1
-                and node.count_subscribers(topics.COMMAND_TOPIC) >= 3  # sim, recorder, observer
                 and client.service_is_ready()
             )
 
@@ -459,40 +601,30 @@ def run_graph(
         time.sleep(1.0)  # steady
         print(f'{label}: running {seconds:g} s ...', flush=True)
         t0, t1, names, cpu, threads = _window(procs, seconds, observer)
-        samples, answers = list(observer.samples), list(observer.answers)
+        samples, estimates, answers = (list(r) for r in observer.received)
     finally:
         procs.stop()
         observer.close()
     wall = (t1 - t0) * 1e-9
     arrival = np.array([t for t, _ in samples], dtype=np.int64)
     stamps = observer.stamps(samples)
+    estimate_stamps = observer.stamps(estimates, 1)
     command_arrival = np.array([t for t, _ in answers], dtype=np.int64)
     crashed = any('crashed' in line for line in procs.lines)
     in_window = (arrival >= t0) & (arrival < t1)
     rtf = int(in_window.sum()) / (rate * wall)
-    # command j answers sample j (every node had every sample from the first)
-    n = min(arrival.size, command_arrival.size)
-    order_ok = bool(np.all(np.diff(stamps) > 0))
-    # samples received but not answered yet at each command: beyond the queues' depth
-    # (SENSOR_QOS keeps 1000) a node may have lost samples and the pairing is void
-    backlog = np.searchsorted(arrival, command_arrival[:n], side='right') - np.arange(1, n + 1)
-    pair = (command_arrival[:n] >= t0) & (command_arrival[:n] < t1)
-    latency = command_arrival[:n][pair] - arrival[:n][pair]
-    worst = int(backlog[: int(np.searchsorted(command_arrival[:n], t1))].max(initial=0))
-    valid = order_ok and worst < DEPTH and not (latency.size and latency.min() < 0)
-    med, p99 = _percentiles(latency) if valid else (float('nan'), float('nan'))
+    # the controller's zero commands while it waits for a first estimate pair with none
+    first = estimates[0][0] if estimates else t1
+    command_arrival = command_arrival[command_arrival >= first]
+    latency, why = sensor_to_command(arrival, stamps, estimate_stamps, command_arrival, t0, t1)
+    med, p99 = _percentiles(latency) if why is None else (float('nan'), float('nan'))
     print(
         f'{label}: {int(in_window.sum())} samples in {wall:.1f} s = real-time factor {rtf:.3f}; '
-        f'sensor-to-command latency median {med:.0f} us, 99th percentile {p99:.0f} us '
-        f'({latency.size} commands; largest backlog {worst} samples; stamps increasing '
-        f'{order_ok}); crashed {crashed}'
+        f'{len(estimates)} estimates, {len(answers)} commands; sensor-to-command latency '
+        f'median {med:.0f} us, 99th percentile {p99:.0f} us ({latency.size} commands); '
+        f'crashed {crashed}'
     )
-    if not valid:
-        why = (
-            f'the graph fell behind by {worst} samples, more than the queues keep ({DEPTH})'
-            if worst >= DEPTH
-            else 'commands do not pair with samples one to one'
-        )
+    if why is not None:
         print(f'    latency not valid: {why}')
     total = _cpu_report(names, cpu, threads, wall)
     return {'rtf': rtf, 'median': med, 'p99': p99, 'cpu': total / wall, 'crashed': crashed}
@@ -595,7 +727,7 @@ def main() -> int:
             if args.only not in (None, layout):
                 continue
             try:
-                values = graph_parameters(args.param, str(tmp / f'bag_{layout}'))
+                values = graph_parameters(args.param, str(tmp / f'bag_{layout}'), layout)
             except Exception as err:  # noqa: BLE001 - a YAML value that does not parse
                 print(f'closed_loop_graph: error: --param: {err}', file=sys.stderr)
                 return 2
@@ -614,7 +746,9 @@ def main() -> int:
             if args.profile and layout == 'composed':
                 graph_env = env | {_PROFILE_ENV: str(tmp / 'composed.prof')}
             results[layout] = (
-                run_graph(f'graph {layout}', graph, graph_env, args.seconds, rate),
+                run_graph(
+                    f'graph {layout}', graph, graph_env, args.seconds, rate, SUBSCRIBERS[layout]
+                ),
                 run_pingpong(f'ping-pong {layout}', pingpong, env, args.seconds, rate),
             )
         if args.profile and (tmp / 'composed.prof').exists():
