@@ -93,3 +93,32 @@ def test_what_the_closed_loop_does_not_run_is_a_usage_error(argv, match, tmp_pat
     err = capfd.readouterr().err
     assert match in err and err.count('\n') == 1, err
     assert not out.exists()
+
+
+def test_realtime_session_records_the_window_and_matches_its_online_arx(domain, tmp_path, capfd):
+    """``--realtime``: the same outputs on the wall clock, the loop composed in one process.
+
+    A loaded machine slows the simulation, not the loop (it is closed in the
+    simulator's thread), so nothing here depends on keeping up with the clock.
+    """
+    out = tmp_path / 'lab'
+    argv = ['--realtime', '--duration', '0.4', '--settle', '0.2', '--seed', str(SEED)]
+    status = lab.main([*argv, '--out', str(out), '--quiet', '--no-plots'])
+    printed = capfd.readouterr().out
+    summary = json.loads((out / 'models.json').read_text())
+    assert status == summary['exit_status'] and status in (0, 1), printed
+    run = summary['run']
+    assert 'closed loop in real time (composed, control at 1000 Hz)' in printed
+    assert run['clock'] == 'realtime' and not run['crashed'] and run['settled'], run
+    assert summary['data']['N'] == SAMPLES  # exactly the window: every sample has its input
+    with Reader(out / 'bag') as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    per_sample = [topics.field_topic(0), topics.CURRENTS_TOPIC, topics.TRUE_STATE_TOPIC]
+    assert all(counts['/' + t] == SAMPLES for t in per_sample), counts
+    # one command per 1 ms burst (5 samples), and the one in force at the start
+    assert SAMPLES // 5 <= counts['/' + topics.COMMAND_TOPIC] <= SAMPLES // 5 + 2, counts
+    assert max(run['largest_excursion_m']) < 0.5e-3, run['largest_excursion_m']
+    # the identifier took the same samples, each command the input of the sample it answers
+    assert summary['online']['samples'] == SAMPLES
+    differences = [float(d) for d in re.findall(r'largest difference (\S+) of', printed)]
+    assert len(differences) == 2 and max(differences) < 1e-5, printed
