@@ -1,6 +1,6 @@
 """Processes of a real-time benchmark: start them in their own sessions, stop them, their CPU.
 
-Shared by ``closed_loop_realtime.py`` and ``closed_loop_graph.py`` (run as
+Shared by ``closed_loop_realtime.py`` and ``closed_loop.py`` (run as
 scripts: ``benchmarks/`` is then on ``sys.path``). CPU times come from
 ``/proc/<pid>/stat`` (user + system, clock ticks) and, per thread, from
 ``/proc/<pid>/task/<tid>/stat``; ``psutil`` lists a process's descendants.
