@@ -375,9 +375,9 @@ class RecorderNode(Node):
         self._handles[topic] = handle
         is_clock = topic == CLOCK_TOPIC
         stamped = is_clock or hasattr(cls, 'header')
-        write = self._writer_for(handle, topic, is_clock, stamped)
+        write, write_list = self._writer_for(handle, topic, is_clock, stamped)
         if tap is not None:
-            listener = self._tap_listener(write)
+            listener = write_list
             tap.connect(listener, NODE_NAME)
             self._taps.append((tap, listener))
             self.get_logger().info(f'{topic}: taken in this process (intra_process)')
@@ -385,8 +385,16 @@ class RecorderNode(Node):
             self.create_subscription(cls, topic, write, qos, raw=True)
 
     def _writer_for(self, handle, topic: str, is_clock: bool, stamped: bool):
-        """Return the callback that logs one raw message of ``topic`` (module docstring)."""
-        write = self.writer.write
+        """Return the callbacks that log raw messages of ``topic`` (module docstring).
+
+        Returns
+        -------
+        on_message : callable
+            Logs one message (a subscription's callback).
+        on_messages : callable
+            Logs a list of them in order, written in one go (a tap's listener).
+        """
+        write, write_many = self.writer.write, self.writer.write_many
         counts = self.counts
         log_clock = self.config.log_clock
         clock = self.get_clock()
@@ -395,7 +403,8 @@ class RecorderNode(Node):
         lock = self._write_lock
         held = self._held
 
-        def on_message(data: bytes) -> None:
+        def log_time(data: bytes) -> int | None:
+            """Return the message's log time, ns (None: outside the window, not written)."""
             if is_clock and log_clock == 'topic':
                 sec, nanosec = _CLOCK.unpack_from(data, 4)
                 self._clock_ns = sec * 1_000_000_000 + nanosec
@@ -415,11 +424,20 @@ class RecorderNode(Node):
             if stamp < start_ns:
                 if log_clock == 'stamp' and not stamped:  # in force when the recording starts
                     held[topic] = (handle, data)
-                return  # before the recording (record_from): not written
+                return None  # before the recording (record_from): not written
             if end_ns is not None and stamp > end_ns:
-                return  # after it (record_until)
-            if held:
-                self._write_held(start_ns)
+                return None  # after it (record_until)
+            if held:  # written once the window's first sample is complete
+                if not stamped and stamp == start_ns:
+                    held.pop(topic, None)  # superseded at the window's first sample
+                elif stamp > start_ns:
+                    self._write_held(start_ns)
+            return stamp
+
+        def on_message(data: bytes) -> None:
+            stamp = log_time(data)
+            if stamp is None:
+                return
             with lock:
                 try:
                     write(handle, stamp, data)
@@ -427,7 +445,23 @@ class RecorderNode(Node):
                     return
                 counts[topic] += 1
 
-        return on_message
+        def on_messages(messages: list) -> None:
+            stamps, kept = [], []
+            for data in messages:
+                stamp = log_time(data)
+                if stamp is not None:
+                    stamps.append(stamp)
+                    kept.append(data)
+            if not kept:
+                return
+            with lock:
+                try:
+                    write_many(handle, stamps, kept)
+                except BagError:  # closed while these messages were in flight
+                    return
+                counts[topic] += len(kept)
+
+        return on_message, on_messages
 
     def _write_held(self, stamp: int) -> None:
         """Log the header-less messages held from before ``record_from`` at its ``stamp``.
@@ -446,16 +480,6 @@ class RecorderNode(Node):
                 except BagError:
                     return
                 self.counts[topic] += 1
-
-    @staticmethod
-    def _tap_listener(on_message):
-        """Return a tap listener: a publisher's list of raw messages, logged in order."""
-
-        def on_messages(messages: list) -> None:
-            for data in messages:
-                on_message(data)
-
-        return on_messages
 
     def _request_metadata(self) -> None:
         name = self.config.metadata_node
@@ -519,6 +543,8 @@ class RecorderNode(Node):
         for tap, listener in self._taps:
             tap.disconnect(listener)
         self._taps = []
+        if self._held and any(self.counts.values()):  # a window of a single sample
+            self._write_held(round(self.config.record_from * 1e9))
         if not self._metadata_done and self._metadata_items:
             # stopped while the metadata node's parameters were still being asked for:
             # the answers so far are stored (a partial set beats none)

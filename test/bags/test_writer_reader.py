@@ -153,3 +153,42 @@ def test_broken_metadata_and_missing_storage(tmp_path):
     (bag / 'run2.mcap').unlink()
     with pytest.raises(BagError, match='its storage file is missing'):
         BagReader(bag).open()
+
+
+@pytest.mark.parametrize('storage', STORAGES)
+def test_write_many_makes_the_bag_write_makes(tmp_path, storage, monkeypatch):
+    """The batch path (a tap's burst) gives the same storage file, byte for byte."""
+    monkeypatch.setattr('maglev_ros.bags.writer.FLUSH_PERIOD_S', 1e9)  # chunks by size only
+    rng = np.random.default_rng(4)
+    bursts = []
+    for b in range(3000):  # > 1 MiB: the chunk closes inside the run, as write's would
+        n = int(rng.integers(1, 8))
+        stamps = [b * 10_000 + k for k in range(n)]
+        bursts.append((stamps, [bytes(rng.integers(0, 256, 80, dtype=np.uint8)) for _ in stamps]))
+    files = []
+    for name, many in (('each', False), ('many', True)):  # names of one length
+        with BagWriter(tmp_path / name, storage) as writer:
+            handles = [writer.add_topic(t, 'sensor_msgs/msg/MagneticField') for t in ('/a', '/b')]
+            for i, (stamps, messages) in enumerate(bursts):
+                handle = handles[i % 2]
+                if many:
+                    writer.write_many(handle, stamps, messages)
+                else:
+                    for stamp, data in zip(stamps, messages, strict=True):
+                        writer.write(handle, stamp, data)
+            assert writer.message_count == sum(len(s) for s, _ in bursts)
+        storage_file = next(p for p in (tmp_path / name).iterdir() if p.suffix != '.yaml')
+        files.append((storage_file.read_bytes(), (tmp_path / name / 'metadata.yaml').read_text()))
+    if storage == 'mcap':  # the file names are in its summary
+        assert files[0][0].replace(b'each', b'many') == files[1][0]
+    assert files[0][1].replace('each', 'many') == files[1][1]
+    with BagReader(tmp_path / 'many') as reader:
+        got = [(stamp, bytes(raw)) for _, stamp, raw in reader.messages(['/a', '/b'])]
+    assert got == sorted(
+        ((s, d) for stamps, msgs in bursts for s, d in zip(stamps, msgs, strict=True)),
+        key=lambda item: item[0],
+    )
+    with BagWriter(tmp_path / 'bad', storage) as writer:
+        handle = writer.add_topic('/a', 'sensor_msgs/msg/MagneticField')
+        with pytest.raises(BagError, match='one timestamp per message'):
+            writer.write_many(handle, [1, 2], [b'x'])
