@@ -23,7 +23,15 @@ numbers) with what an online identifier needs around it:
 
 :func:`coefficient_layout` describes the parameter vector for a
 ``std_msgs/Float64MultiArray``: dimension labels name the polynomials and
-their orders.  Pure functions and numpy only (no rclpy).
+their orders.  Pure functions, numpy and numba only (no rclpy).
+
+Without a window, :meth:`OnlineArx.update` and :meth:`OnlineArx.update_many`
+run one compiled kernel per call (history shift, regressor gather and
+:func:`~.rls.rls_step` of every row): the numbers are bit for bit those of the
+per-sample numpy code, at a few microseconds per sample.  The per-row ``P`` and
+``theta`` are contiguous views into two flat buffers (``theta`` is the public
+parameter vector as stored).  Numba's cache does not track the dependency on
+:func:`~.rls.rls_step`: after editing it, clear ``__pycache__`` of this package.
 """
 
 from __future__ import annotations
@@ -33,6 +41,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .model import PolyModel
 from .orders import Orders, make_orders
@@ -50,6 +59,178 @@ def _check(forgetting: float, p0: float, window: int | None, fit_window: int) ->
         raise ValueError(f'window must be a sample count >= 1 or None, got {window!r}')
     if not isinstance(fit_window, (int, np.integer)) or fit_window < 2:
         raise ValueError(f'fit_window must be a sample count >= 2, got {fit_window!r}')
+
+
+@njit(cache=True)
+def _advance(
+    y: np.ndarray,
+    u: np.ndarray,
+    yh: np.ndarray,
+    uh: np.ndarray,
+    P: np.ndarray,
+    theta: np.ndarray,
+    layout: np.ndarray,
+    index: np.ndarray,
+    updates: np.ndarray,
+    fit_y: np.ndarray,
+    fit_e: np.ndarray,
+    samples: int,
+    lam: float,
+    wait: bool,
+    errors: np.ndarray,
+) -> None:  # pragma: no cover - numba
+    """One sample of :meth:`OnlineArx.update` in place (inputs already checked).
+
+    Parameters
+    ----------
+    y : ndarray, shape (ny,)
+        Outputs at ``t``, output units.
+    u : ndarray, shape (nu,)
+        Inputs at ``t``, input units.
+    yh : ndarray, shape (ny, ylags)
+        Output history, column 0 ``y(t-1)``; shifted in place.
+    uh : ndarray, shape (nu, ulags)
+        Input history, column 0 ``u(t)`` after the shift; shifted in place.
+    P : ndarray, shape (sum of s_i**2,)
+        Row covariances, row ``i`` the C-order ``(s_i, s_i)`` block at
+        ``layout[0, i]``; updated in place.
+    theta : ndarray, shape (n_params,)
+        Parameters, row ``i`` at ``layout[1, i] : layout[1, i + 1]``; in place.
+    layout : ndarray of int64, shape (3, ny + 1)
+        Offsets of the ``P`` blocks, offsets of the ``theta`` (and ``index``)
+        rows, first sample of each row (``orders.row_start``).
+    index : ndarray of int64, shape (n_params,)
+        Regressor positions in ``flat = [-yh.ravel(), uh.ravel()]``.
+    updates : ndarray of int64, shape (ny,)
+        Updates of each row, incremented in place.
+    fit_y, fit_e : ndarray, shape (fit_window, ny)
+        Fit buffers; slot ``samples % fit_window`` is written.
+    samples : int
+        Samples before this one.
+    lam : float
+        Forgetting factor.
+    wait : bool
+        Skip the rows whose regressor is not complete yet.
+    errors : ndarray, shape (ny,)
+        Output: a-priori prediction errors (NaN for a skipped row).
+    """
+    ny, ylags = yh.shape
+    nu, ulags = uh.shape
+    for j in range(nu):
+        for k in range(ulags - 1, 0, -1):
+            uh[j, k] = uh[j, k - 1]
+        uh[j, 0] = u[j]
+    nyl = ny * ylags
+    for i in range(ny):
+        errors[i] = np.nan
+        if wait and samples < layout[2, i]:
+            continue
+        t0 = layout[1, i]
+        s = layout[1, i + 1] - t0
+        phi = np.empty(s)
+        for a in range(s):
+            k = index[t0 + a]
+            if k < nyl:
+                phi[a] = -yh[k // ylags, k % ylags]
+            else:
+                k -= nyl
+                phi[a] = uh[k // ulags, k % ulags]
+        p0 = layout[0, i]
+        Pi = P[p0 : p0 + s * s].reshape((s, s))
+        errors[i] = rls_step(Pi, theta[t0 : t0 + s], phi, y[i], lam)
+        updates[i] += 1
+    for j in range(ny):
+        for k in range(ylags - 1, 0, -1):
+            yh[j, k] = yh[j, k - 1]
+        yh[j, 0] = y[j]
+    slot = samples % fit_y.shape[0]
+    for i in range(ny):
+        fit_y[slot, i] = y[i]
+        fit_e[slot, i] = errors[i]
+
+
+@njit(cache=True)
+def _all_finite(x: np.ndarray) -> bool:  # pragma: no cover - numba
+    for v in x.ravel():
+        if not np.isfinite(v):
+            return False
+    return True
+
+
+@njit(cache=True)
+def _update_one(
+    y: np.ndarray,
+    u: np.ndarray,
+    yh: np.ndarray,
+    uh: np.ndarray,
+    P: np.ndarray,
+    theta: np.ndarray,
+    layout: np.ndarray,
+    index: np.ndarray,
+    updates: np.ndarray,
+    fit_y: np.ndarray,
+    fit_e: np.ndarray,
+    samples: int,
+    lam: float,
+    wait: bool,
+) -> np.ndarray:  # pragma: no cover - numba
+    """Check and add one sample (see :func:`_advance`); return the errors (ny,).
+
+    Non-finite ``y`` or ``u``: nothing is changed and an empty array is returned.
+    """
+    if not (_all_finite(y) and _all_finite(u)):
+        return np.empty(0)
+    errors = np.empty(yh.shape[0])
+    _advance(
+        y, u, yh, uh, P, theta, layout, index, updates, fit_y, fit_e, samples, lam, wait, errors
+    )
+    return errors
+
+
+@njit(cache=True)
+def _update_many(
+    Y: np.ndarray,
+    U: np.ndarray,
+    yh: np.ndarray,
+    uh: np.ndarray,
+    P: np.ndarray,
+    theta: np.ndarray,
+    layout: np.ndarray,
+    index: np.ndarray,
+    updates: np.ndarray,
+    fit_y: np.ndarray,
+    fit_e: np.ndarray,
+    samples: int,
+    lam: float,
+    wait: bool,
+) -> np.ndarray:  # pragma: no cover - numba
+    """Check all rows of ``Y`` (n, ny), ``U`` (n, nu), then add them; return the errors (n, ny).
+
+    Any non-finite value: nothing is changed and an array of shape (0, ny) is
+    returned.
+    """
+    if not (_all_finite(Y) and _all_finite(U)):
+        return np.empty((0, yh.shape[0]))
+    E = np.empty((Y.shape[0], yh.shape[0]))
+    for r in range(Y.shape[0]):
+        _advance(
+            Y[r],
+            U[r],
+            yh,
+            uh,
+            P,
+            theta,
+            layout,
+            index,
+            updates,
+            fit_y,
+            fit_e,
+            samples + r,
+            lam,
+            wait,
+            E[r],
+        )
+    return E
 
 
 @dataclass(frozen=True)
@@ -147,6 +328,14 @@ class OnlineArx:
             self._index.append(np.array(idx, dtype=np.intp))
         self._starts = [o.row_start(i) for i in range(o.ny)]
         self._sizes = o.row_sizes()
+        # the kernel's view of the rows: offsets into the flat P and theta buffers
+        sizes = np.array(self._sizes, dtype=np.int64)
+        self._layout = np.zeros((3, o.ny + 1), dtype=np.int64)
+        self._layout[0, 1:] = np.cumsum(sizes**2)
+        self._layout[1, 1:] = np.cumsum(sizes)
+        self._layout[2, :-1] = self._starts
+        self._index_flat = np.concatenate([np.zeros(0, np.int64), *self._index]).astype(np.int64)
+        self._shapes = ((o.ny,), (o.nu,))
         self.reset()
 
     # ------------------------------------------------------------------ state
@@ -155,8 +344,16 @@ class OnlineArx:
         o = self.orders
         self._yh = np.zeros((o.ny, self._ylags))  # column 0: y(t-1)
         self._uh = np.zeros((o.nu, self._ulags))  # column 0: u(t)
-        self._theta = [np.zeros(s) for s in self._sizes]
-        self._P = [self.initial_covariance * np.eye(s) for s in self._sizes]
+        # flat buffers; the per-row P (s, s) and theta (s,) are contiguous views
+        poff, toff = self._layout[0], self._layout[1]
+        self._theta_flat = np.zeros(int(toff[-1]))
+        self._P_flat = np.zeros(int(poff[-1]))
+        self._theta = [self._theta_flat[toff[i] : toff[i + 1]] for i in range(o.ny)]
+        self._P = [
+            self._P_flat[poff[i] : poff[i + 1]].reshape(s, s) for i, s in enumerate(self._sizes)
+        ]
+        for P, s in zip(self._P, self._sizes, strict=True):
+            P[...] = self.initial_covariance * np.eye(s)
         self.samples = 0
         self._updates = np.zeros(o.ny, dtype=np.int64)
         self._last_error = np.full(o.ny, np.nan)
@@ -164,11 +361,23 @@ class OnlineArx:
         self._fit_e = np.full((self.fit_window, o.ny), np.nan)
         self._window: list[deque[tuple[np.ndarray, float]]] = [deque() for _ in range(o.ny)]
         self._theta_prev: np.ndarray | None = None
+        # the state arguments of the kernels, in their order
+        self._state = (
+            self._yh,
+            self._uh,
+            self._P_flat,
+            self._theta_flat,
+            self._layout,
+            self._index_flat,
+            self._updates,
+            self._fit_y,
+            self._fit_e,
+        )
 
     @property
     def theta(self) -> np.ndarray:
-        """Current parameters, shape (n_params,) (layout of :mod:`.orders`)."""
-        return np.concatenate(self._theta)
+        """Current parameters, shape (n_params,) (layout of :mod:`.orders`; a copy)."""
+        return self._theta_flat.copy()
 
     @property
     def covariance(self) -> np.ndarray:
@@ -198,16 +407,97 @@ class OnlineArx:
         ValueError
             Wrong shapes or non-finite values (the state is left unchanged).
         """
-        o = self.orders
-        y = np.atleast_1d(np.asarray(y, dtype=float))
-        u = np.atleast_1d(np.asarray(u, dtype=float))
-        if y.shape != (o.ny,) or u.shape != (o.nu,):
+        y = np.ascontiguousarray(y, dtype=float)  # ndim >= 1, as np.atleast_1d
+        u = np.ascontiguousarray(u, dtype=float)
+        if y.shape != self._shapes[0] or u.shape != self._shapes[1]:
+            raise self._shape_error(y.shape, u.shape)
+        if self.window is not None:
+            if not (np.all(np.isfinite(y)) and np.all(np.isfinite(u))):
+                raise self._finite_error(y, u)
+            return self._update_window(y, u)
+        errors = _update_one(
+            y, u, *self._state, self.samples, self.forgetting, self.wait_for_history
+        )
+        if errors.shape[0] == 0:
+            raise self._finite_error(y, u)
+        self._last_error = errors
+        self.samples += 1
+        return errors
+
+    def update_many(
+        self, Y: Sequence[Sequence[float]] | np.ndarray, U: Sequence[Sequence[float]] | np.ndarray
+    ) -> np.ndarray:
+        """Add ``n`` samples at once; the same as :meth:`update` row by row.
+
+        The estimate, the histories, the fit buffers, :attr:`samples` and the
+        last prediction error end exactly (bit for bit) as after ``n`` calls
+        of :meth:`update`, in one compiled call.
+
+        Parameters
+        ----------
+        Y : array_like, shape (n, ny)
+            Outputs at ``t .. t+n-1``, output units.
+        U : array_like, shape (n, nu)
+            Inputs at ``t .. t+n-1``, input units.
+
+        Returns
+        -------
+        ndarray, shape (n, ny)
+            The a-priori prediction errors of each sample (as :meth:`update`).
+
+        Raises
+        ------
+        ValueError
+            Wrong shapes or a non-finite value in any row: no sample is added
+            (the state is left unchanged, also for the rows before it).
+        """
+        ny, nu = self._shapes[0][0], self._shapes[1][0]
+        Y = np.ascontiguousarray(Y, dtype=float)
+        U = np.ascontiguousarray(U, dtype=float)
+        if Y.ndim != 2 or Y.shape[1] != ny or U.shape != (Y.shape[0], nu):
             raise ValueError(
-                f'update needs y of shape ({o.ny},) and u of shape ({o.nu},), '
-                f'got {y.shape} and {u.shape}'
+                f'update_many needs Y of shape (n, {ny}) and U of shape (n, {nu}), '
+                f'got {Y.shape} and {U.shape}'
             )
-        if not (np.all(np.isfinite(y)) and np.all(np.isfinite(u))):
-            raise ValueError(f'samples must be finite, got y={y.tolist()} u={u.tolist()}')
+        if self.window is not None:
+            bad = self._first_nonfinite(Y, U)
+            if bad is not None:
+                raise self._finite_error(Y[bad], U[bad], bad)
+            E = np.empty((Y.shape[0], ny))
+            for r in range(Y.shape[0]):
+                E[r] = self._update_window(Y[r], U[r])
+            return E
+        if Y.shape[0] == 0:
+            return np.empty((0, ny))
+        E = _update_many(Y, U, *self._state, self.samples, self.forgetting, self.wait_for_history)
+        if E.shape[0] == 0:
+            bad = self._first_nonfinite(Y, U)
+            raise self._finite_error(Y[bad], U[bad], bad)
+        self._last_error = E[-1].copy()
+        self.samples += Y.shape[0]
+        return E
+
+    @staticmethod
+    def _first_nonfinite(Y: np.ndarray, U: np.ndarray) -> int | None:
+        """Index of the first row of ``Y`` (n, ny) or ``U`` (n, nu) with a non-finite value."""
+        ok = np.isfinite(Y).all(axis=1) & np.isfinite(U).all(axis=1)
+        return None if ok.all() else int(np.argmin(ok))
+
+    def _shape_error(self, y_shape: tuple[int, ...], u_shape: tuple[int, ...]) -> ValueError:
+        o = self.orders
+        return ValueError(
+            f'update needs y of shape ({o.ny},) and u of shape ({o.nu},), '
+            f'got {y_shape} and {u_shape}'
+        )
+
+    @staticmethod
+    def _finite_error(y: np.ndarray, u: np.ndarray, row: int | None = None) -> ValueError:
+        where = '' if row is None else f' (row {row})'
+        return ValueError(f'samples must be finite, got y={y.tolist()} u={u.tolist()}{where}')
+
+    def _update_window(self, y: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """:meth:`update` with a sliding window (numpy; ``y`` (ny,), ``u`` (nu,) checked)."""
+        o = self.orders
         self._uh[:, 1:] = self._uh[:, :-1]
         self._uh[:, 0] = u
         flat = np.concatenate([-self._yh.ravel(), self._uh.ravel()])
@@ -219,8 +509,7 @@ class OnlineArx:
             # the update of RecursiveArx and rls_arx (one compiled step)
             errors[i] = rls_step(self._P[i], self._theta[i], phi, float(y[i]), self.forgetting)
             self._updates[i] += 1
-            if self.window is not None:
-                self._slide(i, phi, float(y[i]))
+            self._slide(i, phi, float(y[i]))
         self._yh[:, 1:] = self._yh[:, :-1]
         self._yh[:, 0] = y
         slot = self.samples % self.fit_window
