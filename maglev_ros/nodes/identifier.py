@@ -456,23 +456,50 @@ class IdentifierNode(Node):
                     msg = deserialize_message(data, cls)
                     read = (stamp_ns(msg) if stamped else None, msg)
                 decoded.append(read)
+            samples: list = []
             with self._lock:
                 for stamp, payload in decoded:
-                    self._handle(topic, stamp, payload)
+                    self._handle(topic, stamp, payload, samples)
+                self._identify(samples)
 
         return on_messages
 
     def _on_message(self, topic: str, msg, stamped: bool) -> None:
+        samples: list = []
         with self._lock:
-            self._handle(topic, stamp_ns(msg) if stamped else None, msg)
+            self._handle(topic, stamp_ns(msg) if stamped else None, msg, samples)
+            self._identify(samples)
 
-    def _handle(self, topic: str, stamp: int | None, payload) -> None:
-        """Align, sample and identify one message (the caller holds the lock).
+    def _identify(self, samples: list) -> None:
+        """Give the ARX the samples of one message or burst, in order (the caller holds the lock).
+
+        One compiled call for them all (``OnlineArx.update_many``); if one is
+        refused (not finite) they are given one at a time, the refused counted.
+        """
+        if not samples:
+            return
+        arx = self.identifier.arx
+        try:
+            errors = arx.update_many(
+                np.array([y for y, _ in samples]), np.array([u for _, u in samples])
+            )
+        except ValueError:
+            for y, u in samples:
+                try:
+                    self.last_error = arx.update(y, u)
+                except ValueError:
+                    self.rejected += 1
+            return
+        self.last_error = errors[-1]
+
+    def _handle(self, topic: str, stamp: int | None, payload, samples: list) -> None:
+        """Align and sample one message; append the samples it completes (caller holds the lock).
 
         ``payload`` is the message, or the tuple of its field values
-        (:meth:`ChannelSampler.field_paths` order).
+        (:meth:`ChannelSampler.field_paths` order); ``samples`` gets each
+        completed sample inside the window as ``(y, u)``.
         """
-        sampler, arx = self.identifier.sampler, self.identifier.arx
+        sampler = self.identifier.sampler
         for name, (released_stamp, item) in self.aligner.add(topic, stamp, (stamp, payload)):
             if name in self.aligner.stamped:
                 self._stamp = released_stamp
@@ -488,13 +515,7 @@ class IdentifierNode(Node):
             ):
                 self.outside += 1  # its values stay held: the next sample's regressor
                 continue
-            try:
-                error = arx.update(*sample)
-            except ValueError:
-                self.rejected += 1
-                continue
-            if error is not None:
-                self.last_error = error
+            samples.append(sample)
 
     def _on_reset(self, _request, response):
         with self._lock:
