@@ -1,43 +1,44 @@
 """The whole closed-loop graph in real time: real-time factor, sensor-to-command latency, CPU.
 
-Issue 10, point 5. The graph: the simulator (``mode: realtime``, 5 kHz, V2,
-magnet free, coil dynamics, 0.1 mT noise, 0.098 mT steps, one sample of
-sensor delay), the estimator (KF), the controller (LQR), the identifier (its
-defaults: ARX 2 2 1 of sensor 0's Bx against ux) and the recorder (its
-default topics, an MCAP bag in a temporary directory, deleted after), in two
-layouts:
+Issue 10, point 5, on the graph of ``maglev-lab --realtime``: the simulator
+(``mode: realtime``, 5 kHz in bursts of 5 samples a millisecond, V2, magnet
+free, coil dynamics, 0.1 mT noise, 0.098 mT steps, one sample of sensor
+delay), the estimator (KF, an estimate per burst), the controller (LQR at
+1 kHz, ``trigger: estimate``), the identifier (the main job's: x and y field
+of sensor 0 against the pair commands, ARX 7 9 1 and 6 6 1) and the recorder
+(the main job's topics, an MCAP bag in a temporary directory, deleted after),
+in two layouts:
 
 ``composed``
     all five nodes in one process on the package's executor
-    (:func:`maglev_ros.nodes.runtime.run_nodes`: one EventsExecutor);
+    (:func:`maglev_ros.nodes.runtime.run_nodes`), as ``maglev-lab --realtime``
+    composes them: samples, estimates and commands handed over in the
+    simulator's thread, the identifier and the recorder on the publishers'
+    taps (``intra_process``; the LQR designs for 1 ms of latency);
 ``separate``
     one process per node, ``python -m maglev_ros.nodes.<node> --ros-args -p ...``
-    (what ``ros2 run`` starts; no install tree needed).
+    (what ``ros2 run`` starts; the LQR designs for 3 ms, as the launch file).
 
 Measured by an observer node in this script's process (its own executor
-thread; messages stored raw, with their arrival time):
+thread; messages stored raw, with their arrival time), on ``/clock`` (one a
+burst, stamped with its last sample: 1 kHz, so the observer costs the graph
+little), the estimates and the commands:
 
-* **real-time factor**: ``maglev/currents`` messages received over
-  ``--seconds`` of wall time, against the simulator's ``sample_rate`` (5000 Hz
-  unless overridden);
-* **sensor-to-command latency** (only while the graph keeps up: once more than
-  the 1000 samples the queues keep wait unanswered, nodes may have lost samples
-  and the latency is reported as not valid): for each command on
-  ``maglev/currents/command``, the time from the arrival (at the observer)
-  of the ``maglev/currents`` message of the sample it answers to the
-  command's arrival. The simulator starts paused and is resumed once every
-  node has matched its topics, so every node gets every sample from the
-  first and the controller answers each sample exactly once, in stamp order
-  (its contract): command ``j`` answers the ``j``-th sample. The script
-  checks the counts agree;
+* **real-time factor**: simulated time (the ``/clock`` stamps) over wall
+  time, over ``--seconds``;
+* **sensor-to-command latency**: for each command, from the arrival of the
+  ``/clock`` of the burst it answers (published before the burst's samples)
+  to the command's arrival. The controller answers each estimate once, in
+  order: command j answers estimate j, whose stamp names the burst. Commands
+  carry no stamp: the pairing is by count and is reported not valid when the
+  counts differ (the controller skipped estimates);
 * **the baseline, in the same run**: a bare rclpy ping-pong in the same
   layout and executor kind -- a pinger publishing stamped JointState
-  messages at the simulator's ``sample_rate`` in bursts as the simulator
-  paces them (``pace_period``, 1 ms), two echo nodes relaying each message (``bench/ping`` ->
-  ``bench/echo`` -> ``bench/pong``, as currents -> estimate -> command) --
-  with the latency measured the same way (ping arrival to pong arrival,
-  matched by stamp). Printed: the ratio of the loop's median and 99th
-  percentile to the ping-pong's (target: within 2x);
+  messages at the simulator's ``sample_rate`` in 1 ms bursts, two echo nodes
+  relaying each message (``bench/ping`` -> ``bench/echo`` -> ``bench/pong``,
+  as samples -> estimate -> command) -- with the latency measured the same
+  way (ping arrival to pong arrival, matched by stamp). Printed: the ratio of
+  the loop's median and 99th percentile to the ping-pong's (target: within 2x);
 * **CPU** of each process from ``/proc`` over the window, in % of one core;
   for the composed process also per thread (the simulator's stepping
   thread, the executor's, DDS's).
@@ -62,6 +63,7 @@ import argparse
 import json
 import os
 import shutil
+import struct
 import sys
 import tempfile
 import time
@@ -120,6 +122,7 @@ GRAPH_PARAMETERS = {
         'initial_covariance': 1e10,
         'trigger': field_topic(0),
         'complete_on_next': True,
+        'publish_rate': 1.0,
     },
     # the main job's recording (path: a temporary directory)
     'recorder': {
@@ -142,6 +145,7 @@ LAYOUT_PARAMETERS = {
     'separate': {'controller': {'command_delay': 3}},
 }
 _PROFILE_ENV = 'CLOSED_LOOP_PROFILE'  # composed child: cProfile dump path
+_TRACE_ENV = 'CLOSED_LOOP_TRACE'  # composed child: _LoopTrace file
 PING, ECHO, PONG = 'bench/ping', 'bench/echo', 'bench/pong'
 _PINGPONG = ('pinger', 'echo_1', 'echo_2')
 
@@ -222,8 +226,55 @@ def _node_classes():
     return classes, errors
 
 
+class _LoopTrace:
+    """Times ``/clock`` and the commands in the composed process, on their taps.
+
+    Both are handed over in the simulator's thread, in order: a burst's
+    ``/clock`` (stamped with its last sample) before its samples, its command
+    after them; a command's burst is the latest ``/clock`` before it. No
+    middleware is involved, so the measurement costs the graph about a
+    microsecond a message (an observer subscribing in another process made
+    every ``/clock`` and command cost the simulator's thread 25-75 us to
+    publish).
+    """
+
+    def __init__(self) -> None:
+        self.clock: list[tuple[int, int]] = []  # (monotonic ns, stamp ns)
+        self.commands: list[int] = []  # monotonic ns
+        self._unpack = struct.Struct('<iI').unpack_from
+        self._taps = []
+
+    def attach(self, context) -> None:
+        """Listen to the ``/clock`` and command taps of ``context``'s nodes."""
+        from maglev_ros.nodes import intra_process
+
+        for topic, listener in ((CLOCK_TOPIC, self._on_clock), (COMMAND_TOPIC, self._on_command)):
+            tap = intra_process.tap(context, '/' + topic.lstrip('/'))
+            tap.connect(listener, 'closed_loop_trace')
+            self._taps.append((tap, listener))
+
+    def _on_clock(self, messages: list) -> None:
+        now = time.monotonic_ns()
+        for data in messages:
+            sec, nanosec = self._unpack(data, 4)
+            self.clock.append((now, sec * 1_000_000_000 + nanosec))
+
+    def _on_command(self, messages: list) -> None:
+        self.commands.append(time.monotonic_ns())
+
+    def save(self, path: str) -> None:
+        """Disconnect and write the times to ``path`` (``.npz``)."""
+        for tap, listener in self._taps:
+            tap.disconnect(listener)
+        clock = np.array(self.clock, dtype=np.int64).reshape(-1, 2)
+        np.savez(path, clock=clock, commands=np.array(self.commands, dtype=np.int64))
+
+
 def composed_graph_child(values: dict[str, dict]) -> int:
     """Run the five graph nodes in this process on one executor until SIGINT.
+
+    With ``CLOSED_LOOP_TRACE`` set, :class:`_LoopTrace` times the loop and
+    writes its figures there at the end.
 
     Parameters
     ----------
@@ -235,25 +286,71 @@ def composed_graph_child(values: dict[str, dict]) -> int:
     from maglev_ros.nodes.runtime import run_nodes
 
     classes, errors = _node_classes()
+    trace = _LoopTrace()
 
     def build(node):
         overrides = [Parameter(k, value=v) for k, v in values[node].items()]
-        return lambda: classes[node](parameter_overrides=overrides)
+
+        def make():
+            made = classes[node](parameter_overrides=overrides)
+            if node == 'identifier':  # the last: the simulator's and controller's taps exist
+                trace.attach(made.context)
+                import gc
+
+                gc.freeze()
+            return made
+
+        return make
 
     # the recorder first: destroyed last, once the nodes writing to it are gone
     order = ['recorder', 'simulator', 'estimator', 'controller', 'identifier']
+    factories = [build(n) for n in order]
     profile_path = os.environ.get(_PROFILE_ENV)
-    if not profile_path:
-        return run_nodes([build(n) for n in order], [sys.argv[0]], 'closed_loop', errors)
-    import cProfile
-
-    profiler = cProfile.Profile()  # the executor's (main) thread only
+    trace_path = os.environ.get(_TRACE_ENV)
     try:
-        return profiler.runcall(
-            run_nodes, [build(n) for n in order], [sys.argv[0]], 'closed_loop', errors
-        )
+        if not profile_path:
+            return run_nodes(factories, [sys.argv[0]], 'closed_loop', errors)
+        import cProfile
+
+        profiler = cProfile.Profile()  # the executor's (main) thread only
+        try:
+            return profiler.runcall(run_nodes, factories, [sys.argv[0]], 'closed_loop', errors)
+        finally:
+            profiler.dump_stats(profile_path)
     finally:
-        profiler.dump_stats(profile_path)
+        if trace_path:
+            trace.save(trace_path)
+
+
+def traced_figures(path: Path, t0: int, t1: int) -> tuple[float, np.ndarray, int]:
+    """Real-time factor and sensor-to-command latencies of a :class:`_LoopTrace` file.
+
+    Parameters
+    ----------
+    path : Path
+        The trace (``.npz``).
+    t0, t1 : int
+        The measured window, monotonic ns.
+
+    Returns
+    -------
+    rtf : float
+        Simulated over wall time of the bursts in the window.
+    latency : ndarray of int
+        ns from each command's burst (its ``/clock``) to the command, for the
+        commands in the window.
+    bursts : int
+        Bursts in the window.
+    """
+    with np.load(path) as data:
+        clock, commands = data['clock'], data['commands']
+    inside = (clock[:, 0] >= t0) & (clock[:, 0] < t1)
+    times, stamps = clock[inside, 0], clock[inside, 1]
+    rtf = float(np.ptp(stamps) / max(np.ptp(times), 1)) if times.size > 1 else 0.0
+    commands = commands[(commands >= t0) & (commands < t1)]
+    burst = np.searchsorted(clock[:, 0], commands, side='right') - 1
+    latency = commands[burst >= 0] - clock[burst[burst >= 0], 0]
+    return rtf, latency, int(times.size)
 
 
 def print_profile(path: Path, top: int = 12) -> None:
@@ -396,24 +493,21 @@ class Observer:
         """The last stream's messages."""
         return self.received[-1]
 
-    def stamps(self, messages, stream: int = 0) -> np.ndarray:
-        """Header stamps of raw messages of a stream's (stamped) type, ns.
+    @staticmethod
+    def stamps(messages) -> np.ndarray:
+        """Stamps of raw stamped messages (a header's, or a ``/clock``'s time), ns.
 
         Parameters
         ----------
         messages : list of (int, bytes)
-            Arrival time and raw message.
-        stream : int
-            Which stream's type they are.
+            Arrival time and raw message: the stamp follows the CDR header.
         """
-        from rclpy.serialization import deserialize_message
-
-        from maglev_ros.nodes.messages import stamp_ns
-
-        cls = self.types[stream]
-        return np.array(
-            [stamp_ns(deserialize_message(d, cls)) for _, d in messages], dtype=np.int64
-        )
+        unpack = struct.Struct('<iI').unpack_from
+        out = np.empty(len(messages), dtype=np.int64)
+        for i, (_, data) in enumerate(messages):
+            sec, nanosec = unpack(data, 4)
+            out[i] = sec * 1_000_000_000 + nanosec
+        return out
 
     def close(self) -> None:
         """Stop spinning and shut the observer's context down."""
@@ -491,7 +585,7 @@ def sensor_to_command(
     Parameters
     ----------
     arrival, stamps : ndarray of int, shape (N,)
-        Arrival time (ns, monotonic) and stamp (ns) of each ``maglev/currents`` sample.
+        Arrival time (ns, monotonic) and stamp (ns) of each ``/clock`` (one a burst).
     estimate_stamps : ndarray of int, shape (M,)
         Stamps of the estimates received, in arrival order.
     command_arrival : ndarray of int, shape (C,)
@@ -530,10 +624,11 @@ def sensor_to_command(
 #: per layout, the subscribers each topic must have before the simulator resumes
 #: (the observer's own counted)
 SUBSCRIBERS = {
-    'composed': {CURRENTS_TOPIC: 1, COMMAND_TOPIC: 1},
+    'composed': {COMMAND_TOPIC: 1},  # the observer, until the first command
     'separate': {  # + recorder, identifier; estimator
         field_topic(0): 3,
-        CURRENTS_TOPIC: 3,  # observer, estimator, recorder
+        CURRENTS_TOPIC: 2,  # estimator, recorder
+        CLOCK_TOPIC: 2,  # observer, recorder
         COMMAND_TOPIC: 4,  # observer, simulator, identifier, recorder
     },
 }
@@ -544,8 +639,8 @@ def run_graph(
     commands: list[list[str]],
     env: dict,
     seconds: float,
-    rate: float,
     subscribers: dict[str, int],
+    trace: Path | None = None,
 ) -> dict:
     """Run the graph, resume the simulator once matched, measure; print and return figures.
 
@@ -559,24 +654,31 @@ def run_graph(
         Their environment.
     seconds : float
         s of wall time measured.
-    rate : float
-        Samples (pings) per second expected, Hz.
     subscribers : dict
         Topic -> subscribers it must have matched before the simulator resumes.
+    trace : Path, optional
+        The composed layout: the figures come from the process's own
+        :class:`_LoopTrace` written there (``CLOSED_LOOP_TRACE``); the observer
+        only waits for the first command, then unsubscribes.
     """
     from nav_msgs.msg import Odometry
-    from sensor_msgs.msg import JointState
+    from rosgraph_msgs.msg import Clock
     from std_msgs.msg import Float64MultiArray
     from std_srvs.srv import SetBool
 
     from maglev_ros import topics
     from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 
-    observer = Observer(
-        (topics.CURRENTS_TOPIC, JointState, SENSOR_QOS),
-        (topics.ESTIMATE_TOPIC, Odometry, SENSOR_QOS),
-        (topics.COMMAND_TOPIC, Float64MultiArray, LOCKSTEP_COMMAND_QOS),
-    )
+    command_stream = (topics.COMMAND_TOPIC, Float64MultiArray, LOCKSTEP_COMMAND_QOS)
+    if trace is None:
+        observer = Observer(  # /clock: once per burst, stamped with its last sample
+            (topics.CLOCK_TOPIC, Clock, SENSOR_QOS),
+            (topics.ESTIMATE_TOPIC, Odometry, SENSOR_QOS),
+            command_stream,
+        )
+    else:
+        observer = Observer(command_stream)
+        env = env | {_TRACE_ENV: str(trace)}
     node = observer.node
     procs = Processes(commands, env)
     try:
@@ -598,31 +700,45 @@ def run_graph(
         future = client.call_async(SetBool.Request(data=False))
         _wait(future.done, 'the simulator to resume', procs, 30.0)
         _wait(lambda: len(observer.answers) > 0, 'the first command', procs, 60.0)
+        if trace is not None:  # nothing published to another process from here on
+            for sub in list(node.subscriptions):
+                node.destroy_subscription(sub)
         time.sleep(1.0)  # steady
         print(f'{label}: running {seconds:g} s ...', flush=True)
         t0, t1, names, cpu, threads = _window(procs, seconds, observer)
-        samples, estimates, answers = (list(r) for r in observer.received)
+        received = [list(r) for r in observer.received]
     finally:
         procs.stop()
         observer.close()
     wall = (t1 - t0) * 1e-9
-    arrival = np.array([t for t, _ in samples], dtype=np.int64)
-    stamps = observer.stamps(samples)
-    estimate_stamps = observer.stamps(estimates, 1)
-    command_arrival = np.array([t for t, _ in answers], dtype=np.int64)
     crashed = any('crashed' in line for line in procs.lines)
-    in_window = (arrival >= t0) & (arrival < t1)
-    rtf = int(in_window.sum()) / (rate * wall)
-    # the controller's zero commands while it waits for a first estimate pair with none
-    first = estimates[0][0] if estimates else t1
-    command_arrival = command_arrival[command_arrival >= first]
-    latency, why = sensor_to_command(arrival, stamps, estimate_stamps, command_arrival, t0, t1)
+    if trace is not None:
+        if not trace.exists():
+            raise SystemExit(f'{label}: no trace written; output:\n{procs.tail()}')
+        rtf, latency, bursts = traced_figures(trace, t0, t1)
+        why = None if latency.size else 'no command in the window'
+        counts = f'{bursts} bursts, {latency.size} commands (timed in the process)'
+    else:
+        samples, estimates, answers = received
+        arrival = np.array([t for t, _ in samples], dtype=np.int64)
+        stamps = observer.stamps(samples)
+        in_window = (arrival >= t0) & (arrival < t1)
+        times, span = arrival[in_window], stamps[in_window]
+        rtf = float(np.ptp(span) / max(np.ptp(times), 1)) if times.size > 1 else 0.0
+        command_arrival = np.array([t for t, _ in answers], dtype=np.int64)
+        # the controller's zero commands while it waits for a first estimate pair with none
+        first = estimates[0][0] if estimates else t1
+        command_arrival = command_arrival[command_arrival >= first]
+        latency, why = sensor_to_command(
+            arrival, stamps, observer.stamps(estimates), command_arrival, t0, t1
+        )
+        counts = (
+            f'{int(in_window.sum())} bursts, {len(estimates)} estimates, {len(answers)} commands'
+        )
     med, p99 = _percentiles(latency) if why is None else (float('nan'), float('nan'))
     print(
-        f'{label}: {int(in_window.sum())} samples in {wall:.1f} s = real-time factor {rtf:.3f}; '
-        f'{len(estimates)} estimates, {len(answers)} commands; sensor-to-command latency '
-        f'median {med:.0f} us, 99th percentile {p99:.0f} us ({latency.size} commands); '
-        f'crashed {crashed}'
+        f'{label}: real-time factor {rtf:.3f} over {wall:.1f} s ({counts}); sensor-to-command '
+        f'latency median {med:.0f} us, 99th percentile {p99:.0f} us; crashed {crashed}'
     )
     if why is not None:
         print(f'    latency not valid: {why}')
@@ -665,8 +781,8 @@ def run_pingpong(
         procs.stop()
         observer.close()
     wall = (t1 - t0) * 1e-9
-    sent = dict(zip(observer.stamps(pings).tolist(), (t for t, _ in pings), strict=True))
-    back = [(t, s) for (t, _), s in zip(pongs, observer.stamps(pongs).tolist(), strict=True)]
+    sent = dict(zip(Observer.stamps(pings).tolist(), (t for t, _ in pings), strict=True))
+    back = [(t, s) for (t, _), s in zip(pongs, Observer.stamps(pongs).tolist(), strict=True)]
     latency = np.array(
         [t - sent[s] for t, s in back if t0 <= t < t1 and s in sent], dtype=np.int64
     )
@@ -747,7 +863,12 @@ def main() -> int:
                 graph_env = env | {_PROFILE_ENV: str(tmp / 'composed.prof')}
             results[layout] = (
                 run_graph(
-                    f'graph {layout}', graph, graph_env, args.seconds, rate, SUBSCRIBERS[layout]
+                    f'graph {layout}',
+                    graph,
+                    graph_env,
+                    args.seconds,
+                    SUBSCRIBERS[layout],
+                    tmp / 'trace.npz' if layout == 'composed' else None,
                 ),
                 run_pingpong(f'ping-pong {layout}', pingpong, env, args.seconds, rate),
             )

@@ -31,6 +31,7 @@ topics, and the recorder would log them at the previous ``/clock``.
 
 from __future__ import annotations
 
+import gc
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
@@ -390,6 +391,7 @@ def run_closed_loop_lab(
                     sensor_quantization=s.quantization,
                     seed=s.seed,
                     mode='realtime' if rt else 'lockstep',
+                    pace_period=1.0 / s.control_rate,  # real time: one burst per command
                     start_paused=True,
                     sensors=list(range(len(make_model(s.params).params.sensors))),
                     marker_rate=0.0,
@@ -621,6 +623,9 @@ def _run_realtime(lab, s, sim, ctrl, ident, recorder, topics, report, stop) -> L
         'the simulator, estimator, controller, identifier and recorder',
         stop=stop,
     )
+    # what start-up made stays out of the collector's way: a full collection of it
+    # (~0.1 s) in the middle of the run would stall the loop's thread
+    gc.freeze()
     # one burst beyond the window: the identifier completes a sample at the next one
     sim.pause_after(last + sim.session.burst)
     sim.set_paused(False)

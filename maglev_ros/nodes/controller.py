@@ -386,6 +386,7 @@ class ControllerNode(Node):
             2 if self.lqr else self.n_sensors + 1, round(cfg.controller.input_timeout * 1e9)
         )
         self._last_level = 'OK'
+        self._status_key: tuple | None = None  # what the core's level depends on
         self._last_sample_ns: int | None = None  # node clock at the last sample message
         self._pending = np.zeros(model.n_inputs)  # delay_commands: computed, not yet sent
         self._command_prefix = float_array_prefix(model.n_inputs)  # + the currents' bytes
@@ -474,13 +475,25 @@ class ControllerNode(Node):
         values = [float(v) for v in command]
         # serialised here (template + 4 doubles): rclpy's message object cost ~3x the bytes
         data = self._command_prefix + self._pack(*values)
-        self._pub.publish(data)
+        if self._command_input is None or self._pub.get_subscription_count():
+            self._pub.publish(data)  # composed: only for subscribers (the simulator has it)
         if self._command_tap.listeners:  # a composed recorder or identifier
             self._command_tap.deliver([data])
         if self._command_input is not None:  # intra_process: the simulator, directly
             self._command_input(values)
         self.commands += 1
-        status = self.controller.status()
+        c = self.controller  # status() only when what its level depends on changed
+        key = (
+            getattr(c, 'lost', None),
+            getattr(c, 'magnet_present', None),
+            c.watchdog.safe,
+            c.enabled,
+            c.active,
+        )
+        if key == self._status_key:
+            return
+        self._status_key = key
+        status = c.status()
         if status.level != self._last_level:
             self._last_level = status.level
             if status.level == 'ERROR':
@@ -572,7 +585,9 @@ class ControllerNode(Node):
 
     def _on_estimate_values(self, stamp: int, x: np.ndarray) -> None:
         """intra_process: one command per estimate, in the estimator's thread."""
-        self._last_sample_ns = self._last_estimate_ns = self.get_clock().now().nanoseconds
+        clock = self.get_clock()  # its time without a Time object (1 us, not 3) unless sim time
+        now = clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns()
+        self._last_sample_ns = self._last_estimate_ns = now
         self._estimates_seen = True
         with self._lock:
             self._send(stamp, self.controller.command(stamp * 1e-9, x))

@@ -398,7 +398,10 @@ class EstimatorNode(Node):
         every = self.config.publish_every
         if every > 1 and round(stamp / self._period_ns) % every:
             return  # not a publishing sample (publish_rate)
-        self._pub.publish(self._encoder.encode(stamp, x, p))
+        if self.estimates is None or self._pub.get_subscription_count():
+            # composed (intra_process), an estimate nobody subscribes to is neither
+            # serialised nor published (volatile: no late subscriber could get it)
+            self._pub.publish(self._encoder.encode(stamp, x, p))
         self.published += 1
         if self.estimates is not None and self.estimates.listeners:
             self.estimates.deliver(stamp, x)
