@@ -444,8 +444,9 @@ def run_closed_loop_lab(
             )
         )
         first_s, last_s = (settle_n + 1) / s.sample_rate, last / s.sample_rate
+        # both clocks: the identifier and the recorder take every topic from its
+        # publisher's tap (no middleware hop, no executor callback per message)
         realtime_identifier = dict(
-            intra_process=True,
             trigger=field_topic(0),  # every sample, the commands held
             complete_on_next=True,  # a command answering a sample is its input
             identify_from=first_s,
@@ -462,13 +463,16 @@ def run_closed_loop_lab(
                     nk=list(s.identifier_orders[2]),
                     initial_covariance=s.initial_covariance,
                     publish_rate=1.0,
+                    intra_process=True,
                     **(realtime_identifier if rt else {}),
                 ),
             )
         )
-        recording = dict(record_from=first_s, log_clock='topic')  # the first recorded sample
-        if rt:  # taken in the simulator's thread, logged at the samples' stamps
-            recording.update(record_until=last_s, log_clock='stamp', intra_process=True)
+        # from the first recorded sample, logged at the samples' stamps (a command at
+        # the newest: the sample it follows); real time: to the last, the loop runs on
+        recording = dict(record_from=first_s, log_clock='stamp', intra_process=True)
+        if rt:
+            recording.update(record_until=last_s)
         recorder = lab.add(
             RecorderNode(
                 context=ctx,
@@ -552,16 +556,10 @@ def _run_lockstep(
     settle_n = s.settle_samples
     last = settle_n + s.samples
     publishers = {  # topic: (publisher node, subscriptions it must have matched)
-        **{
-            field_topic(k): (sim, 1 + (k in s.sensors) + (k == 0))  # estimator, recorder,
-            for k in sim.sensors  # identifier
-        },
-        CURRENTS_TOPIC: (sim, 3),  # estimator, controller, recorder
-        TRUE_STATE_TOPIC: (sim, 1),  # the recorder
-        CLOCK_TOPIC: (sim, 1),
+        **{field_topic(k): (sim, 1) for k in sim.sensors},  # the estimator
+        CURRENTS_TOPIC: (sim, 2),  # estimator, controller
         ESTIMATE_TOPIC: (est, 1),
-        COMMAND_TOPIC: (ctrl, 3),  # simulator, identifier, recorder
-        EXCITATION_TOPIC: (ctrl, 1),
+        COMMAND_TOPIC: (ctrl, 1),  # the simulator (identifier, recorder: its tap)
     }
     lab.wait_until(
         lambda: (
