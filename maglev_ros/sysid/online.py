@@ -158,36 +158,6 @@ def _all_finite(x: np.ndarray) -> bool:  # pragma: no cover - numba
 
 
 @njit(cache=True)
-def _update_one(
-    y: np.ndarray,
-    u: np.ndarray,
-    yh: np.ndarray,
-    uh: np.ndarray,
-    P: np.ndarray,
-    theta: np.ndarray,
-    layout: np.ndarray,
-    index: np.ndarray,
-    updates: np.ndarray,
-    fit_y: np.ndarray,
-    fit_e: np.ndarray,
-    samples: int,
-    lam: float,
-    wait: bool,
-) -> np.ndarray:  # pragma: no cover - numba
-    """Check and add one sample (see :func:`_advance`); return the errors (ny,).
-
-    Non-finite ``y`` or ``u``: nothing is changed and an empty array is returned.
-    """
-    if not (_all_finite(y) and _all_finite(u)):
-        return np.empty(0)
-    errors = np.empty(yh.shape[0])
-    _advance(
-        y, u, yh, uh, P, theta, layout, index, updates, fit_y, fit_e, samples, lam, wait, errors
-    )
-    return errors
-
-
-@njit(cache=True)
 def _update_many(
     Y: np.ndarray,
     U: np.ndarray,
@@ -415,11 +385,12 @@ class OnlineArx:
             if not (np.all(np.isfinite(y)) and np.all(np.isfinite(u))):
                 raise self._finite_error(y, u)
             return self._update_window(y, u)
-        errors = _update_one(
-            y, u, *self._state, self.samples, self.forgetting, self.wait_for_history
+        E = _update_many(  # a burst of one: the same compiled step as update_many
+            y[None], u[None], *self._state, self.samples, self.forgetting, self.wait_for_history
         )
-        if errors.shape[0] == 0:
+        if E.shape[0] == 0:
             raise self._finite_error(y, u)
+        errors = E[0]
         self._last_error = errors
         self.samples += 1
         return errors
