@@ -591,14 +591,7 @@ def _run_lockstep(
     _wait_paused(lab, sim, ctrl, last, 'recording', report, stop, first=settle_n)
     wall = time.monotonic() - wall
     recorded = sim.sim.samples - settle_n
-    lab.wait_until(
-        lambda: (
-            all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)
-            and ident.samples >= recorded
-        ),
-        'the recorder and the identifier',
-        stop=stop,
-    )
+    _wait_recorded(lab, recorder, ident, topics, recorded, stop)
     return _lab_run(s, sim, ctrl, ident, recorded, wall)
 
 
@@ -644,16 +637,22 @@ def _run_realtime(lab, s, sim, ctrl, ident, recorder, topics, report, stop) -> L
     )  # fmt: skip
     wall_s = time.monotonic() - (wall[1] or wall[0])
     recorded = min(sim.sim.samples, last) - settle_n
+    # /clock goes once a burst, commands and excitation once a command
     per_sample = [t for t in topics if t not in (CLOCK_TOPIC, COMMAND_TOPIC, EXCITATION_TOPIC)]
+    _wait_recorded(lab, recorder, ident, per_sample, recorded, stop)
+    return _lab_run(s, sim, ctrl, ident, recorded, wall_s)
+
+
+def _wait_recorded(lab, recorder, ident, topics, recorded: int, stop) -> None:
+    """Wait for ``recorded`` messages of each topic in the bag and as many identifier samples."""
     lab.wait_until(
         lambda: (
-            all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in per_sample)
+            all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)
             and ident.samples >= recorded
         ),
         'the recorder and the identifier',
         stop=stop,
     )
-    return _lab_run(s, sim, ctrl, ident, recorded, wall_s)
 
 
 def _subscription_counts(node) -> list[int]:
