@@ -92,6 +92,7 @@ from maglev_ros.nodes.messages import diagnostic_array, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer, number
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.sysid.online import load_kernels
 from maglev_ros.topics import (
     DIAGNOSTICS_TOPIC,
     FIELD_MESSAGE_TYPE,
@@ -233,11 +234,13 @@ PARAMETERS = ParameterTable(
             'sample stamp from which samples are given to the ARX, s (0: all; earlier '
             'samples still set the held values)',
             check=number(0),
+            mutable=True,
         ),
         'identify_until': Param(
             0.0,
             'sample stamp after which samples are not given to the ARX, s (0: no end)',
             check=number(0),
+            mutable=True,
         ),
         'intra_process': Param(
             False,
@@ -380,7 +383,10 @@ class IdentifierNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.config = cfg = build_config(PARAMETERS.declare(self))
+        # the window may move at run time (a lab sets it once the settling is over)
+        self.add_on_set_parameters_callback(PARAMETERS.on_set(self, build_config))
         self.identifier = ident = build_identifier(cfg)
+        load_kernels()  # now, not with the first sample in a publisher's real-time thread
         kinds = {topic: message_type_of(topic) for topic in ident.topics}
         classes = {topic: _message_class(kind) for topic, kind in kinds.items()}
         stamped = {t for t, cls in classes.items() if hasattr(cls, 'header')}
@@ -390,8 +396,6 @@ class IdentifierNode(Node):
         self.rejected = 0  # samples the ARX refused (non-finite values)
         self.outside = 0  # samples outside identify_from .. identify_until
         self.last_error: np.ndarray | None = None
-        self._from_ns = round(cfg.identify_from * 1e9)
-        self._until_ns = round(cfg.identify_until * 1e9) or None
         self._stamp: int | None = None  # stamp of the newest stamped message released
         # taps deliver in their publishers' threads, the executor runs the rest
         self._lock = threading.Lock()
@@ -427,6 +431,20 @@ class IdentifierNode(Node):
             f'recursive ARX {" ".join(outs)} <- {" ".join(ins)}, na {list(cfg.na)} nb '
             f'{list(cfg.nb)} nk {list(cfg.nk)}, forgetting {cfg.forgetting:g}, sample on '
             f'{ident.sampler.trigger} (stamped: {", ".join(sorted(stamped)) or "none"})'
+        )
+
+    @property
+    def config(self) -> IdentifierConfig:
+        """The validated parameters (the window may be set at run time)."""
+        return self._config
+
+    @config.setter
+    def config(self, config: IdentifierConfig) -> None:
+        self._config = config
+        # sample stamps, ns: first and last identified (last None: no end)
+        self._window = (
+            round(config.identify_from * 1e9),
+            round(config.identify_until * 1e9) or None,
         )
 
     @property
@@ -509,9 +527,9 @@ class IdentifierNode(Node):
                 sample = sampler.add(name, item)
             if sample is None:
                 continue
+            first, last = self._window
             if self._stamp is not None and (
-                self._stamp < self._from_ns
-                or (self._until_ns is not None and self._stamp > self._until_ns)
+                self._stamp < first or (last is not None and self._stamp > last)
             ):
                 self.outside += 1  # its values stay held: the next sample's regressor
                 continue

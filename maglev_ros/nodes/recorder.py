@@ -48,7 +48,7 @@ from __future__ import annotations
 import struct
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from importlib import metadata as importlib_metadata
 from pathlib import Path
 
@@ -170,11 +170,13 @@ PARAMETERS = ParameterTable(
             'lockstep: a recording that starts at a given sample, its subscriptions already '
             'established)',
             check=number(0),
+            mutable=True,
         ),
         'record_until': Param(
             0.0,
             'log time after which messages are not written, s (0: no end)',
             check=number(0),
+            mutable=True,
         ),
         'intra_process': Param(
             False,
@@ -188,6 +190,14 @@ _PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
 def _absolute(topic: str) -> str:
     return topic if topic.startswith('/') else '/' + topic
+
+
+def _check_window(v: dict) -> None:
+    if v['record_until'] and v['record_until'] < v['record_from']:
+        raise RecorderParameterError(
+            f'record_until must be 0 (no end) or >= record_from {v["record_from"]:g}, '
+            f'got {v["record_until"]:g}'
+        )
 
 
 def build_config(values: dict) -> RecorderConfig:
@@ -212,11 +222,7 @@ def build_config(values: dict) -> RecorderConfig:
         raise RecorderParameterError(
             f'log_clock topic needs {CLOCK_TOPIC} among topics, got {list(v["topics"])}'
         )
-    if v['record_until'] and v['record_until'] < v['record_from']:
-        raise RecorderParameterError(
-            f'record_until must be 0 (no end) or >= record_from {v["record_from"]:g}, '
-            f'got {v["record_until"]:g}'
-        )
+    _check_window(v)
     path = v['path'] or time.strftime('maglev_%Y%m%d_%H%M%S')
     if Path(path).exists():
         raise RecorderParameterError(f'path must be a new directory, got {path!r} (exists)')
@@ -282,6 +288,8 @@ class RecorderNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self.config = cfg = build_config(PARAMETERS.declare(self))
+        # the window may move at run time (a lab sets it once the settling is over)
+        self.add_on_set_parameters_callback(PARAMETERS.on_set(self, self._with_window))
         meta = {
             'maglev_ros.version': package_version(),
             'recorder.storage': cfg.storage,
@@ -315,6 +323,23 @@ class RecorderNode(Node):
         self.get_logger().info(
             f'recording {len(cfg.topics)} topic(s) to {cfg.path} ({cfg.storage})'
         )
+
+    @property
+    def config(self) -> RecorderConfig:
+        """The validated parameters (``record_from``, ``record_until``: settable at run time)."""
+        return self._config
+
+    @config.setter
+    def config(self, config: RecorderConfig) -> None:
+        self._config = config
+        # log times, ns: first and last written (last None: no end)
+        self._window = (round(config.record_from * 1e9), round(config.record_until * 1e9) or None)
+
+    def _with_window(self, values: dict) -> RecorderConfig:
+        """Return the configuration with a new window (the only settable parameters)."""
+        v = PARAMETERS.validate(values)
+        _check_window(v)
+        return replace(self.config, record_from=v['record_from'], record_until=v['record_until'])
 
     @property
     def subscribed(self) -> list[str]:
@@ -400,8 +425,6 @@ class RecorderNode(Node):
         counts = self.counts
         log_clock = self.config.log_clock
         clock = self.get_clock()
-        start_ns = round(self.config.record_from * 1e9)
-        end_ns = round(self.config.record_until * 1e9) or None
         lock = self._write_lock
         held = self._held
 
@@ -423,6 +446,7 @@ class RecorderNode(Node):
                 stamp = clock.now().nanoseconds
             else:  # system time, as clock.now() gives it, without its Time object (3 us)
                 stamp = time.time_ns()
+            start_ns, end_ns = self._window
             if stamp < start_ns:
                 if log_clock == 'stamp' and not stamped:  # in force when the recording starts
                     held[topic] = (handle, data)

@@ -47,7 +47,13 @@ from .model import PolyModel
 from .orders import Orders, make_orders
 from .rls import rls_step
 
-__all__ = ['CoefficientLayout', 'IdentifierStatus', 'OnlineArx', 'coefficient_layout']
+__all__ = [
+    'CoefficientLayout',
+    'IdentifierStatus',
+    'OnlineArx',
+    'coefficient_layout',
+    'load_kernels',
+]
 
 
 def _check(forgetting: float, p0: float, window: int | None, fit_window: int) -> None:
@@ -655,3 +661,13 @@ def coefficient_layout(
                 dims.append((f'B[{ys[i]},{us[j]}] nb={n} nk={int(orders.nk[i, j])}', n, offset))
                 offset += n
     return CoefficientLayout(tuple(dims), theta.copy())
+
+
+def load_kernels() -> None:
+    """Load (or compile) the compiled update kernel now, with a throwaway estimate.
+
+    Loading takes 0.3 to 1.5 s holding the GIL: a process with a real-time
+    loop in another thread calls this before the loop runs, not with its first
+    sample.
+    """
+    OnlineArx(1, 1).update_many(np.zeros((2, 1)), np.zeros((2, 1)))

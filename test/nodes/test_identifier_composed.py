@@ -53,21 +53,27 @@ def reference_theta(pairs) -> np.ndarray:
     return arx.theta
 
 
-def test_identify_from_until_leave_out_the_samples_outside(ctx):
+@pytest.mark.parametrize('at_run_time', [False, True], ids=['parameters', 'set-at-run-time'])
+def test_identify_from_until_leave_out_the_samples_outside(ctx, at_run_time):
     n, first, last = 20, 5, 12  # samples k = 0..19; the window holds 5..12
     rng = np.random.default_rng(4)
     y, u = rng.standard_normal(n), rng.standard_normal(n)
+    window = dict(
+        identify_from=(T0_NS + first * DT_NS) / 1e9,  # inclusive bounds
+        identify_until=(T0_NS + last * DT_NS) / 1e9,
+    )
     ident = IdentifierNode(
         context=ctx,
         parameter_overrides=params(
             outputs=[topics.field_channel(0, 'x')],
             inputs=[topics.current_channel(0)],
             initial_covariance=P0,
-            identify_from=(T0_NS + first * DT_NS) / 1e9,  # inclusive bounds
-            identify_until=(T0_NS + last * DT_NS) / 1e9,
+            **(dict(identify_from=0.0, identify_until=1e-9) if at_run_time else window),
             **ORDERS,
         ),
     )
+    if at_run_time:  # a lab sets the window once it knows it (both bounds in one change)
+        assert ident.set_parameters_atomically(params(**window)).successful
     peer = rclpy.create_node('identifier_window_peer', context=ctx)
     field_pub = peer.create_publisher(MagneticField, topics.field_topic(0), SENSOR_QOS)
     current_pub = peer.create_publisher(JointState, topics.CURRENTS_TOPIC, SENSOR_QOS)
@@ -103,6 +109,17 @@ def test_a_window_that_ends_before_it_starts_is_refused(ctx):
         IdentifierNode(
             context=ctx, parameter_overrides=params(identify_from=2.0, identify_until=1.0)
         )
+    ident = IdentifierNode(context=ctx, parameter_overrides=params(identify_until=3.0))
+    try:  # at run time: refused with the reason, the window unchanged
+        result = ident.set_parameters_atomically(params(identify_from=4.0))
+        assert not result.successful and 'identify_until must be 0' in result.reason
+        assert ident.config.identify_from == 0.0 and ident.config.identify_until == 3.0
+        assert ident.set_parameters_atomically(params(identify_from=4.0, identify_until=0.0))
+        assert ident.config.identify_from == 4.0 and ident.config.identify_until == 0.0
+        result = ident.set_parameters_atomically(params(na=[3]))  # not settable
+        assert not result.successful and ident.config.na == (2,)  # the default
+    finally:
+        ident.destroy_node()
 
 
 def test_intra_process_taps_replace_the_subscriptions_and_pair_bursts(ctx):

@@ -14,6 +14,7 @@ with no subscription of its own on those topics.
 import struct
 
 import numpy as np
+import pytest
 from rclpy.parameter import Parameter
 from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
@@ -37,7 +38,8 @@ def _params(**values):
 class _BurstAnswerer:
     """Answers each simulated burst with one command, in the simulator's thread."""
 
-    def __init__(self, ctx, sim) -> None:
+    def __init__(self, ctx, sim, on_first=None) -> None:
+        self.on_first = on_first  # called with the first burst (in the simulator's thread)
         self.tap = intra_process.tap(ctx, '/' + COMMAND_TOPIC)
         self.tap.add_publisher(Float64MultiArray)
         self.prefix = float_array_prefix(4)
@@ -46,6 +48,9 @@ class _BurstAnswerer:
         self.source.connect(self.on_batch, 'test_commands')
 
     def on_batch(self, batch) -> None:
+        if self.on_first is not None:
+            self.on_first, on_first = None, self.on_first
+            on_first()
         last = int(batch.stamps_ns[-1])
         self.sent.append(last)
         self.tap.deliver([self.prefix + struct.pack('<4d', last * 1e-9, 0.0, 0.0, 0.0)])
@@ -55,14 +60,24 @@ class _BurstAnswerer:
         self.tap.remove_publisher()
 
 
-def test_composed_recorder_takes_the_taps_and_keeps_exactly_the_window(ctx, tmp_path):
+@pytest.mark.parametrize('at_run_time', [False, True], ids=['parameters', 'set-at-run-time'])
+def test_composed_recorder_takes_the_taps_and_keeps_exactly_the_window(ctx, tmp_path, at_run_time):
+    """With ``at_run_time`` the recorder starts with an empty window (1 ns at 0) and
+    the window is set while the simulator runs, from its thread, as a board lab does."""
     sim = SimulatorNode(
         context=ctx,
         parameter_overrides=_params(
             mode='realtime', magnet='fixed', start_paused=True, marker_rate=0.0, sensors=[0]
         ),
     )
-    answerer = _BurstAnswerer(ctx, sim)
+    window = dict(record_from=FIRST_S, record_until=LAST_S)
+    recorder = None
+
+    def set_window() -> None:
+        result = recorder.set_parameters_atomically(_params(**window))
+        assert result.successful, result.reason
+
+    answerer = _BurstAnswerer(ctx, sim, set_window if at_run_time else None)
     topics = [field_topic(0), CURRENTS_TOPIC, COMMAND_TOPIC, CLOCK_TOPIC]
     recorder = RecorderNode(
         context=ctx,
@@ -70,8 +85,7 @@ def test_composed_recorder_takes_the_taps_and_keeps_exactly_the_window(ctx, tmp_
             path=str(tmp_path / 'bag'),
             topics=topics,
             log_clock='stamp',
-            record_from=FIRST_S,
-            record_until=LAST_S,
+            **(dict(record_from=0.0, record_until=1e-9) if at_run_time else window),
             intra_process=True,
             metadata_node='',
         ),
@@ -115,6 +129,25 @@ def test_composed_recorder_takes_the_taps_and_keeps_exactly_the_window(ctx, tmp_
     stamps = first + PERIOD_NS * np.arange(n)
     held = np.array([max([s for s in answerer.sent if s <= t], default=-1) for t in stamps])
     np.testing.assert_allclose(u, held * 1e-9, rtol=0, atol=1e-12)  # u(t): answer to <= t
+
+
+def test_a_window_set_at_run_time_is_checked_and_keeps_the_bag(ctx, tmp_path):
+    recorder = RecorderNode(
+        context=ctx,
+        parameter_overrides=_params(
+            path=str(tmp_path / 'bag'), record_until=3.0, metadata_node=''
+        ),
+    )
+    try:  # the bag exists now: a change of the window does not check its path again
+        result = recorder.set_parameters_atomically(_params(record_from=4.0))
+        assert not result.successful and 'record_until must be 0' in result.reason
+        assert (recorder.config.record_from, recorder.config.record_until) == (0.0, 3.0)
+        assert recorder.set_parameters_atomically(_params(record_from=4.0, record_until=5.0))
+        assert (recorder.config.record_from, recorder.config.record_until) == (4.0, 5.0)
+        assert recorder.config.path == str(tmp_path / 'bag')
+        assert not recorder.set_parameters_atomically(_params(path='elsewhere')).successful
+    finally:
+        recorder.destroy_node()
 
 
 def test_window_and_log_clock_are_checked(tmp_path):
