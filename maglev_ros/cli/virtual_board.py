@@ -7,6 +7,7 @@ SIGTERM. Examples::
     maglev-virtual-board --sensors 3 --link /tmp/ttyMAGGY0
     maglev-virtual-board --firmware v4x --log-period 0.01
     maglev-virtual-board --plant physics --magnet fixed    # the physics core, 3 sensors
+    maglev-virtual-board --plant physics --magnet free --noise 1e-4 --quantization 0.098e-3
     maglev-virtual-board --plant mypkg.plants:make_plant   # factory(n_sensors)
 
 Exit status: 0 after a signal, 2 for bad arguments (one line on stderr).
@@ -51,6 +52,26 @@ def _seconds(text: str) -> float:
         raise argparse.ArgumentTypeError(f'expected seconds, got {text!r}') from None
     if not value >= 0 or value == float('inf'):
         raise argparse.ArgumentTypeError(f'must be finite and >= 0, got {text!r}')
+    return value
+
+
+def _nonnegative(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
+    if not 0 <= value < float('inf'):
+        raise argparse.ArgumentTypeError(f'must be finite and >= 0, got {text!r}')
+    return value
+
+
+def _nonnegative_int(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+    if value < 0:
+        raise argparse.ArgumentTypeError(f'must be >= 0, got {value}')
     return value
 
 
@@ -100,6 +121,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         '--clock-start', type=_clock, default=0, help='uint32 us clock at power-up (V2x)'
     )
+    parser.add_argument(
+        '--noise', type=_nonnegative, default=0.0, help='T rms per axis (physics; default 0)'
+    )
+    parser.add_argument(
+        '--quantization', type=_nonnegative, default=0.0, help='T per LSB (physics; 0: none)'
+    )
+    parser.add_argument(
+        '--sensor-delay', type=_nonnegative_int, default=0, help='samples (physics; default 0)'
+    )
+    parser.add_argument('--seed', type=int, default=0, help='seed of the sensor noise (physics)')
     parser.add_argument('--startup-delay', type=_seconds, default=2.0, help='s after open')
     parser.add_argument('--watchdog', type=_seconds, default=1.0, help='s (V2x)')
     parser.add_argument('--log-period', type=_seconds, default=1e-3, help='s per line (V4x)')
@@ -109,9 +140,14 @@ def build_parser() -> argparse.ArgumentParser:
 def _physics_plant(args: argparse.Namespace) -> SimulatorPlant:
     if args.firmware == 'v4x' and args.magnet == 'free':
         raise UsageError('--magnet free needs --firmware v2x (a V4x host cannot close the loop)')
+    from maglev_ros.physics import SensorEffects
+
     scaling = CurrentScaling.from_supply(args.supply_voltage, args.coil_resistance)
+    sensor = SensorEffects(
+        noise_rms=args.noise, quantization=args.quantization, delay_samples=args.sensor_delay
+    )
     try:
-        plant = make_simulator_plant(args.magnet, args.params, scaling)
+        plant = make_simulator_plant(args.magnet, args.params, scaling, sensor, args.seed)
     except (ValueError, OSError) as err:
         raise UsageError(f'--params {args.params!r}: {err}') from None
     if args.sensors is not None and args.sensors != plant.n_sensors:

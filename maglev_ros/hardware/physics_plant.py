@@ -78,6 +78,8 @@ def make_simulator_plant(
     magnet: str = 'fixed',
     params: str = 'maggy_v2',
     scaling: CurrentScaling | None = None,
+    sensor=None,
+    seed: int | None = None,
 ) -> SimulatorPlant:
     """Build a ``SimulatorPlant`` from a physics parameter set.
 
@@ -89,6 +91,10 @@ def make_simulator_plant(
         Preset name or YAML path of ``maglev_ros.physics.make_model``.
     scaling : CurrentScaling, optional
         PWM to current (default ``from_supply(12 V, 4 ohm)``, the driver's default).
+    sensor : maglev_ros.physics.SensorEffects, optional
+        Noise, quantisation and delay of the readings (default: ideal sensors).
+    seed : int, optional
+        Seed of the sensor noise.
 
     Returns
     -------
@@ -100,5 +106,7 @@ def make_simulator_plant(
     from maglev_ros.physics import Simulator, make_model  # heavy import: only when used
 
     model = make_model(params)
-    simulator = Simulator(model, sample_rate=1e6 / SAMPLE_PERIOD_US, magnet=magnet)
+    simulator = Simulator(
+        model, sample_rate=1e6 / SAMPLE_PERIOD_US, magnet=magnet, sensor=sensor, seed=seed
+    )
     return SimulatorPlant(simulator, scaling or CurrentScaling.from_supply(12.0, 4.0))

@@ -54,3 +54,20 @@ def test_firmware_streams_physics_fields(model):
     assert len(batch) == 50 and decoder.stats.dropped_bytes == 0
     expected = model.measurement(plant.simulator.state, np.zeros(4)) * 1e3
     np.testing.assert_array_equal(batch.field_mT[-1], expected.reshape(-1, 3).astype(np.float32))
+
+
+def test_sensor_effects_reach_the_readings(model):
+    """The sensors of maglev-virtual-board --noise --quantization --sensor-delay --seed."""
+    lsb = 0.098e-3  # T
+    sensor = physics.SensorEffects(noise_rms=1e-4, quantization=lsb, delay_samples=1)
+    plants = [
+        make_simulator_plant('fixed', 'maggy_v2', SCALING, sensor, seed) for seed in (3, 3, 4)
+    ]
+    readings = [np.array([p(np.zeros(4), 0.0) for _ in range(4000)]) for p in plants]
+    ideal = model.measurement(plants[0].simulator.state, np.zeros(4)).reshape(-1, 3) * 1e3
+    error = readings[0] - ideal  # mT
+    assert 0.09 < error.std() < 0.11  # 0.1 mT rms (plus the LSB's 0.028 mT), per axis
+    steps = readings[0] / (lsb * 1e3)
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)  # whole LSBs
+    np.testing.assert_array_equal(readings[0], readings[1])  # the seed fixes the noise
+    assert not np.array_equal(readings[0], readings[2])
