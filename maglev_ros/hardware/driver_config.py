@@ -64,6 +64,9 @@ class DriverConfig:
     read_interval : float
         Shortest time in s between reads of the port (0: read as soon as data
         arrives, every burst).
+    intra_process : bool
+        Hand the samples to nodes of the same process directly and take a
+        composed controller's commands (the node's ``intra_process``).
     """
 
     port: str
@@ -80,6 +83,7 @@ class DriverConfig:
     diagnostics_period: float
     confirm_records: bool = True
     read_interval: float = 0.0
+    intra_process: bool = False
 
 
 def driver_config(v: Mapping[str, object]) -> DriverConfig:
@@ -134,4 +138,5 @@ def driver_config(v: Mapping[str, object]) -> DriverConfig:
         diagnostics_period=v['diagnostics_period'],
         confirm_records=v['confirm_records'],
         read_interval=v['read_interval'],
+        intra_process=bool(v.get('intra_process', False)),
     )

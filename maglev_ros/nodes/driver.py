@@ -50,6 +50,14 @@ damage). ``read_interval`` > 0 reads the port at most that often (several
 1 ms bursts decoded and published per read): less CPU per record, up to that
 much more latency (``docs/benchmarks.md``, driver section).
 
+Composed (``intra_process: true``, :mod:`~maglev_ros.nodes.intra_process`):
+the driver hands each read's samples to an estimator of its process (created
+after it) in its I/O thread, takes the commands of a controller of its process
+directly (the command subscription is then dropped: one command source), and
+feeds the taps of composed recorders and identifiers; topics nobody
+subscribes to are then not published. The loop closes in the I/O thread:
+read, estimate, command, send, with no middleware hop (``maglev-lab --board``).
+
 QoS: sensor fields and currents are RELIABLE, KEEP_LAST 1000 (every sample
 must arrive for identification; 1000 samples = 0.2 s at 5 kHz); the command
 subscription is BEST_EFFORT, KEEP_LAST 10, which matches both reliable and
@@ -86,6 +94,7 @@ from maglev_ros.hardware.packet import WATCHDOG_S
 from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE
 from maglev_ros.hardware.serial_link import Backoff, SerialLink
 from maglev_ros.hardware.v2x_stream import DecoderStats
+from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
     DIAGNOSTICS_QOS,
@@ -234,6 +243,11 @@ PARAMETERS = ParameterTable(
             '0.002: two 1 ms bursts per read, less CPU, up to 2 ms more latency)',
             check=_read_interval,
         ),
+        'intra_process': Param(
+            False,
+            "hand the samples to an estimator of this process and take its controller's "
+            'commands directly, not through the middleware (composed loops)',
+        ),
     },
 )
 _PARAMETERS = PARAMETERS  # the name test_launch and older callers use
@@ -330,7 +344,14 @@ class DriverNode(Node):
         self._handles = [pub.handle for pub in self._field_pubs] + [self._current_pub.handle]
         self._publish_calls: dict[int, list] = {}  # per burst length: bound publish_raw calls
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
-        self.create_subscription(Float64MultiArray, COMMAND_TOPIC, self._on_command, COMMAND_QOS)
+        self._command_sub = self.create_subscription(
+            Float64MultiArray, COMMAND_TOPIC, self._on_command, COMMAND_QOS
+        )
+        self.samples_source: intra_process.Channel | None = None
+        self._intra: list = []
+        self._taps: list = []
+        if cfg.intra_process:
+            self._wire_in_process()
         self.create_service(SetBool, ENABLE_SERVICE, self._on_enable)
         self.create_timer(min(0.02, cfg.command_timeout / 4), self._check_timeout)
         self.create_timer(cfg.diagnostics_period, self._publish_diagnostics)
@@ -401,8 +422,12 @@ class DriverNode(Node):
         self.link.send(counts)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
+        self._take_command(msg.data)
+
+    def _take_command(self, values) -> None:
+        """Pass one command (currents, A) through the guard; send what it allows."""
         with self._lock:
-            decision = self.guard.command(msg.data, time.monotonic_ns())
+            decision = self.guard.command(values, time.monotonic_ns())
             if decision.counts is not None:
                 self._send(decision.counts)
         if decision.warning:
@@ -434,6 +459,67 @@ class DriverNode(Node):
         with self._lock:
             self._send(self.guard.zero)
 
+    # -- composition (intra_process) ---------------------------------------------
+
+    def _wire_in_process(self) -> None:
+        """Register the samples channel, the command sink and the topics' taps."""
+        n = self.config.n_sensors
+        self.samples_source = intra_process.Channel(tuple(range(n)))
+        self.samples_source.on_error = self._on_listener_error
+        sink = intra_process.CommandSink(self._take_command, self._command_source_attached)
+        self._intra = [
+            (self.resolve_topic_name(CURRENTS_TOPIC), self.samples_source),
+            (self.resolve_topic_name(COMMAND_TOPIC), sink),
+        ]
+        for topic, obj in self._intra:
+            intra_process.register(self.context, topic, obj)
+        # per sample: each field, then the currents (the serialiser's order)
+        topics = [field_topic(k) for k in range(n)] + [CURRENTS_TOPIC]
+        classes = [MagneticField] * n + [JointState]
+        for topic, cls in zip(topics, classes, strict=True):
+            found = intra_process.tap(self.context, self.resolve_topic_name(topic))
+            found.add_publisher(cls)
+            found.on_error = self._on_listener_error
+            self._taps.append(found)
+        self._sample_pubs = [*self._field_pubs, self._current_pub]
+
+    def _on_listener_error(self, name: str, err: Exception) -> None:
+        self.get_logger().error(
+            f'{name}: samples not taken in this process: {err}',
+            throttle_duration_sec=WARN_THROTTLE_S,
+        )
+
+    def _command_source_attached(self, name: str) -> None:
+        """Drop the command subscription: a controller of this process sends them directly."""
+        self.destroy_subscription(self._command_sub)
+        self._command_sub = None
+        self.get_logger().info(f'commands from {name} in this process (intra_process)')
+
+    def _hand_over(self, stamps: np.ndarray, values: np.ndarray) -> None:
+        """Composed: publish to subscribers, feed the taps, then the samples channel.
+
+        The taps (recorders, identifiers) get the samples before the estimator
+        does: the command that answers them then follows them, as from the
+        simulator.
+        """
+        active = [pub.get_subscription_count() > 0 for pub in self._sample_pubs]
+        tapped = [t.listeners > 0 for t in self._taps]
+        if any(active) or any(tapped):
+            messages = self._serialiser.serialise(stamps, values)
+            k = len(self._taps)
+            for i, (a, t) in enumerate(zip(active, tapped, strict=True)):
+                if a:
+                    publish = self._handles[i].publish_raw
+                    for message in messages[i::k]:
+                        publish(message)
+                if t:
+                    self._taps[i].deliver(messages[i::k])
+        if self.samples_source.listeners:
+            n_fields = 3 * self.config.n_sensors
+            self.samples_source.deliver(
+                intra_process.SampleBlock(stamps, values[:, :n_fields], values[:, n_fields:])
+            )
+
     # -- board I/O --------------------------------------------------------------
 
     def _io_loop(self) -> None:
@@ -447,6 +533,9 @@ class DriverNode(Node):
         Messages are serialised in one go (``SampleSerialiser``) and published
         as bytes; per sample, sensor fields first, then the currents.
         """
+        if self.samples_source is not None:
+            self._hand_over(stamps, values)
+            return
         n = stamps.shape[0]
         messages = self._serialiser.serialise(stamps, values)
         # Publisher.publish(bytes) checks the type and guards the handle per
@@ -491,6 +580,12 @@ class DriverNode(Node):
     def destroy_node(self) -> None:
         """Close the board link (zero currents first), then destroy the node."""
         self.close()
+        for topic, obj in self._intra:
+            intra_process.unregister(self.context, topic, obj)
+        self._intra = []
+        for found in self._taps:
+            found.remove_publisher()
+        self._taps = []
         super().destroy_node()
 
 

@@ -11,9 +11,10 @@ is intra-process communication (``use_intra_process_comms``): a publisher
 hands its message to the subscriptions of its own process directly. This
 module does the same for the closed loop's three streams:
 
-- the **simulator** registers a :class:`Channel` of its published sample
-  batches under the resolved name of its ``maglev/currents`` topic, and a
-  :class:`CommandSink` under ``maglev/currents/command``;
+- the **simulator** (or the board **driver**, ``intra_process: true``)
+  registers a :class:`Channel` of its published sample batches under the
+  resolved name of its ``maglev/currents`` topic, and a :class:`CommandSink`
+  under ``maglev/currents/command``;
 - the **estimator** (``intra_process: true``, created after the simulator)
   connects to the samples and registers a channel of its estimates under
   ``maglev/state/estimate``;
@@ -40,12 +41,46 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from dataclasses import dataclass
 
-__all__ = ['Channel', 'CommandSink', 'MessageTap', 'find', 'register', 'tap', 'unregister']
+import numpy as np
+
+__all__ = [
+    'Channel',
+    'CommandSink',
+    'MessageTap',
+    'SampleBlock',
+    'find',
+    'register',
+    'tap',
+    'unregister',
+]
 
 _lock = threading.Lock()
 _registry: dict[tuple[int, str], object] = {}
 _taps: dict[tuple[int, str], MessageTap] = {}
+
+
+@dataclass(frozen=True)
+class SampleBlock:
+    """Samples a sample :class:`Channel` delivers (what the simulator's batches also carry).
+
+    Attributes
+    ----------
+    stamps_ns : ndarray of int64, shape (n,)
+        Sample stamps, ns (ROS time).
+    readings : ndarray, shape (n, 3 K)
+        The fields of the channel's K sensors, T.
+    currents : ndarray, shape (n, 4)
+        Coil currents, A (x+ x- y+ y-).
+    """
+
+    stamps_ns: np.ndarray
+    readings: np.ndarray
+    currents: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.stamps_ns.shape[0])
 
 
 class Channel:
