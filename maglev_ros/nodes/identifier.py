@@ -440,6 +440,13 @@ class IdentifierNode(Node):
 
     @config.setter
     def config(self, config: IdentifierConfig) -> None:
+        """Store a validated configuration and its window.
+
+        Parameters
+        ----------
+        config : IdentifierConfig
+            The validated parameters.
+        """
         self._config = config
         # sample stamps, ns: first and last identified (last None: no end)
         self._window = (

@@ -331,6 +331,13 @@ class RecorderNode(Node):
 
     @config.setter
     def config(self, config: RecorderConfig) -> None:
+        """Store a validated configuration and its window.
+
+        Parameters
+        ----------
+        config : RecorderConfig
+            The validated parameters.
+        """
         self._config = config
         # log times, ns: first and last written (last None: no end)
         self._window = (round(config.record_from * 1e9), round(config.record_until * 1e9) or None)
