@@ -483,6 +483,9 @@ class IdentifierNode(Node):
                 decoded.append(read)
             samples: list = []
             with self._lock:
+                # a publisher hands over a whole read per topic (a board's may be long):
+                # its stamps wait for the other topics' messages, none is dropped
+                self.aligner.depth = max(self.aligner.depth, len(decoded) + 1)
                 for stamp, payload in decoded:
                     self._handle(topic, stamp, payload, samples)
                 self._identify(samples)

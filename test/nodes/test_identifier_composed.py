@@ -176,3 +176,47 @@ def test_intra_process_taps_replace_the_subscriptions_and_pair_bursts(ctx):
     u = {k: c[(k - 1) // per_burst + (k % per_burst == 0)] for k in range(1, n)}
     expected = reference_theta((y[k], u[k]) for k in range(1, n))
     np.testing.assert_allclose(ident.identifier.arx.theta, expected, rtol=1e-9)
+
+
+def test_a_long_read_of_two_stamped_topics_loses_no_sample(ctx):
+    """A board driver's read after a stall: 300 samples per topic, fields then currents.
+
+    Every stamp of the fields waits for its currents, whatever the read's length
+    (the aligner keeps at least a read's stamps), and is identified.
+    """
+    n = 300
+    rng = np.random.default_rng(6)
+    y, u = rng.standard_normal(n), rng.standard_normal(n)
+    publisher = rclpy.create_node('long_read_publisher', context=ctx)
+    names = {'field': FIELD_TOPIC, 'currents': '/' + topics.CURRENTS_TOPIC}
+    taps = {key: intra_process.tap(ctx, topic) for key, topic in names.items()}
+    taps['field'].add_publisher(MagneticField)
+    taps['currents'].add_publisher(JointState)
+    ident = None
+    try:
+        ident = IdentifierNode(
+            context=ctx,
+            parameter_overrides=params(
+                outputs=[topics.field_channel(0, 'x')],
+                inputs=[topics.current_channel(0)],
+                trigger=topics.field_topic(0),
+                intra_process=True,
+                initial_covariance=P0,
+                **ORDERS,
+            ),
+        )
+        fields = [field(k, y[k]) for k in range(n)]
+        taps['field'].deliver([serialize_message(m) for m in fields])
+        currents = [
+            JointState(header=m.header, effort=[float(u[k])]) for k, m in enumerate(fields)
+        ]
+        taps['currents'].deliver([serialize_message(m) for m in currents])
+    finally:
+        if ident is not None:
+            ident.destroy_node()
+        for tap in taps.values():
+            tap.remove_publisher()
+        publisher.destroy_node()
+    assert ident.aligner.dropped == 0 and ident.samples == n
+    expected = reference_theta(zip(y, u, strict=True))
+    np.testing.assert_allclose(ident.identifier.arx.theta, expected, rtol=1e-9)
