@@ -15,6 +15,14 @@ The steps (``maglev-lab`` with the magnet ``free``, the default):
 4. the physics check of every SISO model against the linearisation, the online
    identifier's coefficients beside the batch ARX of the same samples, plots
    and ``models.json``.
+
+Against a board (``--board PATH`` or ``--virtual-board``, with ``--magnet
+free``): step 1 is :func:`~maglev_ros.nodes.board_lab.run_board_closed_loop_lab`
+(the driver in place of the simulator, a virtual board in a child process),
+the inputs are the pair currents the board applied (``maglev/currents``, each
+record's PWM), there is no true state (the settling and the excursion are the
+estimate's) and the physics check allows for a record reading its field at
+the end of the sample its PWM drives.
 """
 
 from __future__ import annotations
@@ -28,12 +36,18 @@ from pathlib import Path
 import numpy as np
 
 from maglev_ros.cli.progress import progress_bar
-from maglev_ros.topics import TRUE_STATE_TOPIC, excitation_channel, field_channel
+from maglev_ros.topics import (
+    TRUE_STATE_TOPIC,
+    current_channel,
+    excitation_channel,
+    field_channel,
+)
 
 __all__ = ['CHECK_BAND', 'graph_settings', 'load_closed_loop_data', 'run_session']
 
 PROG = 'maglev-lab'
 CHECK_BAND = (10.0, 300.0)  # Hz, the physics check's band (see test/sysid/test_iv_physics.py)
+VIRTUAL_BOARD_STARTUP_S = 2.0  # s, the real board's start-up delay (the graph is up by then)
 RELATIVE = 1e-300  # guards the relative difference of exactly zero coefficients
 
 
@@ -75,31 +89,47 @@ def graph_settings(args: argparse.Namespace):
     )
 
 
-def load_closed_loop_data(bag: Path):
+def load_closed_loop_data(bag: Path, board: bool = False):
     """Read the closed-loop record: fields, pair inputs, excitation and true position.
 
     Parameters
     ----------
     bag : Path
         The bag directory.
+    board : bool
+        A board run: no true position; ``Ts`` is the board's 200 us and gaps
+        (records lost on the link) are filled and reported, as
+        :func:`maglev_ros.cli.lab.load_data` does.
 
     Returns
     -------
     dataset : maglev_ros.bags.BagDataset
-        Outputs ``Bx_0``, ``By_0``, ``x``, ``y``, ``z`` (T, m); inputs
-        ``u_x``, ``u_y`` (total command) and ``r_x``, ``r_y`` (its excitation), A.
+        Outputs ``Bx_0``, ``By_0`` and (simulator) ``x``, ``y``, ``z`` (T, m);
+        inputs ``u_x``, ``u_y`` (total command) and ``r_x``, ``r_y`` (its
+        excitation), A.
     """
     from maglev_ros.bags import read_bag
     from maglev_ros.nodes.closed_loop_lab import pair_channel
 
     outputs = [f'Bx_0={field_channel(0, "x")}', f'By_0={field_channel(0, "y")}']
+    excitation = [pair_channel(p, excitation_channel) for p in 'xy']
+    if board:
+        from maglev_ros.cli.lab_board import BOARD_TS
+
+        inputs = [pair_channel(p, current_channel) for p in 'xy'] + excitation
+        return read_bag(bag, outputs, inputs, Ts=BOARD_TS, allow_gaps=True)
+    inputs = [pair_channel(p) for p in 'xy'] + excitation
     outputs += [f'{a}={TRUE_STATE_TOPIC}:pose.pose.position.{a}' for a in 'xyz']
-    inputs = [pair_channel(p) for p in 'xy'] + [pair_channel(p, excitation_channel) for p in 'xy']
     return read_bag(bag, outputs, inputs)
 
 
-def _plants(args: argparse.Namespace, Ts: float) -> dict:
-    """Return the true local transfer functions of the x and y pairs (the check's truth)."""
+def _plants(args: argparse.Namespace, Ts: float, board: bool = False) -> dict:
+    """Return the true local transfer functions of the x and y pairs (the check's truth).
+
+    A board's record holds the PWM applied over its sample and the field read
+    at that sample's end: one sample less delay than a simulator's command
+    (which drives the coils from the next sample), so ``--delay`` - 1 is left.
+    """
     from maglev_ros.physics import CoilDynamics, linearize, make_model
     from maglev_ros.sysid.physics_check import local_plant
 
@@ -111,9 +141,8 @@ def _plants(args: argparse.Namespace, Ts: float) -> dict:
         tau = coil.inductance / coil.resistance
     # the bag's command of sample t drives the coils over [t, t + 1): only the
     # sensor's delay is left (local_plant's convention)
-    return {
-        pair: local_plant(linear, Ts, f'B{pair}_0', pair, args.delay, tau) for pair in ('x', 'y')
-    }
+    delay = args.delay - 1 if board else args.delay
+    return {pair: local_plant(linear, Ts, f'B{pair}_0', pair, delay, tau) for pair in ('x', 'y')}
 
 
 def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
@@ -134,16 +163,20 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         0 every model usable, 1 a model failed or is unstable, 128 + the
         signal when stopped (the bag finalised).
     """
-    from maglev_ros.nodes.closed_loop_lab import run_closed_loop_lab
+    from maglev_ros.cli.lab_board import on_board
     from maglev_ros.stop_signals import StopSignals
 
     settings = graph_settings(args)
     e = settings.excitation
+    board = on_board(args)
     clock = (
         f'real time (composed, control at {args.control_rate:g} Hz)'
         if settings.realtime
         else 'lockstep'
     )
+    if board:
+        where = args.board or f'a virtual board ({args.params}, physics plant, magnet free)'
+        clock = f'real time on {where} (composed, control at {args.control_rate:g} Hz)'
     print(
         f'{PROG}: closed loop in {clock}, {args.samples} samples ({args.duration:g} s) of '
         f'{args.params} recorded after {args.settle:g} s of levitation; '
@@ -165,7 +198,7 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
 
     with StopSignals() as stop:
         try:
-            run = run_closed_loop_lab(settings, bag, stop, progress)
+            run = _run_graph(args, settings, bag, stop, progress)
         except KeyboardInterrupt:
             name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
             print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
@@ -179,16 +212,23 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     rms_um = ', '.join(f'{1e6 * v:.0f}' for v in run.settle_rms)
     print(
         f'{"settled" if run.settled else "NOT settled"} after {run.settle_s:g} s: RMS of x, y, z '
+        f'{"(estimated) " if run.positions is not None else ""}'
         f'over the last 0.1 s {rms_um} um'
     )
     rate = run.samples / args.sample_rate / max(run.wall_s, 1e-9)
     misses = (
         f'{run.overruns} overruns' if settings.realtime else f'{run.timeouts} command timeouts'
     )
-    print(
-        f'recorded {run.samples} samples ({run.samples / args.sample_rate:.3f} s simulated in '
-        f'{run.wall_s:.1f} s, {rate:.2f} x real time; {misses}) -> {bag}'
-    )
+    if board:
+        print(
+            f'recorded {run.samples} board records ({run.wall_s:.1f} s; the driver zeroed the '
+            f'coils {run.timeouts} times for want of a command) -> {bag}'
+        )
+    else:
+        print(
+            f'recorded {run.samples} samples ({run.samples / args.sample_rate:.3f} s simulated '
+            f'in {run.wall_s:.1f} s, {rate:.2f} x real time; {misses}) -> {bag}'
+        )
     if run.crashed:
         print(
             f'warning: the magnet crashed ({run.crash_reason}); identifying the samples '
@@ -198,12 +238,39 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     return _identify_and_report(args, out, bag, run)
 
 
+def _run_graph(args: argparse.Namespace, settings, bag: Path, stop, progress):
+    """Run the session's graph: on the simulator, or on a board (a virtual one started here)."""
+    from maglev_ros.cli.lab_board import (
+        board_sensors,
+        on_board,
+        start_virtual_board,
+        stop_child,
+    )
+    from maglev_ros.nodes.board_lab import run_board_closed_loop_lab
+    from maglev_ros.nodes.closed_loop_lab import run_closed_loop_lab
+
+    if not on_board(args):
+        return run_closed_loop_lab(settings, bag, stop, progress)
+    n_sensors = board_sensors(args)
+    if args.board:
+        return run_board_closed_loop_lab(settings, bag, args.board, n_sensors, stop, progress)
+    sensor = ('--noise', f'{args.noise!r}', '--quantization', f'{args.quantization!r}')
+    sensor += ('--sensor-delay', str(args.delay), '--seed', str(args.seed))
+    # the board's first sample (and the free magnet's physics) once every node is up
+    child, port = start_virtual_board(args.params, 'free', sensor, VIRTUAL_BOARD_STARTUP_S)
+    try:
+        return run_board_closed_loop_lab(settings, bag, port, n_sensors, stop, progress)
+    finally:
+        stop_child(child)
+
+
 def _identify_and_report(args: argparse.Namespace, out: Path, bag: Path, run) -> int:
     from maglev_ros.sysid.seed_models import identify_groups, physics_deviations
 
-    dataset = load_closed_loop_data(bag)
+    board = run.positions is not None
+    dataset = load_closed_loop_data(bag, board=board)
     data = dataset.data
-    positions = np.asarray(data.y)[:, 2:5]
+    positions = run.positions if board else np.asarray(data.y)[:, 2:5]
     data = data.select(outputs=[0, 1])
     z_eq = _equilibrium_height(args.params)
     error = positions - np.array([0.0, 0.0, z_eq])
@@ -211,7 +278,8 @@ def _identify_and_report(args: argparse.Namespace, out: Path, bag: Path, run) ->
     rms = np.sqrt(np.mean(error**2, axis=0))
     u = np.asarray(data.u)
     print(
-        'magnet while excited: largest excursion from the set-point x, y, z '
+        f'magnet while excited{" (estimated)" if board else ""}: largest excursion from the '
+        'set-point x, y, z '
         + ', '.join(f'{1e3 * v:.3f}' for v in excursion)
         + ' mm (RMS '
         + ', '.join(f'{1e6 * v:.0f}' for v in rms)
@@ -234,7 +302,7 @@ def _identify_and_report(args: argparse.Namespace, out: Path, bag: Path, run) ->
         results = identify_groups(
             data, args.split, use_instruments=args.instruments == 'excitation', progress=step
         )
-    plants = _plants(args, data.Ts)
+    plants = _plants(args, data.Ts, board)
     band = tuple(args.check_band)
     checks = physics_deviations(results, plants, band)
     _print_table(results, checks, band)
@@ -315,7 +383,11 @@ def _print_online(run, data) -> None:
         nb = int(model.orders.nb[i, i])
         nk = int(model.orders.nk[i, i])
         raw = IdData(data.y[:, i], data.u[:, i], data.Ts, [yname], [uname])
-        batch = arx(raw, na, nb, nk)
+        try:
+            batch = arx(raw, na, nb, nk)
+        except (ValueError, np.linalg.LinAlgError) as err:  # e.g. constant data: say so, go on
+            print(f'  {yname} <- {uname} (ARX {na} {nb} {nk}): no batch ARX to compare: {err}')
+            continue
         a_on, b_on = model.polynomial('A', i, i)[1:], model.polynomial('B', i, i)[nk:]
         a_ba, b_ba = batch.polynomial('A')[1:], batch.polynomial('B')[nk:]
         theta_on, theta_ba = np.r_[a_on, b_on], np.r_[a_ba, b_ba]
@@ -361,6 +433,14 @@ def _plots(results, checks: dict, plants: dict, band, out: Path) -> list[Path]:
                 )
             )
     return written
+
+
+def _clock_name(args: argparse.Namespace) -> str:
+    from maglev_ros.cli.lab_board import on_board
+
+    if on_board(args):
+        return 'board' if args.board else 'virtual board'
+    return 'realtime' if args.realtime else 'lockstep'
 
 
 def _summary(args, run, dataset, results, checks, band, excursion, rms) -> dict:
@@ -411,7 +491,8 @@ def _summary(args, run, dataset, results, checks, band, excursion, rms) -> dict:
             'settled': run.settled,
             'simulated_s': run.simulated_s,
             'wall_s': run.wall_s,
-            'clock': 'realtime' if args.realtime else 'lockstep',
+            'clock': _clock_name(args),
+            'state': 'estimated' if run.positions is not None else 'true',
             'timeouts': run.timeouts,
             'overruns': run.overruns,
             'crashed': run.crashed,

@@ -28,6 +28,15 @@ default ARX delay is 0 (a record's field and PWM are simultaneous)::
 
     maglev-lab --virtual-board --magnet fixed --duration 3 --amplitude 0.2 --out lab/
 
+The closed loop against a board (``--board PATH --magnet free``, or
+``--virtual-board --magnet free``: its physics plant with the magnet free,
+``--noise``, ``--quantization``, ``--delay``, ``--seed``):
+:mod:`maglev_ros.nodes.board_lab`, the driver in place of the simulator, all
+composed in this process; exactly ``--samples`` board records are recorded
+after the settling::
+
+    maglev-lab --virtual-board --magnet free --out lab_board/
+
 Outputs in ``--out``: ``bag/`` (rosbag2, MCAP), ``models.json`` (fits and
 coefficients), ``compare_<output>.png`` (validation data vs model). In lockstep
 exactly ``--samples`` samples are recorded (the excitation stops after that many
@@ -43,7 +52,6 @@ import json
 import os
 import shutil
 import signal
-import subprocess
 import sys
 import time
 from pathlib import Path
@@ -51,6 +59,13 @@ from pathlib import Path
 import numpy as np
 
 from maglev_ros.bags.reader import is_bag_directory
+from maglev_ros.cli.lab_board import (
+    BOARD_TS,
+    board_sensors,
+    on_board,
+    start_virtual_board,
+    stop_child,
+)
 from maglev_ros.cli.progress import progress_bar
 from maglev_ros.cli.usage import (
     Parser,
@@ -89,7 +104,6 @@ __all__ = [
 
 PROG = 'maglev-lab'
 WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
-BOARD_TS = 200e-6  # s, the board's sample period (V2x and V4x)
 BOARD_READ_INTERVAL = 0.002  # s between port reads in board runs (open loop: latency is free)
 DEFAULT_SAMPLES = 25000  # the lab's record: 5 s at 5 kHz, split 12500 / 12500
 
@@ -238,7 +252,8 @@ def build_parser() -> argparse.ArgumentParser:
         '--board',
         metavar='PATH',
         default=None,
-        help='run the driver on this serial device instead of the simulator',
+        help='run the driver on this serial device instead of the simulator (with --magnet '
+        'free: the closed-loop session on the board)',
     )
     board.add_argument(
         '--virtual-board',
@@ -260,17 +275,6 @@ def build_parser() -> argparse.ArgumentParser:
         help='board: excitation commands per wall-clock second, Hz (default 1000)',
     )
     return p
-
-
-def on_board(args: argparse.Namespace) -> bool:
-    """Whether the session runs against a board (driver) rather than the simulator.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        maglev-lab's parsed arguments.
-    """
-    return bool(getattr(args, 'board', None) or getattr(args, 'virtual_board', False))
 
 
 def _input_coils(pattern: str) -> list[tuple[str, int]]:
@@ -424,13 +428,20 @@ def _defaults(args: argparse.Namespace) -> None:
 
 def _check_closed_loop(args: argparse.Namespace) -> None:
     """Refuse what the closed-loop session does not run, saying what does."""
-    if args.board or args.virtual_board:
-        option = f'--board {args.board}' if args.board else '--virtual-board'
-        raise UsageError(
-            f'{option} with --magnet free: maglev-lab runs the closed loop on the simulator '
-            'only; against a board use ros2 launch maglev_ros closed_loop_lab_board.launch.xml '
-            'port:=PATH, or leave --magnet free out for the open-loop session on the board'
-        )
+    if on_board(args):
+        if args.sample_rate != 1.0 / BOARD_TS:
+            raise UsageError(
+                f"--sample-rate must be the board's {1.0 / BOARD_TS:g} Hz with --board or "
+                f'--virtual-board, got {args.sample_rate:g}'
+            )
+        if args.delay < 1:
+            raise UsageError(
+                f'--delay must be >= 1 on a board (a record reads its field at the end of the '
+                f'sample its PWM drives), got {args.delay}'
+            )
+        args.realtime = True  # the board sets the pace
+        if args.virtual_board:
+            args.no_coil = True  # the virtual board's plant drives ideal coils
     ratio = args.sample_rate / args.control_rate
     if args.realtime and (ratio < 1 or abs(ratio - round(ratio)) > 1e-9):
         raise UsageError(
@@ -622,87 +633,6 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
             'crashed': sim.sim.crashed,
             'crash_reason': sim.sim.reason,
         }
-
-
-def start_virtual_board(params: str, magnet: str) -> tuple[subprocess.Popen, str]:
-    """Start ``maglev-virtual-board --plant physics`` in a child process.
-
-    Parameters
-    ----------
-    params : str
-        Parameter set of the physics plant.
-    magnet : str
-        Magnet mode (``free`` falls: nothing closes the loop here).
-
-    Returns
-    -------
-    tuple of (subprocess.Popen, str)
-        The child (stop it with SIGINT) and its device path.
-
-    Raises
-    ------
-    RuntimeError
-        If the board does not start (its error output is in the message).
-    """
-    cmd = [
-        sys.executable,
-        '-m',
-        'maglev_ros.cli.virtual_board',
-        '--plant',
-        'physics',
-        '--params',
-        params,
-        '--magnet',
-        magnet,
-        '--startup-delay',
-        '0.2',
-    ]
-    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    line = child.stdout.readline().strip()  # the device path, once the board runs
-    if not line:
-        child.wait(timeout=WAIT_S)
-        raise RuntimeError(f'the virtual board did not start: {child.stderr.read().strip()}')
-    return child, line
-
-
-def stop_child(child: subprocess.Popen) -> None:
-    """Stop a child process with SIGINT (SIGKILL after 10 s) and reap it.
-
-    Parameters
-    ----------
-    child : subprocess.Popen
-        The child process.
-    """
-    if child.poll() is None:
-        child.send_signal(signal.SIGINT)
-        try:
-            child.wait(timeout=10.0)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
-    for stream in (child.stdout, child.stderr):
-        if stream is not None:
-            stream.close()
-
-
-def board_sensors(args: argparse.Namespace) -> int:
-    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1.
-
-    Parameters
-    ----------
-    args : argparse.Namespace
-        maglev-lab's parsed arguments.
-    """
-    if args.board_sensors is not None:
-        return args.board_sensors
-    if args.virtual_board:
-        from maglev_ros.physics import make_model
-
-        try:
-            return make_model(args.params).n_outputs // 3
-        except (ValueError, OSError) as err:
-            raise UsageError(f'--params {args.params!r}: {err}') from None
-    return max(args.sensors) + 1
 
 
 def run_board_experiment(

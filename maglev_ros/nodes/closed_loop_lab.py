@@ -51,18 +51,22 @@ from maglev_ros.topics import (
     REFERENCE_TOPIC,
     TRUE_STATE_TOPIC,
     command_channel,
+    current_channel,
     excitation_channel,
     field_channel,
     field_topic,
 )
 
 __all__ = [
+    'BOARD_IDENTIFIER_CHANNELS',
     'IDENTIFIER_CHANNELS',
     'LabGraphSettings',
     'LabRun',
     'OnlineEstimate',
+    'online_estimate',
     'pair_channel',
     'run_closed_loop_lab',
+    'wait_recorded',
 ]
 
 SETTLE_WINDOW = 0.1  # s of simulated time: the settling check's moving RMS
@@ -78,7 +82,9 @@ def pair_channel(pair: str, channel: Callable[[int], str] = command_channel) -> 
         The coil pair (x+ x- or y+ y-).
     channel : callable
         Coil index to channel spec: :func:`~maglev_ros.topics.command_channel`
-        (the total command, named ``u_<pair>``) or
+        (the total command, named ``u_<pair>``),
+        :func:`~maglev_ros.topics.current_channel` (the currents applied, a
+        board's input, also ``u_<pair>``) or
         :func:`~maglev_ros.topics.excitation_channel` (the excitation, ``r_<pair>``).
 
     Returns
@@ -95,6 +101,12 @@ def pair_channel(pair: str, channel: Callable[[int], str] = command_channel) -> 
 IDENTIFIER_CHANNELS = (
     (f'Bx_0={field_channel(0, "x")}', f'By_0={field_channel(0, "y")}'),
     (pair_channel('x'), pair_channel('y')),
+)
+#: On a board: against the pair currents applied (each record's PWM, stamped with its
+#: field): a command reaches the coils a read and a link's round trip after its sample.
+BOARD_IDENTIFIER_CHANNELS = (
+    IDENTIFIER_CHANNELS[0],
+    (pair_channel('x', current_channel), pair_channel('y', current_channel)),
 )
 
 
@@ -237,6 +249,8 @@ class LabRun:
         Controller counters: ``saturated`` commands, ``level`` and ``message``.
     identifier : OnlineEstimate or None
         None if it got no sample.
+    positions : ndarray, shape (n, 3), optional
+        A board run: the estimated positions over the window, m (no true state).
     """
 
     samples: int
@@ -251,6 +265,7 @@ class LabRun:
     controller: dict
     identifier: OnlineEstimate | None
     overruns: int = 0
+    positions: np.ndarray | None = None
 
 
 def _overrides(**values) -> list:
@@ -509,8 +524,16 @@ def run_closed_loop_lab(
         return replace(run, settle_rms=watch.rms(), settled=bool(np.all(watch.rms() < 1e-4)))
 
 
-def _online(ident, sample_rate: float) -> OnlineEstimate | None:
-    """Return the identifier's final state (None: it got no sample)."""
+def online_estimate(ident, sample_rate: float) -> OnlineEstimate | None:
+    """Return the identifier's final state (None: it got no sample).
+
+    Parameters
+    ----------
+    ident : IdentifierNode
+        The lab's identifier.
+    sample_rate : float
+        Its samples per second, Hz (the model's sample time).
+    """
     if not ident.samples:
         return None
     st = ident.identifier.status()
@@ -542,7 +565,7 @@ def _lab_run(s, sim, ctrl, ident, recorded: int, wall: float) -> LabRun:
             'saturated': int(status.saturated),
             'commands': int(ctrl.commands),
         },
-        identifier=_online(ident, s.sample_rate),
+        identifier=online_estimate(ident, s.sample_rate),
         overruns=int(sim.counters['overruns']),
     )
 
@@ -591,7 +614,7 @@ def _run_lockstep(
     _wait_paused(lab, sim, ctrl, last, 'recording', report, stop, first=settle_n)
     wall = time.monotonic() - wall
     recorded = sim.sim.samples - settle_n
-    _wait_recorded(lab, recorder, ident, topics, recorded, stop)
+    wait_recorded(lab, recorder, ident, topics, recorded, stop)
     return _lab_run(s, sim, ctrl, ident, recorded, wall)
 
 
@@ -639,12 +662,26 @@ def _run_realtime(lab, s, sim, ctrl, ident, recorder, topics, report, stop) -> L
     recorded = min(sim.sim.samples, last) - settle_n
     # /clock goes once a burst, commands and excitation once a command
     per_sample = [t for t in topics if t not in (CLOCK_TOPIC, COMMAND_TOPIC, EXCITATION_TOPIC)]
-    _wait_recorded(lab, recorder, ident, per_sample, recorded, stop)
+    wait_recorded(lab, recorder, ident, per_sample, recorded, stop)
     return _lab_run(s, sim, ctrl, ident, recorded, wall_s)
 
 
-def _wait_recorded(lab, recorder, ident, topics, recorded: int, stop) -> None:
-    """Wait for ``recorded`` messages of each topic in the bag and as many identifier samples."""
+def wait_recorded(lab, recorder, ident, topics, recorded: int, stop) -> None:
+    """Wait for ``recorded`` messages of each topic in the bag and as many identifier samples.
+
+    Parameters
+    ----------
+    lab : Bringup
+        The lab's graph (its wait).
+    recorder : RecorderNode
+    ident : IdentifierNode
+    topics : list of str
+        Topics with one message per sample.
+    recorded : int
+        Samples in the window.
+    stop : StopSignals or threading.Event or None
+        Ends the wait.
+    """
     lab.wait_until(
         lambda: (
             all(recorder.counts['/' + t.lstrip('/')] >= recorded for t in topics)

@@ -35,10 +35,18 @@ topic's messages as the publishing node serialised them: a
 ``/clock``) and the controller (commands, excitation) feed with each burst's
 bytes when someone listens. A tap with a publisher in the process replaces the
 subscription (messages from other processes on that topic are then not taken).
+
+A :class:`TapDispatcher` (:func:`dispatch_taps`) moves the taps' listeners out
+of the loop's thread: every tap of the context then queues what it is given
+and one thread of its own hands it on, in the order it was given (a command
+still follows the samples it answers). The loop's thread then only
+estimates and commands; recording and identifying take the time it leaves
+(``maglev-lab --board``: a board waits for nobody).
 """
 
 from __future__ import annotations
 
+import queue
 import threading
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -50,6 +58,8 @@ __all__ = [
     'CommandSink',
     'MessageTap',
     'SampleBlock',
+    'TapDispatcher',
+    'dispatch_taps',
     'find',
     'register',
     'tap',
@@ -59,6 +69,7 @@ __all__ = [
 _lock = threading.Lock()
 _registry: dict[tuple[int, str], object] = {}
 _taps: dict[tuple[int, str], MessageTap] = {}
+_dispatchers: dict[int, TapDispatcher] = {}  # per context (id)
 
 
 @dataclass(frozen=True)
@@ -148,13 +159,34 @@ class MessageTap(Channel):
     Publishers call :meth:`add_publisher` (with their message class) when created and
     :meth:`remove_publisher` when destroyed, and :meth:`deliver` a list of
     CDR messages (``bytes``, in publishing order) when :attr:`listeners` is
-    not zero; a listener takes that list, in the publisher's thread.
+    not zero; a listener takes that list, in the publisher's thread (or the
+    context's :class:`TapDispatcher`'s).
+
+    Parameters
+    ----------
+    context_key : int, optional
+        ``id`` of the context whose dispatcher, if any, hands the messages on.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, context_key: int = 0) -> None:
         super().__init__()
         self.publishers = 0
         self.msgtype = ''
+        self._context_key = context_key
+
+    def deliver(self, messages: list) -> None:
+        """Hand ``messages`` to the listeners, or to the context's dispatcher's queue.
+
+        Parameters
+        ----------
+        messages : list of bytes
+            CDR messages, in publishing order.
+        """
+        dispatcher = _dispatchers.get(self._context_key)
+        if dispatcher is not None and not dispatcher.in_its_thread():
+            dispatcher.put(self, messages)
+        else:
+            super().deliver(messages)
 
     def add_publisher(self, msg_class: type) -> None:
         """Count a publisher of this process.
@@ -173,6 +205,60 @@ class MessageTap(Channel):
         """Uncount a publisher (destroyed)."""
         with _lock:
             self.publishers = max(self.publishers - 1, 0)
+
+
+class TapDispatcher:
+    """The thread that hands on the taps' messages of one context (see the module docstring).
+
+    Parameters
+    ----------
+    name : str
+        The thread's name.
+    """
+
+    def __init__(self, name: str = 'maglev-taps') -> None:
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
+        self._thread.start()
+
+    def in_its_thread(self) -> bool:
+        """Whether the caller is the dispatcher's thread."""
+        return threading.current_thread() is self._thread
+
+    def put(self, tap: MessageTap, messages: list) -> None:
+        """Queue ``messages`` for ``tap``'s listeners (any thread).
+
+        Parameters
+        ----------
+        tap : MessageTap
+        messages : list of bytes
+        """
+        self._queue.put((tap, messages))
+
+    @property
+    def backlog(self) -> int:
+        """Deliveries queued and not yet handed on."""
+        return self._queue.qsize()
+
+    def _run(self) -> None:
+        while True:
+            item = self._queue.get()
+            if item is None:
+                return
+            tap, messages = item
+            Channel.deliver(tap, messages)
+
+    def close(self, timeout: float = 10.0) -> None:
+        """Hand on what is queued, then stop the thread (idempotent).
+
+        Parameters
+        ----------
+        timeout : float
+            Longest wait for the queue to drain, s.
+        """
+        if self._thread.is_alive():
+            self._queue.put(None)
+            self._thread.join(timeout)
 
 
 class CommandSink:
@@ -274,5 +360,23 @@ def tap(context, topic: str) -> MessageTap:
     with _lock:
         found = _taps.get(key)
         if found is None:
-            found = _taps[key] = MessageTap()
+            found = _taps[key] = MessageTap(id(context))
         return found
+
+
+def dispatch_taps(context, dispatcher: TapDispatcher | None) -> None:
+    """Let ``dispatcher`` hand on every tap's messages in ``context`` (None: back to direct).
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        The nodes' context.
+    dispatcher : TapDispatcher or None
+        The thread that hands them on; None: each publisher's thread again
+        (close the dispatcher afterwards: what it has queued is still handed on).
+    """
+    with _lock:
+        if dispatcher is None:
+            _dispatchers.pop(id(context), None)
+        else:
+            _dispatchers[id(context)] = dispatcher

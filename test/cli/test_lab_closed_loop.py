@@ -80,8 +80,9 @@ def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_model
     'argv, match',
     [
         (['--realtime', '--control-rate', '3000'], '--control-rate must divide --sample-rate'),
-        (['--board', '/dev/ttyACM0', '--magnet', 'free'], 'board.launch.xml port:=PATH'),
-        (['--virtual-board', '--magnet', 'free'], 'runs the closed loop on the simulator only'),
+        (['--board', '/nonexistent/ttyACM0', '--magnet', 'free'], 'no such device'),
+        (['--virtual-board', '--magnet', 'free', '--sample-rate', '4000'], "the board's 5000 Hz"),
+        (['--virtual-board', '--magnet', 'free', '--delay', '0'], '--delay must be >= 1 on a'),
         (['--sensors', '0', '1'], 'the closed-loop session records and identifies sensor 0'),
         (['--check-band', '300', '10'], '--check-band must be LOW HIGH'),
         (['--amplitude', '0'], '--amplitude must be > 0'),
@@ -122,3 +123,58 @@ def test_realtime_session_records_the_window_and_matches_its_online_arx(domain, 
     assert summary['online']['samples'] == SAMPLES
     differences = [float(d) for d in re.findall(r'largest difference (\S+) of', printed)]
     assert len(differences) == 2 and max(differences) < 1e-5, printed
+
+
+def test_virtual_board_session_levitates_records_the_window_and_matches_its_online_arx(
+    domain, tmp_path, capfd
+):
+    """``--virtual-board --magnet free``: the closed loop against a board in a child process.
+
+    The driver, estimator, controller, identifier and recorder are composed in
+    this process; the board (physics plant, noise, quantisation, sensor delay)
+    runs on the wall clock in its own. Exactly the window's records are in the
+    bag and in the identifier, whose ARX is the batch ARX of them, with the
+    currents the board applied as inputs; the magnet stays levitated.
+    """
+    out = tmp_path / 'lab'
+    samples = 5000
+    argv = ['--virtual-board', '--magnet', 'free', '--samples', str(samples), '--settle', '0.5']
+    argv += ['--control-rate', '500', '--seed', str(SEED), '--out', str(out), '--quiet']
+    status = lab.main([*argv, '--no-plots'])
+    printed = capfd.readouterr().out
+    summary = json.loads((out / 'models.json').read_text())
+    assert status == summary['exit_status'] and status in (0, 1), printed
+    run = summary['run']
+    assert 'closed loop in real time on a virtual board' in printed
+    assert run['clock'] == 'virtual board' and run['state'] == 'estimated'
+    assert not run['crashed'] and run['settled'], run
+    assert max(run['largest_excursion_m']) < 0.5e-3, run['largest_excursion_m']
+    assert summary['data']['N'] == samples  # exactly the window, every record has its input
+    with Reader(out / 'bag') as reader:
+        counts = {c.topic: c.msgcount for c in reader.connections}
+    assert counts['/' + topics.field_topic(0)] == counts['/' + topics.CURRENTS_TOPIC] == samples
+    assert counts['/' + topics.COMMAND_TOPIC] > samples // 10 - 20, counts  # 500 Hz
+    assert summary['metadata']['maglev_driver.intra_process'] is True  # the driver's parameters
+    # the identifier took the same records: its ARX is the batch ARX of them
+    assert summary['online']['samples'] == samples
+    differences = [float(d) for d in re.findall(r'largest difference (\S+) of', printed)]
+    assert len(differences) == 2 and max(differences) < 1e-5, printed
+
+
+def test_the_online_comparison_survives_data_without_a_batch_arx(capsys):
+    """A lost magnet leaves constant data: the batch ARX fails, the rest is still printed."""
+    from maglev_ros.cli.closed_loop_lab import _print_online
+    from maglev_ros.nodes.closed_loop_lab import LabRun, OnlineEstimate
+    from maglev_ros.sysid import IdData
+    from maglev_ros.sysid.online import OnlineArx
+
+    rng = np.random.default_rng(1)
+    arx = OnlineArx([[2, 0], [0, 2]], [[2, 0], [0, 2]], 1, ny=2, nu=2)
+    arx.update_many(rng.standard_normal((200, 2)), rng.standard_normal((200, 2)))
+    online = OnlineEstimate(arx.model(2e-4), 200, 1.0, np.zeros(2), 1.0)
+    run = LabRun(200, 1.0, np.zeros(3), True, 1.0, 1.0, 0, True, 'lost', {}, online)
+    y, u = rng.standard_normal((200, 2)), np.zeros((200, 2))  # the coils at zero: no input
+    _print_online(run, IdData(y, u, 2e-4, ['Bx_0', 'By_0'], ['u_x', 'u_y']))
+    printed = capsys.readouterr().out
+    assert printed.count('no batch ARX to compare') == 2, printed
+    assert printed.startswith('online ARX (identifier node, 200 samples')
