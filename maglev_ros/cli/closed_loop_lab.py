@@ -47,7 +47,7 @@ __all__ = ['CHECK_BAND', 'graph_settings', 'load_closed_loop_data', 'run_session
 
 PROG = 'maglev-lab'
 CHECK_BAND = (10.0, 300.0)  # Hz, the physics check's band (see test/sysid/test_iv_physics.py)
-VIRTUAL_BOARD_STARTUP_S = 2.0  # s, the real board's start-up delay (the graph is up by then)
+VIRTUAL_BOARD_STARTUP_S = 0.5  # s from the port's opening (all nodes are up) to the first sample
 RELATIVE = 1e-300  # guards the relative difference of exactly zero coefficients
 
 
@@ -256,7 +256,7 @@ def _run_graph(args: argparse.Namespace, settings, bag: Path, stop, progress):
         return run_board_closed_loop_lab(settings, bag, args.board, n_sensors, stop, progress)
     sensor = ('--noise', f'{args.noise!r}', '--quantization', f'{args.quantization!r}')
     sensor += ('--sensor-delay', str(args.delay), '--seed', str(args.seed))
-    # the board's first sample (and the free magnet's physics) once every node is up
+    # the driver opens the port once every node is up; the first sample follows
     child, port = start_virtual_board(args.params, 'free', sensor, VIRTUAL_BOARD_STARTUP_S)
     try:
         return run_board_closed_loop_lab(settings, bag, port, n_sensors, stop, progress)

@@ -246,6 +246,7 @@ def run_board_closed_loop_lab(
         cleanup.callback(intra_process.dispatch_taps, ctx, None)
         driver = lab.add(
             DriverNode(
+                open_port=False,  # once every node is up (start below)
                 context=ctx,
                 parameter_overrides=_overrides(
                     port=port,
@@ -353,6 +354,8 @@ def run_board_closed_loop_lab(
             destroy_last=True,  # finalises the bag once the others are gone
         )
         lab.start()
+        gc.freeze()  # start-up's objects stay out of the collector's way (a 0.1 s stall)
+        driver.start()  # the board's first sample now finds the whole loop
         # a thread holding the GIL hands it over after this long (default 5 ms): the
         # executor's work (the identifier's model, diagnostics) delays the loop less
         switch = sys.getswitchinterval()
@@ -372,7 +375,6 @@ def run_board_closed_loop_lab(
 
 def _run(lab, s, window, estimates, driver, ctrl, ident, recorder, topics, z_eq, report, stop):
     """Wait for the settling and the window; return the run's figures."""
-    gc.freeze()  # start-up's objects stay out of the collector's way (a 0.1 s stall)
     settle_ms = round(s.settle * 1e3)
     last = [-1, time.monotonic()]
 

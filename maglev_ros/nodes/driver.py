@@ -292,6 +292,9 @@ class DriverNode(Node):
 
     Parameters
     ----------
+    open_port : bool, optional
+        Open the port and start the I/O thread now (default); False: at
+        :meth:`start` (a composed loop starts its board once every node is up).
     **kwargs
         Passed to ``rclpy.node.Node`` (e.g. ``context``,
         ``parameter_overrides``).
@@ -302,7 +305,7 @@ class DriverNode(Node):
         If a parameter is invalid.
     """
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, *, open_port: bool = True, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self._lock = threading.Lock()  # the command guard and the link's writes
         self.guard: CommandGuard | None = None
@@ -367,7 +370,13 @@ class DriverNode(Node):
         self._stop = threading.Event()
         self._closed = False
         self._io = threading.Thread(target=self._io_loop, name='maglev-driver-io', daemon=True)
-        self._io.start()
+        if open_port:
+            self._io.start()
+
+    def start(self) -> None:
+        """Open the port and start the I/O thread (if ``open_port`` was False; idempotent)."""
+        if self._io.ident is None and not self._closed:
+            self._io.start()
 
     # -- state ------------------------------------------------------------------
 
@@ -572,7 +581,8 @@ class DriverNode(Node):
             return
         self._closed = True
         self._stop.set()
-        self._io.join(timeout=2.0)
+        if self._io.ident is not None:  # started
+            self._io.join(timeout=2.0)
         if self._v2x and self.link.serial.is_open:
             self._send_zero()
         self.link.close()

@@ -146,3 +146,27 @@ def test_a_composed_controller_takes_over_the_command_input(ctx, board):
     assert _accepted(board)[-1] == (0, 0, 0, 0)  # destroyed: coils at zero
     assert intra_process.find(ctx, command_topic) is None
     assert intra_process.tap(ctx, '/' + CURRENTS_TOPIC).publishers == 0
+
+
+def test_the_port_opens_at_start_when_asked_to_wait(ctx, board):
+    """``open_port=False``: a composed lab builds every node, then starts the board."""
+    driver = DriverNode(
+        open_port=False,
+        context=ctx,
+        parameter_overrides=[Parameter('port', value=board.path), Parameter('n_sensors', value=2)],
+    )
+    try:
+        time.sleep(0.3)
+        assert not board.status.port_open and driver.link_state == 'connecting'
+        driver.start()
+        driver.start()  # idempotent
+        wait_for(lambda: driver.counters['records'] > 0, what='records after start')
+        assert board.status.port_open
+    finally:
+        driver.destroy_node()
+    never = DriverNode(
+        open_port=False,
+        context=ctx,
+        parameter_overrides=[Parameter('port', value=board.path), Parameter('n_sensors', value=2)],
+    )
+    never.destroy_node()  # never started: closes cleanly
