@@ -509,7 +509,8 @@ class DriverNode(Node):
 
         The taps (recorders, identifiers) get the samples before the estimator
         does: the command that answers them then follows them, as from the
-        simulator.
+        simulator. With a tap dispatcher in the context they are queued and
+        handed on after the command is sent (:func:`~.intra_process.pump_taps`).
         """
         active = [pub.get_subscription_count() > 0 for pub in self._sample_pubs]
         tapped = [t.listeners > 0 for t in self._taps]
@@ -528,6 +529,7 @@ class DriverNode(Node):
             self.samples_source.deliver(
                 intra_process.SampleBlock(stamps, values[:, :n_fields], values[:, n_fields:])
             )
+        intra_process.pump_taps(self.context)  # deferred taps: after the command is sent
 
     # -- board I/O --------------------------------------------------------------
 

@@ -36,18 +36,20 @@ topic's messages as the publishing node serialised them: a
 bytes when someone listens. A tap with a publisher in the process replaces the
 subscription (messages from other processes on that topic are then not taken).
 
-A :class:`TapDispatcher` (:func:`dispatch_taps`) moves the taps' listeners out
-of the loop's thread: every tap of the context then queues what it is given
-and one thread of its own hands it on, in the order it was given (a command
-still follows the samples it answers). The loop's thread then only
-estimates and commands; recording and identifying take the time it leaves
-(``maglev-lab --board``: a board waits for nobody).
+A :class:`TapDispatcher` (:func:`dispatch_taps`) moves the taps' listeners
+behind the loop's answer: every tap of the context then queues what it is
+given, and the loop's thread hands it on (:func:`pump_taps`) once its command
+is sent, in the order it was given (a command still follows the samples it
+answers). A board's command leaves before any recording or identifying is
+done (``maglev-lab --board``: a board waits for nobody). A thread of their
+own would not do: with the interpreter's lock, the loop's thread would wait
+for it at every call that releases the lock.
 """
 
 from __future__ import annotations
 
-import queue
 import threading
+from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -61,6 +63,7 @@ __all__ = [
     'TapDispatcher',
     'dispatch_taps',
     'find',
+    'pump_taps',
     'register',
     'tap',
     'unregister',
@@ -159,8 +162,8 @@ class MessageTap(Channel):
     Publishers call :meth:`add_publisher` (with their message class) when created and
     :meth:`remove_publisher` when destroyed, and :meth:`deliver` a list of
     CDR messages (``bytes``, in publishing order) when :attr:`listeners` is
-    not zero; a listener takes that list, in the publisher's thread (or the
-    context's :class:`TapDispatcher`'s).
+    not zero; a listener takes that list, in the publisher's thread (or when
+    the context's :class:`TapDispatcher` is pumped).
 
     Parameters
     ----------
@@ -183,7 +186,7 @@ class MessageTap(Channel):
             CDR messages, in publishing order.
         """
         dispatcher = _dispatchers.get(self._context_key)
-        if dispatcher is not None and not dispatcher.in_its_thread():
+        if dispatcher is not None and not dispatcher.pumping:
             dispatcher.put(self, messages)
         else:
             super().deliver(messages)
@@ -208,22 +211,23 @@ class MessageTap(Channel):
 
 
 class TapDispatcher:
-    """The thread that hands on the taps' messages of one context (see the module docstring).
+    """Defers the taps' deliveries of a context until its loop has answered (module docstring).
 
-    Parameters
-    ----------
-    name : str
-        The thread's name.
+    Every tap of the context queues what it is given; the loop's thread
+    calls :meth:`pump` once its command is sent, and the listeners get the
+    queued messages then, in the order given (a command still follows the
+    samples it answers). One thread does all the work, so no thread waits
+    for another's share of the interpreter.
     """
 
-    def __init__(self, name: str = 'maglev-taps') -> None:
-        self._queue: queue.SimpleQueue = queue.SimpleQueue()
-        self._thread = threading.Thread(target=self._run, name=name, daemon=True)
-        self._thread.start()
+    def __init__(self) -> None:
+        self._queue: deque = deque()
+        self._pumping = False
 
-    def in_its_thread(self) -> bool:
-        """Whether the caller is the dispatcher's thread."""
-        return threading.current_thread() is self._thread
+    @property
+    def pumping(self) -> bool:
+        """Whether :meth:`pump` is handing messages on (listeners' own deliveries go direct)."""
+        return self._pumping
 
     def put(self, tap: MessageTap, messages: list) -> None:
         """Queue ``messages`` for ``tap``'s listeners (any thread).
@@ -233,32 +237,24 @@ class TapDispatcher:
         tap : MessageTap
         messages : list of bytes
         """
-        self._queue.put((tap, messages))
+        self._queue.append((tap, messages))
 
     @property
     def backlog(self) -> int:
         """Deliveries queued and not yet handed on."""
-        return self._queue.qsize()
+        return len(self._queue)
 
-    def _run(self) -> None:
-        while True:
-            item = self._queue.get()
-            if item is None:
-                return
-            tap, messages = item
-            Channel.deliver(tap, messages)
+    def pump(self) -> None:
+        """Hand on everything queued, in order (the loop's thread, after its command)."""
+        self._pumping = True
+        try:
+            while self._queue:
+                tap, messages = self._queue.popleft()
+                Channel.deliver(tap, messages)
+        finally:
+            self._pumping = False
 
-    def close(self, timeout: float = 10.0) -> None:
-        """Hand on what is queued, then stop the thread (idempotent).
-
-        Parameters
-        ----------
-        timeout : float
-            Longest wait for the queue to drain, s.
-        """
-        if self._thread.is_alive():
-            self._queue.put(None)
-            self._thread.join(timeout)
+    close = pump
 
 
 class CommandSink:
@@ -364,15 +360,28 @@ def tap(context, topic: str) -> MessageTap:
         return found
 
 
+def pump_taps(context) -> None:
+    """Hand on what the taps of ``context`` queued, if it has a dispatcher (the loop's thread).
+
+    Parameters
+    ----------
+    context : rclpy.context.Context
+        The nodes' context.
+    """
+    dispatcher = _dispatchers.get(id(context))
+    if dispatcher is not None:
+        dispatcher.pump()
+
+
 def dispatch_taps(context, dispatcher: TapDispatcher | None) -> None:
-    """Let ``dispatcher`` hand on every tap's messages in ``context`` (None: back to direct).
+    """Let ``dispatcher`` defer every tap's messages in ``context`` (None: back to direct).
 
     Parameters
     ----------
     context : rclpy.context.Context
         The nodes' context.
     dispatcher : TapDispatcher or None
-        The thread that hands them on; None: each publisher's thread again
+        The queue the loop pumps; None: each publisher delivers at once again
         (close the dispatcher afterwards: what it has queued is still handed on).
     """
     with _lock:

@@ -141,13 +141,15 @@ def test_virtual_board_session_levitates_records_the_window_and_matches_its_onli
     argv = ['--virtual-board', '--magnet', 'free', '--samples', str(samples), '--settle', '0.5']
     argv += ['--control-rate', '500', '--seed', str(SEED), '--out', str(out), '--quiet']
     status = lab.main([*argv, '--no-plots'])
-    printed = capfd.readouterr().out
+    captured = capfd.readouterr()
+    printed = captured.out
+    assert (out / 'models.json').is_file(), captured.out + captured.err
     summary = json.loads((out / 'models.json').read_text())
     assert status == summary['exit_status'] and status in (0, 1), printed
     run = summary['run']
     assert 'closed loop in real time on a virtual board' in printed
     assert run['clock'] == 'virtual board' and run['state'] == 'estimated'
-    assert not run['crashed'] and run['settled'], run
+    assert not run['crashed'] and run['settled'], (run, captured.err)
     assert max(run['largest_excursion_m']) < 0.5e-3, run['largest_excursion_m']
     assert summary['data']['N'] == samples  # exactly the window, every record has its input
     with Reader(out / 'bag') as reader:

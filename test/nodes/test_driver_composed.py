@@ -143,7 +143,7 @@ def test_a_composed_controller_takes_over_the_command_input(ctx, board):
         driver.destroy_node()
         peer.destroy_node()
     assert (100, 100, 100, 100) not in _accepted(board)
-    assert _accepted(board)[-1] == (0, 0, 0, 0)  # destroyed: coils at zero
+    wait_for(lambda: _accepted(board)[-1] == (0, 0, 0, 0), what='zero currents at the end')
     assert intra_process.find(ctx, command_topic) is None
     assert intra_process.tap(ctx, '/' + CURRENTS_TOPIC).publishers == 0
 
