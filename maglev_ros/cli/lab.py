@@ -105,6 +105,7 @@ __all__ = [
 PROG = 'maglev-lab'
 WAIT_S = 60.0  # s, longest wait for the graph (discovery) and for the recorder to drain
 BOARD_READ_INTERVAL = 0.002  # s between port reads in board runs (open loop: latency is free)
+BOARD_CONTROL_RATE = 500.0  # Hz, the closed loop's default on a board (docs/benchmarks.md)
 DEFAULT_SAMPLES = 25000  # the lab's record: 5 s at 5 kHz, split 12500 / 12500
 
 
@@ -226,9 +227,9 @@ def build_parser() -> argparse.ArgumentParser:
     closed.add_argument(
         '--control-rate',
         type=positive_float,
-        default=1000.0,
-        help='--realtime: estimates and commands per second, Hz (divides --sample-rate; '
-        'default 1000)',
+        default=None,
+        help='--realtime and boards: estimates and commands per second, Hz (divides '
+        '--sample-rate; default 1000, on a board 500)',
     )
     p.add_argument('--na', type=int, default=2, help='ARX order of A (default 2)')
     p.add_argument('--nb', type=int, default=2, help='ARX order of B per input (default 2)')
@@ -442,6 +443,8 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
         args.realtime = True  # the board sets the pace
         if args.virtual_board:
             args.no_coil = True  # the virtual board's plant drives ideal coils
+    if args.control_rate is None:  # a board's loop also waits for its link: more slack
+        args.control_rate = BOARD_CONTROL_RATE if on_board(args) else 1000.0
     ratio = args.sample_rate / args.control_rate
     if args.realtime and (ratio < 1 or abs(ratio - round(ratio)) > 1e-9):
         raise UsageError(

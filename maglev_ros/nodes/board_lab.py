@@ -44,7 +44,6 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from rclpy.parameter import Parameter
 
 from maglev_ros.nodes.closed_loop_lab import (
     BOARD_IDENTIFIER_CHANNELS,
@@ -52,7 +51,11 @@ from maglev_ros.nodes.closed_loop_lab import (
     WAIT_S,
     LabGraphSettings,
     LabRun,
+    controller_parameters,
+    estimator_parameters,
+    identifier_parameters,
     online_estimate,
+    overrides,
     wait_recorded,
 )
 from maglev_ros.topics import COMMAND_TOPIC, CURRENTS_TOPIC, EXCITATION_TOPIC, field_topic
@@ -78,10 +81,6 @@ GIL_SWITCH_S = 0.0005  # s, the interpreter's switch interval during the run
 #: the controller's loss distance)
 STALE_TIMEOUT_S = 0.1
 _STAMP = struct.Struct('<iI')  # a header's stamp, after the 4-byte CDR header
-
-
-def _overrides(**values) -> list:
-    return [Parameter(k, value=v) for k, v in values.items()]
 
 
 class _SampleWindow:
@@ -255,7 +254,7 @@ def run_board_closed_loop_lab(
             DriverNode(
                 open_port=False,  # once every node is up (start below)
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     port=port,
                     n_sensors=n_sensors,
                     start_enabled=True,
@@ -269,40 +268,25 @@ def run_board_closed_loop_lab(
         est = lab.add(
             EstimatorNode(
                 context=ctx,
-                parameter_overrides=_overrides(
-                    params=s.params,
-                    filter=s.filter,
-                    sample_rate=s.sample_rate,
-                    sensor_delay=s.sensor_delay,
-                    sensor_noise=max(s.noise, 1e-6),
-                    quantization=s.quantization,
-                    publish_rate=s.control_rate,
-                    intra_process=True,
+                parameter_overrides=overrides(
+                    **estimator_parameters(s, publish_rate=s.control_rate, intra_process=True)
                 ),
             )
         )
-        e = replace(s.control_excitation, start=s.settle)
         ctrl = lab.add(
             ControllerNode(
                 context=ctx,
-                parameter_overrides=_overrides(
-                    params=s.params,
-                    coil_dynamics=s.coil_dynamics,
-                    delay_commands=False,
-                    excitation_signal=e.signal,
-                    excitation_amplitude=e.amplitude,
-                    excitation_band=list(e.band),
-                    excitation_pattern=e.pattern,
-                    excitation_seed=e.seed,
-                    excitation_length=e.length,
-                    excitation_cycles=e.cycles,
-                    excitation_start=e.start,
-                    sample_rate=s.control_rate,
-                    trigger='estimate',
-                    intra_process=True,
-                    command_delay=BOARD_COMMAND_DELAY,
-                    input_timeout=STALE_TIMEOUT_S,
-                    start_enabled=True,
+                parameter_overrides=overrides(
+                    **controller_parameters(
+                        s,
+                        replace(s.control_excitation, start=s.settle),
+                        delay_commands=False,
+                        sample_rate=s.control_rate,
+                        trigger='estimate',
+                        intra_process=True,
+                        command_delay=BOARD_COMMAND_DELAY,
+                        input_timeout=STALE_TIMEOUT_S,
+                    )
                 ),
             )
         )
@@ -317,7 +301,7 @@ def run_board_closed_loop_lab(
                 (ident, dict(identify_from=first_s, identify_until=last_s)),
                 (recorder, dict(record_from=first_s, record_until=last_s)),
             ):
-                result = node.set_parameters_atomically(_overrides(**values))
+                result = node.set_parameters_atomically(overrides(**values))
                 if not result.successful:
                     raise RuntimeError(f'{node.get_name()}: {result.reason}')
 
@@ -329,25 +313,21 @@ def run_board_closed_loop_lab(
         ident = lab.add(
             IdentifierNode(
                 context=ctx,
-                parameter_overrides=_overrides(
-                    outputs=list(BOARD_IDENTIFIER_CHANNELS[0]),
-                    inputs=list(BOARD_IDENTIFIER_CHANNELS[1]),
-                    na=list(s.identifier_orders[0]),
-                    nb=list(s.identifier_orders[1]),
-                    nk=list(s.identifier_orders[2]),
-                    initial_covariance=s.initial_covariance,
-                    publish_rate=1.0,
-                    intra_process=True,
-                    trigger=field_topic(0),  # the currents: the same stamps
-                    identify_from=nothing['first'],
-                    identify_until=nothing['last'],
+                parameter_overrides=overrides(
+                    **identifier_parameters(
+                        s,
+                        BOARD_IDENTIFIER_CHANNELS,
+                        trigger=field_topic(0),  # the currents: the same stamps
+                        identify_from=nothing['first'],
+                        identify_until=nothing['last'],
+                    )
                 ),
             )
         )
         recorder = lab.add(
             RecorderNode(
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     path=str(bag),
                     storage=s.storage,
                     topics=topics,

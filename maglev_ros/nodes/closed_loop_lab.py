@@ -63,7 +63,11 @@ __all__ = [
     'LabGraphSettings',
     'LabRun',
     'OnlineEstimate',
+    'controller_parameters',
+    'estimator_parameters',
+    'identifier_parameters',
     'online_estimate',
+    'overrides',
     'pair_channel',
     'run_closed_loop_lab',
     'wait_recorded',
@@ -268,8 +272,90 @@ class LabRun:
     positions: np.ndarray | None = None
 
 
-def _overrides(**values) -> list:
+def overrides(**values) -> list:
+    """Return ROS parameter overrides ``name=value`` for a node of the lab's graph.
+
+    Parameters
+    ----------
+    **values
+        Parameter name to value.
+    """
     return [Parameter(k, value=v) for k, v in values.items()]
+
+
+_overrides = overrides
+
+
+def estimator_parameters(s: LabGraphSettings, **more) -> dict:
+    """Return the lab's estimator parameters: parameter set, filter, rate and sensors.
+
+    Parameters
+    ----------
+    s : LabGraphSettings
+    **more
+        Further parameters (e.g. ``intra_process``).
+    """
+    return dict(
+        params=s.params,
+        filter=s.filter,
+        sample_rate=s.sample_rate,
+        sensor_delay=s.sensor_delay,
+        sensor_noise=max(s.noise, 1e-6),
+        quantization=s.quantization,
+        **more,
+    )
+
+
+def controller_parameters(s: LabGraphSettings, excitation: CommandExcitation, **more) -> dict:
+    """Return the lab's controller parameters: the LQR of the set and its excitation.
+
+    Parameters
+    ----------
+    s : LabGraphSettings
+    excitation : CommandExcitation
+        In the controller's samples, its ``start`` set.
+    **more
+        Further parameters (rate, trigger, delays).
+    """
+    e = excitation
+    return dict(
+        params=s.params,
+        coil_dynamics=s.coil_dynamics,
+        excitation_signal=e.signal,
+        excitation_amplitude=e.amplitude,
+        excitation_band=list(e.band),
+        excitation_pattern=e.pattern,
+        excitation_seed=e.seed,
+        excitation_length=e.length,
+        excitation_cycles=e.cycles,
+        excitation_start=e.start,
+        **more,
+    )
+
+
+def identifier_parameters(s: LabGraphSettings, channels=None, **more) -> dict:
+    """Return the lab's identifier parameters: the seed's x and y orders, in this process.
+
+    Parameters
+    ----------
+    s : LabGraphSettings
+    channels : tuple of (outputs, inputs), optional
+        Default :data:`IDENTIFIER_CHANNELS`.
+    **more
+        Further parameters (trigger, window).
+    """
+    outputs, inputs = channels or IDENTIFIER_CHANNELS
+    return dict(
+        outputs=list(outputs),
+        inputs=list(inputs),
+        na=list(s.identifier_orders[0]),
+        nb=list(s.identifier_orders[1]),
+        nk=list(s.identifier_orders[2]),
+        initial_covariance=s.initial_covariance,
+        publish_rate=1.0,
+        intra_process=True,
+        **more,
+    )
 
 
 def _matched(node, topic: str, publisher: bool) -> int:
@@ -421,13 +507,7 @@ def run_closed_loop_lab(
             EstimatorNode(
                 context=ctx,
                 parameter_overrides=_overrides(
-                    params=s.params,
-                    filter=s.filter,
-                    sample_rate=s.sample_rate,
-                    sensor_delay=s.sensor_delay,
-                    sensor_noise=max(s.noise, 1e-6),
-                    quantization=s.quantization,
-                    **(realtime_estimator if rt else {}),
+                    **estimator_parameters(s, **(realtime_estimator if rt else {}))
                 ),
             )
         )
@@ -443,18 +523,12 @@ def run_closed_loop_lab(
             ControllerNode(
                 context=ctx,
                 parameter_overrides=_overrides(
-                    params=s.params,
-                    coil_dynamics=s.coil_dynamics,
-                    delay_commands=not rt,
-                    excitation_signal=e.signal,
-                    excitation_amplitude=e.amplitude,
-                    excitation_band=list(e.band),
-                    excitation_pattern=e.pattern,
-                    excitation_seed=e.seed,
-                    excitation_length=e.length,
-                    excitation_cycles=e.cycles,
-                    excitation_start=e.start,
-                    **(realtime_controller if rt else dict(sample_rate=s.sample_rate)),
+                    **controller_parameters(
+                        s,
+                        e,
+                        delay_commands=not rt,
+                        **(realtime_controller if rt else dict(sample_rate=s.sample_rate)),
+                    )
                 ),
             )
         )
@@ -471,15 +545,7 @@ def run_closed_loop_lab(
             IdentifierNode(
                 context=ctx,
                 parameter_overrides=_overrides(
-                    outputs=list(IDENTIFIER_CHANNELS[0]),
-                    inputs=list(IDENTIFIER_CHANNELS[1]),
-                    na=list(s.identifier_orders[0]),
-                    nb=list(s.identifier_orders[1]),
-                    nk=list(s.identifier_orders[2]),
-                    initial_covariance=s.initial_covariance,
-                    publish_rate=1.0,
-                    intra_process=True,
-                    **(realtime_identifier if rt else {}),
+                    **identifier_parameters(s, **(realtime_identifier if rt else {}))
                 ),
             )
         )

@@ -139,7 +139,7 @@ def test_virtual_board_session_levitates_records_the_window_and_matches_its_onli
     out = tmp_path / 'lab'
     samples = 5000
     argv = ['--virtual-board', '--magnet', 'free', '--samples', str(samples), '--settle', '0.5']
-    argv += ['--control-rate', '500', '--seed', str(SEED), '--out', str(out), '--quiet']
+    argv += ['--seed', str(SEED), '--out', str(out), '--quiet']  # control at 500 Hz
     status = lab.main([*argv, '--no-plots'])
     captured = capfd.readouterr()
     printed = captured.out
@@ -148,6 +148,7 @@ def test_virtual_board_session_levitates_records_the_window_and_matches_its_onli
     assert status == summary['exit_status'] and status in (0, 1), printed
     run = summary['run']
     assert 'closed loop in real time on a virtual board' in printed
+    assert 'control at 500 Hz' in printed  # a board's default
     assert run['clock'] == 'virtual board' and run['state'] == 'estimated'
     assert not run['crashed'] and run['settled'], (run, captured.err)
     assert max(run['largest_excursion_m']) < 0.5e-3, run['largest_excursion_m']
