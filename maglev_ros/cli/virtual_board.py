@@ -28,21 +28,29 @@ from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make
 from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.virtual_board import VirtualBoard
 
-from .usage import Parser, UsageError, run_command
+from .usage import Parser, UsageError, non_negative_float, run_command
 
 __all__ = ['build_parser', 'load_plant', 'main']
 
 PROG = 'maglev-virtual-board'
 
 
-def _positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f'must be >= 1, got {value}')
-    return value
+def _integer_from(low: int):
+    """Argparse type: an integer >= ``low``."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
+        if value < low:
+            raise argparse.ArgumentTypeError(f'must be >= {low}, got {value}')
+        return value
+
+    return parse
+
+
+_positive_int = _integer_from(1)
 
 
 def _seconds(text: str) -> float:
@@ -52,26 +60,6 @@ def _seconds(text: str) -> float:
         raise argparse.ArgumentTypeError(f'expected seconds, got {text!r}') from None
     if not value >= 0 or value == float('inf'):
         raise argparse.ArgumentTypeError(f'must be finite and >= 0, got {text!r}')
-    return value
-
-
-def _nonnegative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected a number, got {text!r}') from None
-    if not 0 <= value < float('inf'):
-        raise argparse.ArgumentTypeError(f'must be finite and >= 0, got {text!r}')
-    return value
-
-
-def _nonnegative_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f'expected an integer, got {text!r}') from None
-    if value < 0:
-        raise argparse.ArgumentTypeError(f'must be >= 0, got {value}')
     return value
 
 
@@ -122,13 +110,13 @@ def build_parser() -> argparse.ArgumentParser:
         '--clock-start', type=_clock, default=0, help='uint32 us clock at power-up (V2x)'
     )
     parser.add_argument(
-        '--noise', type=_nonnegative, default=0.0, help='T rms per axis (physics; default 0)'
+        '--noise', type=non_negative_float, default=0.0, help='T rms per axis (physics; default 0)'
     )
     parser.add_argument(
-        '--quantization', type=_nonnegative, default=0.0, help='T per LSB (physics; 0: none)'
+        '--quantization', type=non_negative_float, default=0.0, help='T per LSB (physics; 0: none)'
     )
     parser.add_argument(
-        '--sensor-delay', type=_nonnegative_int, default=0, help='samples (physics; default 0)'
+        '--sensor-delay', type=_integer_from(0), default=0, help='samples (physics; default 0)'
     )
     parser.add_argument('--seed', type=int, default=0, help='seed of the sensor noise (physics)')
     parser.add_argument('--startup-delay', type=_seconds, default=2.0, help='s after open')
