@@ -381,6 +381,10 @@ class VirtualBoard:
                 with self._lock:
                     master = self._master
                     if master is not None and not self._paused.is_set():
+                        # the host's bytes first: a command that came while this thread
+                        # waited drives the samples computed now (the board reads its
+                        # serial input every loop, before its samples)
+                        self._poll_input()
                         now_us = int((time.monotonic() - self._t0) * 1e6)
                         out = self._firmware.advance_to(now_us)
                         if out and self._port_open:
@@ -389,7 +393,6 @@ class VirtualBoard:
                             self._write(out)
                         else:
                             self._flush()
-                        self._poll_input()
                     port_open = self._port_open
                     waiting = [master] if self._backlog else []
                 if master is None or not port_open or self._paused.is_set():
