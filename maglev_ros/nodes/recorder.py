@@ -310,6 +310,11 @@ class RecorderNode(Node):
         self._taps: list[tuple[object, object]] = []  # (tap, listener): intra_process
         self._write_lock = threading.Lock()  # taps write from their publishers' threads
         self._held: dict[str, tuple[object, bytes]] = {}  # log_clock stamp, before record_from
+        # log_clock stamp: the last header-less message written per topic (handle, bytes,
+        # log time), the newest stamp taken into the window, and whether the window's
+        # end has logged what is in force there (_close_window)
+        self._tail: dict[str, tuple[object, bytes, int]] = {}
+        self._newest_written = 0
         self._clock_ns = 0
         self._metadata_done = not cfg.metadata_node
         self._metadata_pending = False
@@ -341,6 +346,7 @@ class RecorderNode(Node):
         self._config = config
         # log times, ns: first and last written (last None: no end)
         self._window = (round(config.record_from * 1e9), round(config.record_until * 1e9) or None)
+        self._window_closed = False  # a new window: its end is still to come
 
     def _with_window(self, values: dict) -> RecorderConfig:
         """Return the configuration with a new window (the only settable parameters)."""
@@ -459,13 +465,23 @@ class RecorderNode(Node):
                     held[topic] = (handle, data)
                 return None  # before the recording (record_from): not written
             if end_ns is not None and stamp > end_ns:
+                if log_clock == 'stamp' and self._tail and not self._window_closed:
+                    self._close_window()
                 return None  # after it (record_until)
             if held:  # written once the window's first sample is complete
                 if not stamped and stamp == start_ns:
                     held.pop(topic, None)  # superseded at the window's first sample
                 elif stamp > start_ns:
                     self._write_held(start_ns)
+            if stamped and stamp > self._newest_written:
+                self._newest_written = stamp  # the newest sample in the window
             return stamp
+
+        track = log_clock == 'stamp'  # what is in force at the window's end (_close_window)
+
+        def written(stamp: int, data: bytes) -> None:
+            if not stamped:
+                self._tail[topic] = (handle, data, stamp)
 
         def on_message(data: bytes) -> None:
             stamp = log_time(data)
@@ -477,6 +493,8 @@ class RecorderNode(Node):
                 except BagError:  # closed while this message was in flight
                     return
                 counts[topic] += 1
+                if track:
+                    written(stamp, data)
 
         def on_messages(messages: list) -> None:
             stamps, kept = [], []
@@ -493,8 +511,34 @@ class RecorderNode(Node):
                 except BagError:  # closed while these messages were in flight
                     return
                 counts[topic] += len(kept)
+                if track:
+                    written(stamps[-1], kept[-1])
 
         return on_message, on_messages
+
+    def _close_window(self) -> None:
+        """Log the header-less messages in force at the window's last sample at its stamp.
+
+        ``log_clock: stamp`` with ``record_until``: a command logged before the
+        window's last sample is still in force there; the bag converter holds an
+        input for one of its own periods after its last message, so the window's
+        last samples would be trimmed. Logged once more at the last sample
+        written, they are not. The mirror of the start's rule
+        (:meth:`_write_held`).
+        """
+        with self._write_lock:
+            if self._window_closed:
+                return
+            self._window_closed = True
+            newest = self._newest_written
+            for topic, (handle, data, stamp) in list(self._tail.items()):
+                if stamp >= newest:
+                    continue  # already logged at the last sample
+                try:
+                    self.writer.write(handle, newest, data)
+                except BagError:
+                    return
+                self.counts[topic] += 1
 
     def _write_held(self, stamp: int) -> None:
         """Log the header-less messages held from before ``record_from`` at its ``stamp``.
@@ -578,6 +622,8 @@ class RecorderNode(Node):
         self._taps = []
         if self._held and any(self.counts.values()):  # a window of a single sample
             self._write_held(round(self.config.record_from * 1e9))
+        if self._window[1] is not None and self._tail:  # the window's end never came
+            self._close_window()
         if not self._metadata_done and self._metadata_items:
             # stopped while the metadata node's parameters were still being asked for:
             # the answers so far are stored (a partial set beats none)
