@@ -10,7 +10,9 @@ with a random socket; every test of a session gets its own id.
 ``colcon build --packages-select maglev_ros`` once per session (a plain copy
 install, which is what ``ros2 run`` users get by default; a few seconds). The
 install-tree checks (``test_colcon_build.py``) and the real command-line tests
-(``test/ros2cli``) use the same build.
+(``test/ros2cli``) use the same build. The numba kernels the source tree has
+compiled so far are copied into it (:func:`seed_numba_cache`), so that the
+install's node processes do not compile them all again.
 """
 
 from __future__ import annotations
@@ -162,4 +164,43 @@ def colcon_build(tmp_path_factory: pytest.TempPathFactory) -> ColconBuild:
         out = exc.stdout.decode(errors='replace') if isinstance(exc.stdout, bytes) else ''
         err = exc.stderr.decode(errors='replace') if isinstance(exc.stderr, bytes) else ''
         return ColconBuild(workspace, None, out, err + f'\n(timed out after {BUILD_TIMEOUT} s)')
-    return ColconBuild(workspace, proc.returncode, proc.stdout, proc.stderr)
+    build = ColconBuild(workspace, proc.returncode, proc.stdout, proc.stderr)
+    if build.returncode == 0:
+        seed_numba_cache(PKG_DIR / PACKAGE, build.site_packages() / PACKAGE)
+    return build
+
+
+def seed_numba_cache(source: Path, installed: Path) -> int:
+    """Copy the numba kernels already compiled in the source tree into the install tree.
+
+    numba's on-disk cache (``cache=True``: ``__pycache__/*.nbi`` index and
+    ``*.nbc`` data files beside each module) is keyed by the module file's
+    *content* (a SHA-256 of the source, numba >= 0.59), not by its path or
+    modification time, so an entry compiled for ``maglev_ros/physics/kernels.py``
+    is valid for the identical copy in the install tree. Without this, every
+    ``ros2 run``/``ros2 launch`` test's first start compiled the same kernels
+    again, several node processes at once on a 2-core machine. A kernel not
+    yet compiled in the source tree (or a stale entry: numba checks the hash)
+    is simply compiled on first use, as for a user.
+
+    Parameters
+    ----------
+    source : Path
+        The package directory of the source tree (``maglev_ros``).
+    installed : Path
+        The same package in the install tree's site-packages.
+
+    Returns
+    -------
+    int
+        The number of files copied.
+    """
+    copied = 0
+    for cached in sorted(source.rglob('__pycache__/*.nb[ic]')):
+        target = installed / cached.relative_to(source)
+        if not target.parent.parent.is_dir():  # a module the install does not have
+            continue
+        target.parent.mkdir(exist_ok=True)
+        shutil.copy2(cached, target)
+        copied += 1
+    return copied
