@@ -1,8 +1,10 @@
 """``ros2 launch`` of each launch file, stopped as a terminal's Ctrl-C stops it.
 
-Each launch runs for at least ``RUN_S`` seconds once its nodes are up; then the
-whole process group gets SIGINT (what a terminal sends to its foreground job),
-and ``ros2 launch`` forwards its own SIGINT to the nodes after that. Then:
+Each launch runs for at least ``RUN_S`` seconds once its nodes are up (the checks
+that messages flow fall in that time: their ``ros2 topic echo`` listeners start with
+the launch); then the whole process group gets SIGINT (what a terminal sends to its
+foreground job), and ``ros2 launch`` forwards its own SIGINT to the nodes after that.
+Then:
 
 - ``ros2 launch`` and every process it started exit 0;
 - no ERROR or FATAL line (and no traceback) appears in the output;
@@ -17,6 +19,7 @@ magnet fixed, 3 sensors) on a pseudo-terminal, started with ``ros2 run``.
 from __future__ import annotations
 
 import re
+import subprocess
 import time
 from collections import Counter
 from pathlib import Path
@@ -47,21 +50,33 @@ def assert_bag_complete(bag: Path, topics: list[str], metadata_node: str) -> dic
     return indexed
 
 
-def echo_once(ros2, topic: str):
-    """``ros2 topic echo --once TOPIC``, asked again while the topic is not discovered yet.
+def listen(ros2, topic: str, msg_type: str):
+    """Start ``ros2 topic echo --once TOPIC TYPE``, to be started with (or before) the launch.
 
-    Without a daemon, ``ros2 topic echo`` looks the topic's type up once, after a short
-    discovery; a publisher it has not seen yet makes it give up at once ("does not
-    appear to be published yet"), which says nothing about the launch.
+    With the type given, ``ros2 topic echo`` needs no publisher to look the type up:
+    it waits for the first message of a publisher that appears after it (the nodes'
+    publishers are reliable; echo's default subscription is best effort and matches
+    them). Started beside the launch, it hears the first message while the nodes
+    come up, instead of a ``ros2`` process starting and discovering the graph after
+    them. :func:`heard` waits for it.
     """
-    deadline = time.monotonic() + START_TIMEOUT
-    while True:
-        echo = ros2.run('topic', 'echo', '--once', topic, timeout=START_TIMEOUT)
-        if echo.returncode == 0 or 'does not appear to be published' not in echo.stdout:
-            return echo
-        if time.monotonic() > deadline:
-            return echo
-        time.sleep(1.0)
+    return ros2.start('topic', 'echo', '--once', topic, msg_type)
+
+
+def heard(listener) -> str:
+    """The output of a :func:`listen` that received its message (fails on timeout or error)."""
+    try:
+        status = listener.popen.wait(timeout=START_TIMEOUT)
+    except subprocess.TimeoutExpired:
+        listener.kill()
+        pytest.fail(f'{listener.args}: no message in {START_TIMEOUT} s:\n{listener.output()}')
+    assert status == 0, f'{listener.args} exited with {status}:\n{listener.output()}'
+    return listener.output()
+
+
+def run_until(started: float) -> None:
+    """Let the launch run until ``RUN_S`` seconds after ``started`` (its nodes were up)."""
+    time.sleep(max(0.0, started + RUN_S - time.monotonic()))
 
 
 def stop_like_terminal(launch, tolerate: re.Pattern | None = None) -> str:
@@ -100,7 +115,7 @@ def test_lab_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path, storage)
     )  # fmt: skip
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
     launch.wait_for(r'\[maglev_simulator\]: .* lockstep at', START_TIMEOUT)
-    time.sleep(RUN_S)
+    run_until(time.monotonic())
     stop_like_terminal(launch)
     counts = assert_bag_complete(
         bag,
@@ -118,15 +133,16 @@ def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
     )  # fmt: skip
     port = board.wait_for(r'^(/\S+)$', START_TIMEOUT)[1]
     bag = tmp_path / 'board_bag'
+    currents = listen(ros2, '/maglev/currents', 'sensor_msgs/msg/JointState')
     launch = ros2.start(
         'launch', 'maglev_ros', 'lab_board.launch.xml', f'port:={port}', f'bag:={bag}'
     )
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
+    up = time.monotonic()
     # the driver publishes once its link has caught up: wait for the first sample
-    echo = echo_once(ros2, '/maglev/currents')
-    assert echo.returncode == 0 and 'effort' in echo.stdout, echo.stdout + echo.stderr
-    time.sleep(RUN_S)
+    assert 'effort' in first_message(heard(currents)), currents.output()
+    run_until(up)
     stop_like_terminal(launch)
     board.interrupt_like_terminal()
     assert board.wait() == 0, board.output()
@@ -151,16 +167,14 @@ def first_message(stdout: str) -> dict:
     return yaml.safe_load('\n'.join(lines).split('---')[0])
 
 
-def a_command(ros2) -> list[float]:
-    """Echo one ``maglev/currents/command``: 4 finite currents within the 1 A limit.
+def a_command(listener) -> list[float]:
+    """One ``maglev/currents/command`` a :func:`listen` heard: 4 currents within 1 A.
 
     Not asserted: that they are non-zero. On a loaded 2-core machine the
     estimator falls behind the real-time samples, and the controller then
     commands zero currents, as it must (stale input, ERROR on /diagnostics).
     """
-    echo = echo_once(ros2, '/maglev/currents/command')
-    assert echo.returncode == 0, echo.stdout + echo.stderr
-    data = first_message(echo.stdout)['data']
+    data = first_message(heard(listener))['data']
     assert len(data) == 4 and all(abs(v) <= 1.0 for v in data), data
     return data
 
@@ -181,23 +195,19 @@ def test_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2, tmp_path
     bag = tmp_path / 'closed_loop_bag'
     # listening before the launch (types given: no discovery needed): the simulator
     # starts with its controller, and a magnet lost on a loaded machine stops the samples
-    estimates = ros2.start('topic', 'echo', '--once', '/maglev/state/estimate',
-                           'nav_msgs/msg/Odometry')  # fmt: skip
-    commands = ros2.start('topic', 'echo', '--once', '/maglev/currents/command',
-                          'std_msgs/msg/Float64MultiArray')  # fmt: skip
+    estimates = listen(ros2, '/maglev/state/estimate', 'nav_msgs/msg/Odometry')
+    commands = listen(ros2, '/maglev/currents/command', 'std_msgs/msg/Float64MultiArray')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml', 'record:=true',
                         f'bag:={bag}', 'sample_rate:=1000.0')  # fmt: skip
     launch.wait_for(r'\[maglev_simulator\]: .* realtime at', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
-    assert estimates.wait(START_TIMEOUT) == 0, estimates.output()
-    estimate = first_message(estimates.output())
+    up = time.monotonic()
+    estimate = first_message(heard(estimates))
     assert estimate['child_frame_id'] == 'maglev_magnet', estimate
     assert len(estimate['pose']['covariance']) == 36
-    assert commands.wait(START_TIMEOUT) == 0, commands.output()
-    data = first_message(commands.output())['data']
-    assert len(data) == 4 and all(abs(v) <= 1.0 for v in data), data
-    time.sleep(RUN_S)
+    a_command(commands)
+    run_until(up)
     stop_like_terminal(launch, tolerate=CRASH)
     assert_bag_complete(
         bag,
@@ -219,23 +229,23 @@ def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp
         '--magnet', 'fixed', '--link', str(tmp_path / 'ttyMAGGY'),
     )  # fmt: skip
     port = board.wait_for(r'^(/\S+)$', START_TIMEOUT)[1]
+    estimates = listen(ros2, '/maglev/state/estimate', 'nav_msgs/msg/Odometry')
+    commands = listen(ros2, '/maglev/currents/command', 'std_msgs/msg/Float64MultiArray')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop_board.launch.xml', f'port:={port}')
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
-    echo = echo_once(ros2, '/maglev/state/estimate')
-    assert echo.returncode == 0 and 'pose' in echo.stdout, echo.stdout + echo.stderr
-    a_command(ros2)  # the board's samples drive the estimator and the controller
-    time.sleep(RUN_S)
+    up = time.monotonic()
+    assert 'pose' in first_message(heard(estimates)), estimates.output()
+    a_command(commands)  # the board's samples drive the estimator and the controller
+    run_until(up)
     stop_like_terminal(launch)
     board.interrupt_like_terminal()
     assert board.wait() == 0, board.output()
 
 
-def _excitation(ros2) -> list[float]:
-    """One message of the controller's excitation: 4 currents within its amplitude."""
-    echo = echo_once(ros2, '/maglev/currents/excitation')
-    assert echo.returncode == 0, echo.stdout + echo.stderr
-    data = first_message(echo.stdout)['data']
+def _excitation(listener) -> list[float]:
+    """The controller's excitation a :func:`listen` heard: 4 currents within its amplitude."""
+    data = first_message(heard(listener))['data']
     assert len(data) == 4 and all(abs(v) <= 0.1 + 1e-12 for v in data), data
     return data
 
@@ -249,16 +259,18 @@ def test_closed_loop_lab_launch_excites_identifies_records_and_stops_cleanly(ros
     (with the excitation) reads back complete.
     """
     bag = tmp_path / 'lab_bag'
+    excitation = listen(ros2, '/maglev/currents/excitation', 'std_msgs/msg/Float64MultiArray')
+    model = listen(ros2, '/maglev/identifier/model', 'std_msgs/msg/Float64MultiArray')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop_lab.launch.xml', f'bag:={bag}',
                         'settle:=0.05')  # fmt: skip
     launch.wait_for(r'\[maglev_simulator\]: .* lockstep at', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on .*prbs 0.1 A on pairs', START_TIMEOUT)
     launch.wait_for(r'\[maglev_identifier\]: recursive ARX', START_TIMEOUT)
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
-    _excitation(ros2)
-    model = echo_once(ros2, '/maglev/identifier/model')
-    assert model.returncode == 0 and 'A[Bx_0,Bx_0] na=7' in model.stdout, model.stdout
-    time.sleep(RUN_S)
+    up = time.monotonic()
+    _excitation(excitation)
+    assert 'A[Bx_0,Bx_0] na=7' in heard(model), model.output()
+    run_until(up)
     stop_like_terminal(launch, tolerate=CRASH)
     assert_bag_complete(
         bag,
@@ -280,13 +292,15 @@ def test_closed_loop_lab_board_launch_excites_records_and_stops_cleanly(ros2, tm
     )  # fmt: skip
     port = board.wait_for(r'^(/\S+)$', START_TIMEOUT)[1]
     bag = tmp_path / 'lab_board_bag'
+    excitation = listen(ros2, '/maglev/currents/excitation', 'std_msgs/msg/Float64MultiArray')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop_lab_board.launch.xml',
                         f'port:={port}', f'bag:={bag}', 'settle:=0.0')  # fmt: skip
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on .*prbs 0.1 A on pairs', START_TIMEOUT)
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
-    _excitation(ros2)
-    time.sleep(RUN_S)
+    up = time.monotonic()
+    _excitation(excitation)
+    run_until(up)
     stop_like_terminal(launch)
     board.interrupt_like_terminal()
     assert board.wait() == 0, board.output()
