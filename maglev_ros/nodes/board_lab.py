@@ -35,6 +35,7 @@ of the estimate.
 from __future__ import annotations
 
 import gc
+import os
 import struct
 import sys
 import time
@@ -216,8 +217,6 @@ def run_board_closed_loop_lab(
     RuntimeError
         If the board sends no samples or the window cannot be set (names what).
     """
-    import os
-
     from maglev_ros.nodes import intra_process
     from maglev_ros.nodes.bringup import Bringup
     from maglev_ros.nodes.controller import ControllerNode
@@ -264,7 +263,7 @@ def run_board_closed_loop_lab(
                 ),
             )
         )
-        cleanup.callback(driver.close)  # the loop stops first (coils at zero)
+        cleanup.callback(driver.close)  # the loop stops (coils at zero), then the taps' queue
         est = lab.add(
             EstimatorNode(
                 context=ctx,
@@ -294,6 +293,7 @@ def run_board_closed_loop_lab(
         if est.estimates is None or driver.samples_source.listeners == 0:
             raise RuntimeError('the estimator did not connect to the driver in this process')
         est.estimates.connect(estimates.on_estimate, 'maglev_lab_estimates')
+        cleanup.callback(est.estimates.disconnect, estimates.on_estimate)
         ident = recorder = None
 
         def set_window(first_s: float, last_s: float) -> None:
@@ -310,6 +310,7 @@ def run_board_closed_loop_lab(
         # (created next) take the read that opens or closes it
         fields_tap = intra_process.tap(ctx, driver.resolve_topic_name(field_topic(0)))
         fields_tap.connect(window.on_fields, 'maglev_lab_window')
+        cleanup.callback(fields_tap.disconnect, window.on_fields)
         ident = lab.add(
             IdentifierNode(
                 context=ctx,
@@ -345,19 +346,10 @@ def run_board_closed_loop_lab(
         driver.start()  # the board's first sample now finds the whole loop
         # a thread holding the GIL hands it over after this long (default 5 ms): the
         # executor's work (the identifier's model, diagnostics) delays the loop less
-        switch = sys.getswitchinterval()
+        cleanup.callback(sys.setswitchinterval, sys.getswitchinterval())
         sys.setswitchinterval(GIL_SWITCH_S)
-        try:
-            return _run(lab, s, window, estimates, driver, ctrl, ident, recorder, topics, z_eq,
-                        report, stop)  # fmt: skip
-        finally:
-            sys.setswitchinterval(switch)
-            driver.close()  # the loop stops first (coils at zero), then what the taps queued
-            intra_process.dispatch_taps(ctx, None)
-            dispatcher.close()
-            fields_tap.disconnect(window.on_fields)
-            if est.estimates is not None:
-                est.estimates.disconnect(estimates.on_estimate)
+        return _run(lab, s, window, estimates, driver, ctrl, ident, recorder, topics, z_eq,
+                    report, stop)  # fmt: skip
 
 
 def _run(lab, s, window, estimates, driver, ctrl, ident, recorder, topics, z_eq, report, stop):
@@ -365,8 +357,11 @@ def _run(lab, s, window, estimates, driver, ctrl, ident, recorder, topics, z_eq,
     settle_ms = round(s.settle * 1e3)
     last = [-1, time.monotonic()]
 
-    def progressing(done: int) -> None:
-        now = time.monotonic()
+    def progressing() -> None:
+        """Raise if the window could not be set or the board's records stopped."""
+        if window.error is not None:
+            raise RuntimeError(f'the recording window could not be set: {window.error}')
+        now, done = time.monotonic(), driver.counters['records']
         if done != last[0]:
             last[:] = [done, now]
         elif now - last[1] > WAIT_S:
@@ -375,18 +370,14 @@ def _run(lab, s, window, estimates, driver, ctrl, ident, recorder, topics, z_eq,
             )
 
     def settled() -> bool:
-        if window.error is not None:
-            raise RuntimeError(f'the recording window could not be set: {window.error}')
+        progressing()
         first, newest = window.first_ns, estimates.stamps[-1] if estimates.stamps else None
         done = 0 if first is None or newest is None else (newest - first) // 1_000_000
-        progressing(driver.counters['records'])
         report('settling', int(min(max(done, 0), settle_ms)), settle_ms)
         return window.start_ns is not None
 
     def recorded() -> bool:
-        if window.error is not None:
-            raise RuntimeError(f'the recording window could not be set: {window.error}')
-        progressing(driver.counters['records'])
+        progressing()
         report('recording', window.recorded, s.samples)
         return window.end_ns is not None
 
