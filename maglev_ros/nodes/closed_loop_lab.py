@@ -283,9 +283,6 @@ def overrides(**values) -> list:
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-_overrides = overrides
-
-
 def estimator_parameters(s: LabGraphSettings, **more) -> dict:
     """Return the lab's estimator parameters: parameter set, filter, rate and sensors.
 
@@ -481,7 +478,7 @@ def run_closed_loop_lab(
         sim = lab.add(
             SimulatorNode(
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     params=s.params,
                     field_model=s.field_model,
                     magnet='free',
@@ -506,7 +503,7 @@ def run_closed_loop_lab(
         est = lab.add(
             EstimatorNode(
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     **estimator_parameters(s, **(realtime_estimator if rt else {}))
                 ),
             )
@@ -522,7 +519,7 @@ def run_closed_loop_lab(
         ctrl = lab.add(
             ControllerNode(
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     **controller_parameters(
                         s,
                         e,
@@ -544,7 +541,7 @@ def run_closed_loop_lab(
         ident = lab.add(
             IdentifierNode(
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     **identifier_parameters(s, **(realtime_identifier if rt else {}))
                 ),
             )
@@ -557,7 +554,7 @@ def run_closed_loop_lab(
         recorder = lab.add(
             RecorderNode(
                 context=ctx,
-                parameter_overrides=_overrides(
+                parameter_overrides=overrides(
                     path=str(bag),
                     storage=s.storage,
                     topics=topics,

@@ -621,7 +621,7 @@ class RecorderNode(Node):
             tap.disconnect(listener)
         self._taps = []
         if self._held and any(self.counts.values()):  # a window of a single sample
-            self._write_held(round(self.config.record_from * 1e9))
+            self._write_held(self._window[0])
         if self._window[1] is not None and self._tail:  # the window's end never came
             self._close_window()
         if not self._metadata_done and self._metadata_items:
