@@ -28,6 +28,7 @@ NODES: dict[str, str] = {
     'identifier': 'maglev_ros.nodes.identifier:main',
     'estimator': 'maglev_ros.nodes.estimator:main',
     'controller': 'maglev_ros.nodes.controller:main',
+    'loop': 'maglev_ros.nodes.loop:main',
 }
 
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]

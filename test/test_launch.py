@@ -104,3 +104,15 @@ def test_closed_loop_lab_launch_files_excite_identify_and_record(name):
     assert params['excitation_signal'] == '$(var signal)'
     recorded = {p.get('name'): p.get('value') for p in nodes['recorder'].findall('param')}
     assert 'maglev/currents/excitation' in recorded['topics']
+
+
+def test_closed_loop_launch_composes_the_loop_unless_separate():
+    root = ET.parse(LAUNCH / 'closed_loop.launch.xml').getroot()
+    composed = [g for g in root.findall('group') if g.get('unless') == '$(var separate)']
+    assert [n.get('exec') for n in composed[0].findall('node')] == ['loop', 'recorder']
+    separate = [g for g in root.findall('group') if g.get('if') == '$(var separate)']
+    assert [n.get('exec') for n in separate[0].findall('node')] == [
+        'simulator', 'estimator', 'controller', 'recorder',
+    ]  # fmt: skip
+    defaults = {a.get('name'): a.get('default') for a in root.findall('arg')}
+    assert defaults['separate'] == 'false'

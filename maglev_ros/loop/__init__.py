@@ -7,8 +7,10 @@ simulation studies, the nodes, the lab, the tests and the benchmarks.
 
 from .control_loop import MAX_COMMAND_DELAY, ControlLoop, LoopSample
 from .observers import Observer, ObserverSet, ObserverThread
+from .paced import PacedSimulatedPlant
 from .plant import Plant, SampleBlock
 from .simulated import SimulatedPlant
+from .simulated_setup import SimulatedLoopSettings, build_simulated_loop
 
 __all__ = [
     'MAX_COMMAND_DELAY',
@@ -17,7 +19,10 @@ __all__ = [
     'Observer',
     'ObserverSet',
     'ObserverThread',
+    'PacedSimulatedPlant',
     'Plant',
     'SampleBlock',
+    'SimulatedLoopSettings',
     'SimulatedPlant',
+    'build_simulated_loop',
 ]

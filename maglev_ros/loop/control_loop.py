@@ -47,8 +47,9 @@ class LoopSample:
         True state (simulated plants).
     estimate : ndarray, shape (12,) or None
         The estimator's state after this sample (None: no estimator or no reading).
-    std : ndarray, shape (10,) or None
-        Its standard deviations (reduced states).
+    covariance : ndarray, shape (n, n) or None
+        Its covariance over the reduced states (x y z alpha beta vx vy vz wx
+        wy, then any bias states); :attr:`std` gives their standard deviations.
     nis : float
         NIS of the accepted readings.
     dof : int
@@ -77,7 +78,7 @@ class LoopSample:
     valid: bool
     state: np.ndarray | None
     estimate: np.ndarray | None
-    std: np.ndarray | None
+    covariance: np.ndarray | None
     nis: float
     dof: int
     frozen: np.ndarray | None
@@ -86,6 +87,13 @@ class LoopSample:
     applied: np.ndarray | None
     level: str
     message: str
+
+    @property
+    def std(self) -> np.ndarray | None:
+        """Standard deviations of the 10 reduced states, shape (10,) (None: no estimate)."""
+        if self.covariance is None:
+            return None
+        return np.sqrt(np.diag(self.covariance)[:10])
 
 
 class ControlLoop:
@@ -159,6 +167,23 @@ class ControlLoop:
         self.stopped = False
         self.reason = ''
 
+    def warm_up(self) -> None:
+        """Call the estimator and the controller once on the plant's model, then reset them.
+
+        Their compiled kernels load (or compile) now, not in the first
+        control period of a real-time run, where seconds of compiling would
+        leave the magnet uncontrolled.
+        """
+        n_s = self.plant.n_inputs
+        sim = getattr(self.plant, 'simulator', None)
+        y = sim.reset() if sim is not None else None
+        if self.estimator is not None and y is not None:
+            x_hat = self.estimator.step(y, np.zeros(n_s))
+            self.controller.command(0.0, odometry_round_trip(x_hat), np.zeros(n_s))
+        elif y is not None:
+            self.controller.command(0.0, y, np.zeros(n_s))
+        self.reset()
+
     def run(self, samples: int, stop: Callable[[], bool] | None = None) -> int:
         """Step until ``samples`` samples were handled, the plant stopped or ``stop()``.
 
@@ -215,12 +240,12 @@ class ControlLoop:
             valid = bool(block.valid[j])
             if self.reference is not None:
                 self._set_reference(self.reference(t))
-            x_hat = std = frozen = None
+            x_hat = cov = frozen = None
             nis, dof = 0.0, 0
             last = j == n - 1
             if est is not None and valid:
                 x_hat = est.step(y, currents)
-                std = est.state_std()
+                cov = est.state_covariance
                 nis, dof = est.last_nis, est.last_dof
                 frozen = est.freeze.frozen.copy()
             command = excitation = applied = None
@@ -247,7 +272,7 @@ class ControlLoop:
                 state = None if block.states is None else block.states[j]
                 # fmt: off
                 observers(LoopSample(
-                    k, t, stamp, y, currents, valid, state, x_hat, std, nis, dof, frozen,
+                    k, t, stamp, y, currents, valid, state, x_hat, cov, nis, dof, frozen,
                     command, excitation, applied, level, message,
                 ))
                 # fmt: on

@@ -49,7 +49,12 @@ class ObserverSet:
         self._entries.append([observer, every, 0])
 
     def remove(self, observer: Observer) -> None:
-        """Stop calling ``observer``."""
+        """Stop calling ``observer``.
+
+        Parameters
+        ----------
+        observer : Observer
+        """
         self._entries = [e for e in self._entries if e[0] != observer]
 
     def __bool__(self) -> bool:

@@ -83,7 +83,15 @@ class Plant(Protocol):
         ...
 
     def write(self, command: np.ndarray, stamp_ns: int) -> None:
-        """Apply coil currents, A, shape (n_s,), answering the sample stamped ``stamp_ns``."""
+        """Apply a command: coil currents answering the sample stamped ``stamp_ns``.
+
+        Parameters
+        ----------
+        command : ndarray, shape (n_s,)
+            Coil currents, A, order x+, x-, y+, y-.
+        stamp_ns : int
+            Stamp of the sample the command answers, ns.
+        """
         ...
 
     def close(self) -> None:

@@ -39,7 +39,13 @@ class SimulatedPlant:
         self._reading = simulator.reset()
 
     def reset(self, x0=None) -> None:
-        """Restart the simulation at ``x0`` (shape (12,); default: its equilibrium)."""
+        """Restart the simulation at ``x0``.
+
+        Parameters
+        ----------
+        x0 : array_like, shape (12,), optional
+            Initial state (default: the equilibrium).
+        """
         self._reading = self.simulator.reset(x0)
 
     def read(self) -> SampleBlock:
@@ -61,7 +67,15 @@ class SimulatedPlant:
         )
 
     def write(self, command: np.ndarray, stamp_ns: int) -> None:
-        """Step one sample with ``command`` (A, shape (n_s,)) held."""
+        """Step one sample with ``command`` held.
+
+        Parameters
+        ----------
+        command : ndarray, shape (n_s,)
+            Coil currents, A, order x+, x-, y+, y-.
+        stamp_ns : int
+            Stamp of the sample the command answers, ns.
+        """
         self._reading = self.simulator.step(command)
 
     def close(self) -> None:

@@ -24,6 +24,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 
@@ -179,17 +180,70 @@ def a_command(listener) -> list[float]:
     return data
 
 
-def test_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
+HOLD_S = 60.0  # s of levitation asserted for the composed launch
+MISMATCH_HOLD_S = 20.0  # s with the plant's magnet 10 % off the believed one
+SETTLE_S = 1.0  # s from the first recorded state before the hold is judged
+
+
+def assert_held(bag: Path, seconds: float, largest: float, rms: float) -> np.ndarray:
+    """The recorded true state held ``seconds``: |x|, |y| < ``largest``, RMS < ``rms`` (m)."""
+    from maglev_ros.bags import read_bag
+
+    position = [f'maglev/state/true:pose.pose.position.{a}' for a in 'xyz']
+    data = read_bag(bag, position, allow_gaps=True).data
+    y = np.asarray(data.y)
+    recorded = len(y) * data.Ts
+    assert recorded >= seconds, f'{bag}: {recorded:.1f} s of states recorded'
+    p = y[int(round(SETTLE_S / data.Ts)) :].copy()
+    p[:, 2] -= p[:, 2].mean()
+    worst, spread = np.abs(p).max(axis=0), np.sqrt(np.mean(p**2, axis=0))
+    assert np.all(worst[:2] < largest), f'largest |x|, |y| {worst[:2] * 1e3} mm'
+    assert np.all(spread < rms), f'RMS x, y, z {spread * 1e6} um'
+    return spread
+
+
+def run_composed(ros2, tmp_path, seconds: float, *args: str) -> Path:
+    """``closed_loop.launch.xml record:=true`` (composed) for ``seconds``; its bag."""
+    bag = tmp_path / 'closed_loop_bag'
+    launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml', 'record:=true',
+                        f'bag:={bag}', *args)  # fmt: skip
+    launch.wait_for(r'\[maglev_loop\]: maggy_v2: kf \+ lqr at 1000 Hz', START_TIMEOUT)
+    launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
+    time.sleep(seconds + SETTLE_S + 1.0)
+    stop_like_terminal(launch)
+    assert_bag_complete(
+        bag,
+        ['/maglev/sensor_0/field', '/maglev/currents', '/maglev/currents/command',
+         '/maglev/state/estimate', '/maglev/state/true'],
+        'maglev_loop',
+    )  # fmt: skip
+    return bag
+
+
+def test_composed_closed_loop_launch_holds_a_minute_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
+    """The loop node (simulator at 5 kHz with noise and quantisation, KF, LQR at 1 kHz) and
+    a recorder process: the magnet holds ``HOLD_S``, Ctrl-C ends all with 0, the bag complete.
+    """
+    bag = run_composed(ros2, tmp_path, HOLD_S)
+    assert_held(bag, HOLD_S, 0.5e-3, 0.1e-3)
+
+
+@pytest.mark.parametrize(('polarization', 'mass'), [(1.1, 0.9), (0.9, 1.1)])
+def test_composed_closed_loop_launch_holds_a_mismatched_magnet(ros2, tmp_path, polarization, mass):
+    bag = run_composed(ros2, tmp_path, MISMATCH_HOLD_S, f'plant_polarization:={polarization}',
+                       f'plant_mass:={mass}')  # fmt: skip
+    assert_held(bag, MISMATCH_HOLD_S, 0.5e-3, 0.1e-3)
+
+
+def test_separate_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
     """Simulator in real time, estimator, controller and recorder as separate processes.
 
-    At 1 kHz (``sample_rate:=1000``, which still holds V2 in the ROS-free
-    loop), to spare a loaded CI machine. Asserted: the estimator publishes
-    estimates, the controller publishes commands, the recorder's bag reads
-    back complete and Ctrl-C stops all cleanly. Not asserted: non-zero
-    commands and the hold. On a loaded 2-core machine the estimator falls
-    behind the real-time samples and the controller rightly commands zero
-    currents (stale input); ``benchmarks/closed_loop_realtime.py`` measures
-    the hold at 5 kHz on a quiet machine. A crash of the simulated magnet is
+    At 1 kHz (``sample_rate:=1000``), to spare a loaded CI machine. Asserted: the
+    estimator publishes estimates, the controller publishes commands, the
+    recorder's bag reads back complete and Ctrl-C stops all cleanly. Not
+    asserted: non-zero commands and the hold. On a loaded 2-core machine the
+    estimator falls behind the real-time samples and the controller rightly
+    commands zero currents (stale input). A crash of the simulated magnet is
     the one ERROR line tolerated.
     """
     bag = tmp_path / 'closed_loop_bag'
@@ -198,7 +252,7 @@ def test_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2, tmp_path
     estimates = listen(ros2, '/maglev/state/estimate', 'nav_msgs/msg/Odometry')
     commands = listen(ros2, '/maglev/currents/command', 'std_msgs/msg/Float64MultiArray')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml', 'record:=true',
-                        f'bag:={bag}', 'sample_rate:=1000.0')  # fmt: skip
+                        'separate:=true', f'bag:={bag}', 'sample_rate:=1000.0')  # fmt: skip
     launch.wait_for(r'\[maglev_simulator\]: .* realtime at', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
