@@ -61,8 +61,6 @@ setup(
         'tqdm>=4.60',
         # SINDy with control inputs (maglev_ros.sysid.sindy)
         'pysindy>=2.0',
-        # SLICOT's balanced truncation AB09MD (maglev_ros.sysid.reduction)
-        'slycot>=0.6',
     ],
     extras_require={
         # The PyPI build of ROS 2 Jazzy's Python side, for machines without ROS.
