@@ -37,3 +37,17 @@ def record(pattern, amplitude, clock, samples, seed):
                  'reference', 'level', 'frozen', 'readings'):  # fmt: skip
         fields[name] = fields[name][keep]
     return type(result)(**fields), r
+
+
+def lab_x(seed=0, samples=25000):
+    """The lab's x channel: ``Bx_0`` against ``u_x`` (total command), +-0.1 A PRBS on the x pair.
+
+    Means removed (the lab's detrend); ``u_x = (u_x+ - u_x-) / 2`` includes the excitation.
+    """
+    from maglev_ros.sysid import IdData
+
+    result, r = record('x', 0.1, 0.2, samples, seed)
+    u = result.command + r
+    ux = 0.5 * (u[:, 0] - u[:, 1])
+    bx = result.readings[:, 0]
+    return IdData(bx - bx.mean(), ux - ux.mean(), result.dt, ['Bx_0'], ['u_x'], ['T'], ['A'])

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy import linalg
 
-from maglev_ros.sysid import IdData, arx
+from maglev_ros.sysid import arx
 from maglev_ros.sysid.reduction import (
     StateSpaceModel,
     balanced_truncation,
@@ -12,7 +12,7 @@ from maglev_ros.sysid.reduction import (
 )
 from maglev_ros.sysid.reduction_plots import reduction_plot
 
-from .physics_runs import record
+from .physics_runs import lab_x
 
 F = np.linspace(0.0, 0.5, 400)  # Hz with Ts = 1
 
@@ -61,17 +61,8 @@ def test_unstable_part_is_kept_whole():
         balanced_truncation(full, order=0)
 
 
-def lab_x_data():
-    """The lab's x channel: Bx_0 against u_x, closed loop, +-0.1 A PRBS on the x pair."""
-    result, r = record('x', 0.1, 0.2, 25000, 0)
-    u = result.command + r
-    ux = 0.5 * (u[:, 0] - u[:, 1])
-    bx = result.readings[:, 0]
-    return IdData(bx - bx.mean(), ux - ux.mean(), result.dt, ['Bx_0'], ['u_x'], ['T'], ['A'])
-
-
 def test_lab_arx_7_9_1_reduced_by_the_default_rule(tmp_path, capsys):
-    est, val = lab_x_data().split(0.5)
+    est, val = lab_x().split(0.5)
     model = arx(est, 7, 9, 1)
     red = balanced_truncation(model)
     full_fit, reduced_fit = red.fit_loss(val)
