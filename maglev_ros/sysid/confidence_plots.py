@@ -71,6 +71,11 @@ def bode_band_figure(
                         f, band.value[:, i, j] + add, color=f'C{k}',
                         label=f'{label} (+-{sigma:g} sd)' if ax is axes[0, 0] else None,
                     )  # fmt: skip
+    for ax in axes[0::2].ravel():  # a band can reach -inf dB where |G| is uncertain
+        values = np.concatenate([line.get_ydata() for line in ax.get_lines()] or [[0.0]])
+        finite = values[np.isfinite(values)]
+        if finite.size:
+            ax.set_ylim(finite.min() - 20.0, finite.max() + 20.0)
     for i in range(first.ny):
         for j in range(first.nu):
             axes[2 * i, j].set_title(

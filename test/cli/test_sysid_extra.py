@@ -1,0 +1,85 @@
+"""maglev-sysid: NARX rows, confidence plots and covariance, reduction, several data files."""
+
+import json
+
+import numpy as np
+import pytest
+from sysid.systems import simulate_siso
+
+from maglev_ros.cli.sysid import main
+
+
+def npz(path, data):
+    np.savez(path, y=data.y, u=data.u, Ts=data.Ts)
+    return path
+
+
+@pytest.fixture
+def files(tmp_path):
+    """Three experiments of the same ARX plant, and one of another plant with two inputs."""
+    out = [npz(tmp_path / f'run{k}.npz', simulate_siso(3000, seed=k)) for k in range(3)]
+    wide = simulate_siso(3000, seed=9)
+    np.savez(tmp_path / 'wide.npz', y=wide.y, u=np.column_stack([wide.u, wide.u]), Ts=wide.Ts)
+    return out, tmp_path / 'wide.npz'
+
+
+def run(argv, capsys):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_several_files_print_a_fold_table(files, capsys):
+    runs, _ = files
+    code, out, err = run([*runs, '--arx', 2, 2, 1, '--armax', 2, 2, 1, 1, '--quiet'], capsys)
+    assert code == 0, err
+    assert '3 experiments as one data set' in out
+    assert out.count('Validation k-fold over the files') == 2
+    assert 'run1.npz, run2.npz' in out and out.count('mean ') == 2
+    code, out, _ = run([*runs, '--arx', 2, 2, 1, '--kfold', 3, '--json'], capsys)
+    summary = json.loads(out)
+    folds = summary['models'][0]['folds']['folds']
+    assert [f['validation'] for f in folds] == [['run0.npz'], ['run1.npz'], ['run2.npz']]
+    assert np.array(summary['models'][0]['covariance']).shape == (4, 4)
+    code, out, _ = run([*runs, '--narx', 2, 2, 1, 2, '--by-experiment', '--quiet'], capsys)
+    assert code == 0 and 'by experiment' in out and 'NARX' in out
+
+
+def test_narx_confidence_and_reduction_on_one_file(files, tmp_path, capsys):
+    runs, _ = files
+    plots = tmp_path / 'plots'
+    argv = [runs[0], '--arx', 4, 4, 1, '--narx', 2, 2, 1, 2, '--reduce', '--confidence']
+    code, out, err = run([*argv, '--plot', plots, '--quiet'], capsys)
+    assert code == 0, err
+    assert 'polynomial NARX' in out and 'u1(t-1)' in out and 'ERR' in out
+    assert 'balanced truncation: order 4 ->' in out
+    for name in ('bode_confidence', 'step_confidence', 'compare_narx', 'reduction_1_arx'):
+        assert (plots / f'{name}.png').stat().st_size > 0
+    code, out, _ = run([*argv, '--json'], capsys)
+    summary = json.loads(out)
+    arx_entry, narx_entry = summary['models']
+    assert np.array(arx_entry['covariance']).shape == (8, 8)
+    assert arx_entry['reduction']['order'] < 4
+    assert narx_entry['structure'] == 'narx' and narx_entry['terms'][0]['names']
+
+
+@pytest.mark.parametrize(
+    ('extra', 'match'),
+    [
+        (['--kfold'], 'need several data files'),
+        (['--narx', 2, 2, 1, 5], 'DEGREE from 1 to 4'),
+        (['--reduce', 'x'], '--reduce takes a state count'),
+        (['--confidence', '0'], '--confidence must be a positive'),
+        (['{second}', '--kfold', 5], '--kfold K must be from 2 to 2'),
+        (['{wide}'], 'the data files do not fit together'),
+        (['{second}', '--reduce'], '--reduce and --confidence take one data file'),
+    ],
+)
+def test_bad_input_exits_2_with_one_line(files, capsys, extra, match):
+    runs, wide = files
+    more = [{'{second}': runs[1], '{wide}': wide}[a] for a in extra if str(a).startswith('{')]
+    options = [a for a in extra if not str(a).startswith('{')]
+    code, out, err = run([runs[0], *more, '--arx', 2, 2, 1, *options], capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1, err
+    assert match in lines[0]
