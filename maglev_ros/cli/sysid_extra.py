@@ -343,13 +343,13 @@ def run_several(args: argparse.Namespace, load: Any, plain: Any, requested: list
         raise UsageError('--instruments takes one data file; give the files one at a time')
     if args.select:
         raise UsageError('--select takes one data file; choose orders with --arx on several')
-    experiments, labels = [], []
+    experiments = []
     for path in args.data:
         one = copy.copy(args)
         one.data = path
         data, _ = load(one)
         experiments.append(_prepare(args, data))
-        labels.append(Path(path).name)
+    labels = _labels(args.data)
     try:
         experiments = list(sysid.merge(*experiments))
     except ValueError as exc:
@@ -426,6 +426,16 @@ def run_several(args: argparse.Namespace, load: Any, plain: Any, requested: list
     for block in blocks:
         print('\n' + block)
     return status
+
+
+def _labels(paths: list[str]) -> list[str]:
+    """Shortest distinct path tails: ``run1.npz``, or ``lab1/bag`` for bags all named ``bag``."""
+    parts = [Path(p).resolve().parts for p in paths]
+    for depth in range(1, max(len(p) for p in parts) + 1):
+        labels = ['/'.join(p[-depth:]) for p in parts]
+        if len(set(labels)) == len(labels):
+            return labels
+    return [str(p) for p in paths]
 
 
 def _indent(text: str, n: int) -> str:

@@ -83,3 +83,11 @@ def test_bad_input_exits_2_with_one_line(files, capsys, extra, match):
     lines = err.strip().splitlines()
     assert code == 2 and len(lines) == 1, err
     assert match in lines[0]
+
+
+def test_labels_are_the_shortest_distinct_tails(tmp_path):
+    from maglev_ros.cli.sysid_extra import _labels
+
+    assert _labels([tmp_path / 'a.npz', tmp_path / 'b.npz']) == ['a.npz', 'b.npz']
+    bags = [tmp_path / 'lab1' / 'bag', tmp_path / 'lab2' / 'bag']
+    assert _labels(bags) == ['lab1/bag', 'lab2/bag']
