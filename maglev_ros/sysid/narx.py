@@ -256,8 +256,6 @@ class NarxModel:
         if not self.input_units:
             object.__setattr__(self, 'input_units', ('',) * s.nu)
 
-    structure_name = 'narx'
-
     @property
     def ny(self) -> int:
         """Number of outputs."""
@@ -343,7 +341,11 @@ class NarxModel:
         return out
 
     def residuals(self, data: IdData, ic: str = 'estimate') -> np.ndarray:
-        """One-step prediction errors, shape (N, ny) (zero for the first ``max_lag``)."""
+        """One-step prediction errors, shape (N, ny) (zero for the first ``max_lag``).
+
+        ``ic`` is accepted as by :meth:`PolyModel.residuals`; the predictor
+        always starts from the measured outputs.
+        """
         return data.y - self.predict(data, 1, ic='estimate')
 
     def __str__(self) -> str:
