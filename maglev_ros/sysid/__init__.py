@@ -8,7 +8,8 @@ Data sets (:class:`IdData`, :func:`load_data`), estimators (:func:`arx`, :func:`
 (:func:`save_model`, :func:`load_model`, :func:`export_mat`) and PNG plots.
 
 Beyond the linear fits: polynomial NARX with FROLS (:func:`narx`), SINDy with
-control (:func:`sindy`, through pysindy), confidence bands
+control (:func:`sindy`, through pysindy; :func:`bag_states` reads a bag's
+states), confidence bands
 (:func:`frequency_band`, :func:`step_band`, :func:`simulation_band`),
 cross-validation over experiments (:func:`kfold`, :func:`by_experiment`) and
 balanced truncation (:func:`balanced_truncation`).
@@ -33,6 +34,7 @@ from .reduction import Reduction, StateSpaceModel, balanced_truncation
 from .rls import RecursiveArx, RlsResult, rls_arx
 from .selection import OrderSearch, arxstruc, delayest, selstruc
 from .sindy import SindyModel, sindy
+from .state_trajectories import StateTrajectory, bag_states
 from .validation import CompareResult, ResidualAnalysis, compare, resid
 
 __all__ = [
@@ -53,11 +55,13 @@ __all__ = [
     'ResidualAnalysis',
     'RlsResult',
     'SindyModel',
+    'StateTrajectory',
     'StateSpaceModel',
     'aic',
     'armax',
     'arx',
     'arxstruc',
+    'bag_states',
     'balanced_truncation',
     'bj',
     'bode_figure',
