@@ -19,7 +19,16 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['SindyModel', 'sindy']
+__all__ = [
+    'COIL_INPUTS',
+    'REDUCED_INDEX',
+    'REDUCED_STATES',
+    'EigenvalueCheck',
+    'SindyModel',
+    'eigenvalue_check',
+    'sindy',
+    'sindy_magnet',
+]
 
 
 @dataclass(frozen=True, eq=False)
@@ -206,3 +215,99 @@ def sindy(
     else:  # pysindy 2 takes several trajectories as lists
         model.fit(scaled_x, t=dt, u=scaled_u, x_dot=scaled_dot, feature_names=names)
     return SindyModel(model, state_names, input_names, x_ref, u_ref, sx, su)
+
+
+#: The magnet's 10 states without yaw and yaw rate (the physics' ``reduced()`` order),
+#: indices into the 12-state.
+REDUCED_STATES = ('x', 'y', 'z', 'alpha', 'beta', 'vx', 'vy', 'vz', 'wx', 'wy')
+REDUCED_INDEX = (0, 1, 2, 3, 4, 6, 7, 8, 9, 10)
+COIL_INPUTS = ('i1', 'i2', 'i3', 'i4')
+
+
+def sindy_magnet(
+    x: np.ndarray | Sequence[np.ndarray],
+    u: np.ndarray | Sequence[np.ndarray],
+    dt: float,
+    linear: object,
+    degree: int = 2,
+    threshold: float = 0.5,
+) -> SindyModel:
+    """SINDy of the magnet: 10 states around the equilibrium in mm, mrad, mm/s, mrad/s.
+
+    Parameters
+    ----------
+    x : ndarray, shape (N, 12), or a sequence of them
+        12-states (position m, ZYX angles rad, world velocity m/s, body rates rad/s).
+    u : ndarray, shape (N, 4), or a sequence of them
+        Coil currents, A.
+    dt : float
+        Sample time, s.
+    linear : LinearModel
+        The physics linearisation (:func:`maglev_ros.physics.linearize`): its
+        equilibrium ``x_eq``, ``u_eq`` is the operating point.
+    degree : int
+        Polynomial degree of the library.
+    threshold : float
+        STLSQ threshold in the scaled units.
+    """
+    keep = list(REDUCED_INDEX)
+    return sindy(
+        [a[:, keep] for a in _as_list(x)],
+        u,
+        dt,
+        degree=degree,
+        threshold=threshold,
+        state_names=REDUCED_STATES,
+        input_names=COIL_INPUTS,
+        x_ref=np.asarray(linear.x_eq)[keep],
+        u_ref=np.asarray(linear.u_eq),
+        state_scale=np.full(len(keep), 1e3),
+    )
+
+
+@dataclass(frozen=True)
+class EigenvalueCheck:
+    """One eigenvalue of the physics linearisation and SINDy's nearest.
+
+    Attributes
+    ----------
+    name : str
+        ``unstable``, ``oscillatory (slow)`` or ``oscillatory (fast)``.
+    physics, found : complex
+        Eigenvalues, 1/s.
+    error : float
+        ``|found - physics| / |physics|``.
+    """
+
+    name: str
+    physics: complex
+    found: complex
+    error: float
+
+
+def eigenvalue_check(model: SindyModel, linear: object) -> list[EigenvalueCheck]:
+    """Compare the SINDy model's linearisation with the physics' unstable and oscillatory modes.
+
+    Parameters
+    ----------
+    model : SindyModel
+        From :func:`sindy_magnet` (its reference point is the equilibrium).
+    linear : LinearModel
+        The physics linearisation; its ``reduced()`` 10-state model is compared.
+    """
+    A, _ = model.linearize()
+    found = np.linalg.eigvals(A)
+    truth = np.linalg.eigvals(linear.reduced().A)
+    oscillatory = [p for p in truth if p.imag > 1e-6 * np.abs(truth).max()]
+    targets = [('unstable', truth[np.argmax(truth.real)])]
+    if oscillatory:
+        targets += [
+            ('oscillatory (slow)', min(oscillatory, key=abs)),
+            ('oscillatory (fast)', max(oscillatory, key=abs)),
+        ]
+    out = []
+    for name, target in targets:
+        nearest = found[np.argmin(np.abs(found - target))]
+        out.append(EigenvalueCheck(name, complex(target), complex(nearest),
+                                   float(abs(nearest - target) / abs(target))))  # fmt: skip
+    return out

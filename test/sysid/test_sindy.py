@@ -5,12 +5,11 @@ import pytest
 from scipy.integrate import solve_ivp
 
 from maglev_ros.physics import linearize, make_model
-from maglev_ros.sysid.sindy import sindy
+from maglev_ros.sysid.sindy import eigenvalue_check, sindy, sindy_magnet
 
 from .physics_runs import record
 
 STATES = ('x', 'y', 'z', 'alpha', 'beta', 'vx', 'vy', 'vz', 'wx', 'wy')
-KEEP = [0, 1, 2, 3, 4, 6, 7, 8, 9, 10]  # the 12 states without yaw and yaw rate
 INPUTS = ('i1', 'i2', 'i3', 'i4')
 
 
@@ -67,34 +66,12 @@ def magnet():
 
 
 def fit(states, result, linear):
-    return sindy(
-        states[:, KEEP],
-        result.currents,
-        result.dt,
-        degree=2,
-        threshold=0.5,
-        state_names=STATES,
-        input_names=INPUTS,
-        x_ref=linear.x_eq[KEEP],
-        u_ref=linear.u_eq,
-        state_scale=np.full(10, 1e3),  # mm, mrad, mm/s, mrad/s
-    )
+    return sindy_magnet(states, result.currents, result.dt, linear)
 
 
 def eigenvalue_errors(model, linear):
-    """Relative errors of the unstable and the two oscillatory eigenvalue pairs."""
-    A, _ = model.linearize()
-    found = np.linalg.eigvals(A)
-    truth = np.linalg.eigvals(linear.reduced().A)
-    errors = {}
-    for name, target in (
-        ('unstable', truth[np.argmax(truth.real)]),
-        ('oscillatory (slow)', min((p for p in truth if p.imag > 1), key=abs)),
-        ('oscillatory (fast)', max((p for p in truth if p.imag > 1), key=abs)),
-    ):
-        nearest = found[np.argmin(np.abs(found - target))]
-        errors[name] = (target, nearest, abs(nearest - target) / abs(target))
-    return errors
+    """Name -> (physics, SINDy, relative error) of the unstable and the oscillatory pairs."""
+    return {c.name: (c.physics, c.found, c.error) for c in eigenvalue_check(model, linear)}
 
 
 def test_true_states_give_the_physics_eigenvalues_and_force_law(magnet, capsys):
