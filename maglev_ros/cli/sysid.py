@@ -421,9 +421,11 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
-    from .sysid_extra import check_arguments, extend_single, run_several
+    from .sysid_extra import check_arguments, extend_single, run_several, run_sindy
 
     check_arguments(args)
+    if args.sindy:
+        return run_sindy(args, _plain)
     if len(args.data) > 1:
         return run_several(args, _load, _plain, _requested(args))
     args.data = args.data[0]

@@ -11,7 +11,9 @@ Options added to the parser by :func:`add_arguments`:
   states, or by ``--reduce-fraction`` of the Hankel singular values;
 - several data files (or bags): estimated as one data set (no samples joined
   across files) and validated by ``--kfold [K]`` (default: leave one file out)
-  or ``--by-experiment``.
+  or ``--by-experiment``;
+- ``--sindy``: SINDy with control on the states recorded in bags, with the
+  physics check of its linearisation.
 """
 
 from __future__ import annotations
@@ -25,7 +27,7 @@ import numpy as np
 
 from .usage import UsageError
 
-__all__ = ['add_arguments', 'check_arguments', 'extend_single', 'run_several']
+__all__ = ['add_arguments', 'check_arguments', 'extend_single', 'run_several', 'run_sindy']
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -80,6 +82,31 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
         '(default, and without K: leave one file out)',
     )
     g.add_argument(
+        '--sindy',
+        action='store_true',
+        help='SINDy with control (pysindy) on the bag(s): the 12-state of --state-topic and '
+        'the coil currents, 10 states around the equilibrium of --params; prints the '
+        'equations and checks their linearisation against the physics',
+    )
+    g.add_argument(
+        '--state-topic',
+        default='maglev/state/true',
+        help='--sindy: Odometry topic of the states (default maglev/state/true; '
+        'maglev/state/estimate for an estimator)',
+    )
+    g.add_argument('--sindy-degree', type=int, default=2, help='--sindy: library degree')
+    g.add_argument(
+        '--sindy-threshold',
+        type=float,
+        default=0.5,
+        help='--sindy: STLSQ threshold in mm, mrad, mm/s, mrad/s units (default 0.5)',
+    )
+    g.add_argument(
+        '--params',
+        default='maggy_v2',
+        help='--sindy: parameter set of the physics check (default maggy_v2)',
+    )
+    g.add_argument(
         '--by-experiment',
         action='store_true',
         help='several data files: estimate on each file alone, validate on the others',
@@ -107,6 +134,10 @@ def check_arguments(args: argparse.Namespace) -> None:
             raise UsageError(f'--reduce takes a state count such as 4, got {args.reduce!r}')
     if not 0.0 < args.reduce_fraction <= 1.0:
         raise UsageError(f'--reduce-fraction must be in (0, 1], got {args.reduce_fraction}')
+    if args.sindy and not 1 <= args.sindy_degree <= 3:
+        raise UsageError(f'--sindy-degree must be 1, 2 or 3, got {args.sindy_degree}')
+    if args.sindy and not args.sindy_threshold >= 0:
+        raise UsageError(f'--sindy-threshold must be >= 0, got {args.sindy_threshold}')
     several = len(args.data) > 1
     if not several and (args.kfold is not None or args.by_experiment):
         raise UsageError('--kfold and --by-experiment need several data files')
@@ -440,3 +471,85 @@ def _labels(paths: list[str]) -> list[str]:
 
 def _indent(text: str, n: int) -> str:
     return '\n'.join(' ' * n + line for line in text.splitlines())
+
+
+# ---------------------------------------------------------------------- SINDy
+SINDY_TOLERANCE = 0.10  # relative eigenvalue error accepted by the physics check
+
+
+def run_sindy(args: argparse.Namespace, plain: Any) -> int:
+    """SINDy on the states of one or several bags, with the physics check.
+
+    Returns 0 when the unstable and oscillatory eigenvalues are within 10 % of
+    the physics linearisation's, 1 otherwise (everything is still printed).
+    """
+    import json
+    import warnings
+
+    from maglev_ros.bags import BagError, is_bag_path
+    from maglev_ros.physics import linearize, make_model
+    from maglev_ros.sysid.sindy import eigenvalue_check, sindy_magnet
+    from maglev_ros.sysid.state_trajectories import bag_states
+
+    for path in args.data:
+        if not is_bag_path(path):
+            raise UsageError(f'--sindy reads states from bags; {path} is not a bag directory')
+    try:
+        linear = linearize(make_model(args.params))
+    except (ValueError, OSError) as exc:
+        raise UsageError(f'--params {args.params}: {exc}') from None
+    trajectories = []
+    for path in args.data:
+        try:
+            trajectories.append(bag_states(path, args.state_topic))
+        except BagError as exc:
+            raise UsageError(f'{path}: {exc}') from None
+    dts = {round(t.dt, 12) for t in trajectories}
+    if len(dts) > 1:
+        raise UsageError(f'the bags have different sample times {sorted(dts)} s')
+    with warnings.catch_warnings():
+        warnings.simplefilter('ignore')  # pysindy's sparsity warnings: the check says it
+        model = sindy_magnet(
+            [t.x for t in trajectories], [t.u for t in trajectories], trajectories[0].dt,
+            linear, args.sindy_degree, args.sindy_threshold,
+        )  # fmt: skip
+    checks = eigenvalue_check(model, linear)
+    passed = all(c.error < SINDY_TOLERANCE for c in checks)
+    status = 0 if passed else 1
+    if args.json:
+        print(json.dumps(plain({
+            'bags': list(args.data),
+            'state_topic': args.state_topic,
+            'samples': [len(t.x) for t in trajectories],
+            'states': list(model.state_names),
+            'inputs': list(model.input_names),
+            'units': 'mm, mrad, mm/s, mrad/s, A; around the equilibrium of ' + args.params,
+            'features': model.feature_names,
+            'coefficients': model.coefficients,
+            'equations': model.equations(),
+            'eigenvalue_check': [
+                {'mode': c.name, 'physics': [c.physics.real, c.physics.imag],
+                 'sindy': [c.found.real, c.found.imag], 'relative_error': c.error}
+                for c in checks
+            ],
+            'exit_status': status,
+        }), indent=1))  # fmt: skip
+        return status
+    samples = ', '.join(str(len(t.x)) for t in trajectories)
+    print(
+        f'maglev-sysid --sindy: {args.state_topic} of {len(trajectories)} bag(s) ({samples} '
+        f'samples, Ts = {trajectories[0].dt:g} s); states in mm, mrad, mm/s, mrad/s around '
+        f'the equilibrium of {args.params}, coil currents in A'
+    )
+    print(str(model).splitlines()[0])
+    for line in model.equations(2):
+        print('  ' + line)
+    print(f'Linearised at the equilibrium, against the physics ({args.params}):')
+    for c in checks:
+        print(
+            f'  {c.name:<20} physics {c.physics.real:+8.2f} {c.physics.imag:+8.2f}j  SINDy '
+            f'{c.found.real:+8.2f} {c.found.imag:+8.2f}j 1/s  ({100 * c.error:.2f} %)'
+        )
+    verdict = 'ok' if passed else 'FAILED'
+    print(f'physics check {verdict}: every mode within {100 * SINDY_TOLERANCE:.0f} %')
+    return status

@@ -91,3 +91,43 @@ def test_labels_are_the_shortest_distinct_tails(tmp_path):
     assert _labels([tmp_path / 'a.npz', tmp_path / 'b.npz']) == ['a.npz', 'b.npz']
     bags = [tmp_path / 'lab1' / 'bag', tmp_path / 'lab2' / 'bag']
     assert _labels(bags) == ['lab1/bag', 'lab2/bag']
+
+
+@pytest.fixture(scope='module')
+def state_bag(tmp_path_factory):
+    """The ROS-free closed loop (independent +-0.3 A PRBS per coil, 4 s) written as a bag."""
+    from rclpy.serialization import serialize_message
+    from sysid.physics_runs import record
+
+    from maglev_ros.bags import BagWriter
+    from maglev_ros.nodes.messages import currents_message, odometry_message
+
+    result, _ = record('all', 0.3, 0.05, 20000, 0)
+    path = tmp_path_factory.mktemp('sindy') / 'bag'
+    t0, step = 1_700_000_000_000_000_000, 200_000
+    with BagWriter(path) as bag:
+        state = bag.add_topic('/maglev/state/true', 'nav_msgs/msg/Odometry')
+        coils = bag.add_topic('/maglev/currents', 'sensor_msgs/msg/JointState')
+        for k in range(len(result.x)):
+            stamp = t0 + k * step
+            bag.write(state, stamp, serialize_message(odometry_message(stamp, result.x[k])))
+            bag.write(coils, stamp, serialize_message(currents_message(stamp, result.currents[k])))
+    return path
+
+
+def test_sindy_on_a_bag_prints_equations_and_the_physics_check(state_bag, capsys):
+    pytest.importorskip('rclpy')
+    code, out, err = run([state_bag, '--sindy'], capsys)
+    assert code == 0, err
+    assert 'd(vz)/dt = -17' in out and ' z^2' in out
+    assert 'physics check ok: every mode within 10 %' in out
+    code, out, _ = run([state_bag, '--sindy', '--sindy-threshold', '1e9', '--json'], capsys)
+    summary = json.loads(out)  # nothing survives the threshold: the check fails, exit 1
+    assert code == 1 and summary['exit_status'] == 1
+    assert summary['eigenvalue_check'][0]['mode'] == 'unstable'
+
+
+def test_sindy_needs_bags(files, capsys):
+    runs, _ = files
+    code, _, err = run([runs[0], '--sindy'], capsys)
+    assert code == 2 and '--sindy reads states from bags' in err
