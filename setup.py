@@ -60,6 +60,8 @@ setup(
         'rosbags>=0.10',
         'matplotlib>=3.7',
         'tqdm>=4.60',
+        # SINDy with control inputs (maglev_ros.sysid.sindy)
+        'pysindy>=2.0',
     ],
     extras_require={
         # The PyPI build of ROS 2 Jazzy's Python side, for machines without ROS.
@@ -75,6 +77,8 @@ setup(
             'colcon-common-extensions',
             # pinned: the formatter's output changes between minor versions
             'ruff==0.17.6',
+            # NARX reference in test/sysid/test_narx.py and benchmarks/sysid.py
+            'sysidentpy>=0.9',
         ],
     },
     entry_points={'console_scripts': console_scripts},

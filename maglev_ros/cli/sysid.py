@@ -58,8 +58,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         'data',
+        nargs='+',
         help='data file (.npz, .csv or MATLAB .mat, v7 or older) or a '
-        'rosbag2 bag directory (then choose channels with --output/--input)',
+        'rosbag2 bag directory (then choose channels with --output/--input); '
+        'several: one data set of several experiments (see --kfold)',
     )
     from .bag2data import add_channel_arguments
 
@@ -162,6 +164,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument('--quiet', action='store_true', help='no progress display')
     p.add_argument('--plot', metavar='DIR', help='write compare/resid/bode PNGs into DIR')
     p.add_argument('--save', metavar='DIR', help='save each model as JSON into DIR')
+    from .sysid_extra import add_arguments
+
+    add_arguments(p)
     return p
 
 
@@ -416,10 +421,18 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
+    from .sysid_extra import check_arguments, extend_single, run_several, run_sindy
+
+    check_arguments(args)
+    if args.sindy:
+        return run_sindy(args, _plain)
+    if len(args.data) > 1:
+        return run_several(args, _load, _plain, _requested(args))
+    args.data = args.data[0]
     specs = _requested(args)
-    if not specs and not args.select:
+    if not specs and not args.select and not args.narx:
         raise UsageError(
-            'no model requested: give --arx, --iv, --armax, --oe, --bj, --spec or --select'
+            'no model requested: give --arx, --iv, --armax, --oe, --bj, --spec, --narx or --select'
         )
     split_text = str(args.split)
     try:
@@ -491,7 +504,6 @@ def run(args: argparse.Namespace) -> int:
     what = 'simulation' if args.horizon is None else f'{args.horizon}-step prediction'
     for row in result.rows:
         entry = {} if row.model is None else sysid.model_to_dict(row.model)
-        entry.pop('covariance', None)
         entry.update(
             {
                 'label': row.label,
@@ -515,6 +527,9 @@ def run(args: argparse.Namespace) -> int:
             entry['validated'] = sysid.model_to_dict(row.validated)
         summary['models'].append(entry)
     written = _write_plots(result, Path(args.plot)) if args.plot else []
+    extra_texts, extra_written, extra_status = extend_single(args, est, val, result, summary)
+    written += extra_written
+    exit_status = max(result.exit_status, extra_status)
     if args.save:
         Path(args.save).mkdir(parents=True, exist_ok=True)
         for index, row in enumerate(result.rows, start=1):
@@ -522,10 +537,10 @@ def run(args: argparse.Namespace) -> int:
                 sysid.save_model(
                     row.model, Path(args.save) / f'model_{index}_{row.structure}.json'
                 )
-    summary['exit_status'] = result.exit_status
+    summary['exit_status'] = exit_status
     if args.json:
         print(json.dumps(_plain(summary), indent=1))
-        return result.exit_status
+        return exit_status
     header = (
         f'{PROG}: {data.N} samples of {data.ny} output(s), {est.nu} input(s), '
         f'Ts = {data.Ts:g} s; estimation {est.N}, validation {val.N}'
@@ -543,10 +558,13 @@ def run(args: argparse.Namespace) -> int:
         print(f'hint: {hint}')
     for row in result.rows:
         print('\n' + _row_text(row, what, args.ic))
-    print('\n' + _summary_table(result, what))
+    for text in extra_texts:
+        print('\n' + text)
+    if result.rows:
+        print('\n' + _summary_table(result, what))
     for path in written:
         print(f'wrote {path}')
-    return result.exit_status
+    return exit_status
 
 
 def main(argv: list[str] | None = None) -> int:
