@@ -122,9 +122,8 @@ def write_dataset(data: IdData, path: str | Path) -> Path:
                 f'channel names {bad} contain commas: name them (NAME=SPEC) before writing CSV'
             )
         table = np.column_stack([t, data.y, data.u])
-        np.savetxt(
-            path, table, delimiter=',', fmt='%.17g', header=','.join(['t', *names]), comments=''
-        )
+        header = ['t [s]'] + [f'{n} [{u}]' if u else n for n, u in zip(names, units, strict=True)]
+        np.savetxt(path, table, delimiter=',', fmt='%.17g', header=','.join(header), comments='')
     return path
 
 
