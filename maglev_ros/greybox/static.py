@@ -259,7 +259,12 @@ class AffineStatistics:
         u, y = _shifted(exp, delay)
         z = _regressors(u)
         if z.shape[0] <= 2 * z.shape[1]:
-            raise GreyBoxError(f'{exp.name}: {exp.samples} samples are too few')
+            raise GreyBoxError(
+                f'{exp.name}: {z.shape[0]} valid samples in this part are too few: the '
+                f'affine fit of the field to {u.shape[1]} currents needs more than '
+                f'{2 * z.shape[1]} (twice its {z.shape[1]} coefficients) in the estimation '
+                'and in the validation part; record longer, or move the split with --split'
+            )
         gram = z.T @ z
         try:
             lower = np.linalg.cholesky(gram)
