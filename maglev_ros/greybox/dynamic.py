@@ -30,7 +30,11 @@ minimise ``sum |eps_k / sigma|^2`` (scipy's ``least_squares``, Jacobian by
 central differences of the predictor); standard deviations from the Jacobian
 at the optimum in the sandwich form with a Newey-West long-run variance of
 the scores (:mod:`.uncertainty`): the prediction errors are correlated in
-time, and the white-noise formula would understate the spread.
+time, and the white-noise formula would understate the spread.  Added in
+quadrature: how far the optimum moves when the linearisation's
+finite-difference step is ten times larger (along a flat, correlated
+direction the model's numerical noise moves the optimum by several
+statistical standard deviations).
 
 The currents come from the coil drivers, measured at the samples; the ZOH
 assumes them constant over a sample.
@@ -38,11 +42,13 @@ assumes them constant over a sample.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
 from .bounded_fit import fit_bounded, identified
 from .errors import GreyBoxError
@@ -87,6 +93,10 @@ class DynamicCalibration(StaticCalibration):
         ``std`` is the sandwich (Newey-West) one, :mod:`.uncertainty`.
     hac_lags : int
         Lag window of the Newey-West long-run variance, samples.
+    std_numerical : dict
+        How far the optimum moves when the model's linearisation is computed
+        with a ten times larger finite-difference step (refit from the
+        optimum): the numerical part of the uncertainty, in ``std`` in quadrature.
     """
 
     form: str = 'linear'
@@ -96,6 +106,7 @@ class DynamicCalibration(StaticCalibration):
     notes: tuple = ()
     std_white: dict | None = None
     hac_lags: int = 0
+    std_numerical: dict | None = None
 
 
 def calibrate_dynamic(
@@ -259,12 +270,21 @@ def calibrate_dynamic(
     s2 = float(r @ r) / dof
     blocks = [e.samples - delay - problem.burn for e in estimation]
     fitted = long_run_spread(problem, problem.jacobian(z), r, blocks, problem.channels.size, s2)
-    names, std, corr = fitted.spread.names, fitted.spread.std, fitted.spread.correlation
+    names, corr = fitted.spread.names, fitted.spread.correlation
     say(
         f'standard deviations from the sandwich covariance (Newey-West, {fitted.lags} lags): '
         + ', '.join(f'{n} x{fitted.inflation[n]:.2g}' for n in names)
         + ' the white-noise ones'
     )
+    numerical = _numerical_spread(problem, z, say)
+    std = {n: float(np.hypot(fitted.spread.std[n], numerical.get(n, 0.0))) for n in names}
+    notes = []
+    if solution.status == 0:
+        notes.append(
+            f'the fit stopped at its evaluation limit without converging ({solution.message}): '
+            'the estimates wander along a flat direction of the cost; free fewer '
+            'parameters or record with more excitation'
+        )
     seconds = time.perf_counter() - start
     say(f'done in {seconds:.2f} s: {solution.message}')
 
@@ -310,8 +330,41 @@ def calibrate_dynamic(
         delay_costs=tuple(costs),
         std_white=dict(fitted.white.std),
         hac_lags=fitted.lags,
-        notes=_divergence_notes(problem),
+        notes=(*notes, *_divergence_notes(problem)),
+        std_numerical=numerical,
     )
+
+
+NUMERICAL_STEP_FACTOR = 10.0  # the numerical check's linearisation step, times the default
+
+
+def _numerical_spread(problem, z: np.ndarray, say) -> dict[str, float]:
+    """Return how far the optimum moves with a coarser linearisation step, per parameter.
+
+    Along a flat direction of the cost (two strongly correlated parameters) the
+    optimum is set by the model's numerical noise as much as by the data; the
+    statistical standard deviations cannot see that, this refit does.
+    """
+    coarse = copy.copy(problem)
+    coarse.fd_step = problem.fd_step * NUMERICAL_STEP_FACTOR
+    coarse._last = coarse._last_jacobian = None
+    lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
+    upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
+    try:
+        again = least_squares(
+            coarse.residual, np.clip(z, lower, upper), jac=lambda x: coarse.jacobian(x),
+            bounds=(lower, upper), method='trf', x_scale=1.0, ftol=1e-10, xtol=1e-10,
+            gtol=1e-10, max_nfev=20,
+        )  # fmt: skip
+    except (ValueError, np.linalg.LinAlgError):
+        return {}
+    moved = np.abs(again.x - z) * np.array([s.scale for s in problem.free])
+    out = {s.name: float(m) for s, m in zip(problem.free, moved, strict=True)}
+    say(
+        'numerical check (linearisation step x10, refit): the optimum moves by '
+        + ', '.join(f'{n} {problem.vector[n].display(v)}' for n, v in out.items())
+    )
+    return out
 
 
 def _divergence_notes(problem) -> tuple[str, ...]:

@@ -31,7 +31,7 @@ from scipy.linalg import solve_discrete_are
 from ..physics.board_processing import BoardProcessing, augment
 from ..physics.discretization import zoh
 from ..physics.equilibria import find_equilibria
-from ..physics.linearization import linearize
+from ..physics.linearization import FD_STEP, linearize
 from ..physics.model import MaggyModel
 from .errors import GreyBoxError
 from .parameters import ParameterVector
@@ -254,6 +254,8 @@ class LinearGreyBoxProblem:
                 f'measurement must be one of {", ".join(MEASUREMENTS)}, got {measurement!r}'
             )
         self.measurement = measurement
+        #: finite-difference step of the linearisation (the numerical check changes it)
+        self.fd_step = FD_STEP
         self.vector = vector
         self.experiments = tuple(experiments)
         self.delay = int(delay)
@@ -297,7 +299,7 @@ class LinearGreyBoxProblem:
         found = find_equilibria(model)
         if not found:
             raise GreyBoxError(f'no equilibrium for {values}')
-        lin = linearize(model, model.hover_state(found[0].z)).reduced()
+        lin = linearize(model, model.hover_state(found[0].z), step=self.fd_step).reduced()
         ad, bd = zoh(lin.A, lin.B, self.Ts)
         c = np.ascontiguousarray(lin.C[self.channels])
         d = np.ascontiguousarray(lin.D[self.channels])
