@@ -11,7 +11,8 @@ Every file holds one :class:`~maglev_ros.sysid.IdData` and loads back with
     inputs, ``Ts``, ``t`` and ``names`` / ``units`` (cell arrays), ``ny``, ``nu``
     (``maglev-sysid data.mat --rows 1,2 3``).
 ``.csv``
-    A header line ``t,<output names>,<input names>`` then one row per sample
+    A header line ``t [s],<output names>,<input names>`` (a name with a unit as
+    ``Bx_0 [T]``) then one row per sample
     (17 significant digits: the doubles round-trip exactly).
 """
 
