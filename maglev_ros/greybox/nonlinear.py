@@ -137,7 +137,7 @@ def divergence_text(problem: NonlinearGreyBoxProblem) -> str:
     return (
         f'the nonlinear predictor diverged in {problem.diverged} of '
         f'{problem.evaluations} evaluations (first: {name}, sample {k}, '
-        f't = {t:.4g} s, {where}the magnet left 5 mm of its equilibrium)'
+        f't = {t:.4g} s, {where}the predicted magnet moved more than 5 mm from its equilibrium)'
     )
 
 

@@ -54,3 +54,12 @@ def test_the_nonlinear_form_refuses_the_board_model():
             measurement='board',
             form='nonlinear',
         )
+
+
+def test_a_diverging_nonlinear_predictor_is_named_with_its_count_and_time():
+    # the raw model's nonlinear predictor on processed data (tens of mT off): it diverges
+    # in the burn-in; that is the error, not "not identifiable, rank 0"
+    with pytest.raises(GreyBoxError, match=r'diverged in 1 of \d+ evaluations') as info:
+        calibrate_dynamic(nominal_vector().with_free(FREE), [processed_record()], form='nonlinear')
+    assert 'in the burn-in' in str(info.value) and 't = 0.00' in str(info.value)
+    assert '--measurement' in str(info.value)
