@@ -389,6 +389,7 @@ def _file_with_instruments(args: argparse.Namespace, load: Any) -> tuple[Any, in
         ],
         data.output_units,
         list(data.input_units) + [''] * z.shape[1],
+        t0=data.t0,
     )
     return combined, z.shape[1]
 
