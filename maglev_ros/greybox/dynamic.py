@@ -83,9 +83,6 @@ class DynamicCalibration(StaticCalibration):
         Kalman gain's input-disturbance level, A rms.
     z_eq : tuple of float
         Equilibrium height of the nominal and the calibrated set, m.
-    delay_costs : tuple of float
-        Nominal prediction error per reading for each tried sensor delay
-        (empty when the delay was given).
     notes : tuple of str
         What went wrong on the way (a diverging nonlinear predictor).
     std_white : dict
@@ -102,7 +99,6 @@ class DynamicCalibration(StaticCalibration):
     form: str = 'linear'
     process_noise: float = 0.0
     z_eq: tuple = ()
-    delay_costs: tuple = ()
     notes: tuple = ()
     std_white: dict | None = None
     hac_lags: int = 0
@@ -327,7 +323,7 @@ def calibrate_dynamic(
         form=form,
         process_noise=float(process_noise),
         z_eq=tuple(z_eq),
-        delay_costs=tuple(costs),
+        delay_costs=(tuple(costs),) if costs else (),
         std_white=dict(fitted.white.std),
         hac_lags=fitted.lags,
         notes=(*notes, *_divergence_notes(problem)),

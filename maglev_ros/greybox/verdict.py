@@ -106,15 +106,17 @@ def assess(cal) -> Verdict:
             f'{1e3 * nom.total_rms:.4g} mT): the fit does not generalise; the model or the '
             'data are wrong'
         )
-    costs = np.asarray(getattr(cal, 'delay_costs', ()), dtype=float)
-    if costs.size > 1 and np.all(np.isfinite(costs)):
+    for k, record in enumerate(getattr(cal, 'delay_costs', ())):
+        costs = np.asarray(record, dtype=float)
+        if costs.size < 2 or not np.all(np.isfinite(costs)):
+            continue
         spread = (costs.max() - costs.min()) / max(costs.min(), 1e-300)
         if spread < DELAY_SPREAD:
+            delay = cal.delays[min(k, len(cal.delays) - 1)]
             warnings.append(
                 f'the sensor delay is not determined: every tried delay predicts equally well '
                 f'(costs {", ".join(f"{c:.4g}" for c in costs)}); the reported '
-                f"{cal.delays[0]} is arbitrary: give --delay SAMPLES from the board's "
-                'documentation'
+                f"{delay} is arbitrary: give --delay SAMPLES from the board's documentation"
             )
     for a, b, r in cal.correlated:
         if abs(r) > CORRELATION_LIMIT:

@@ -26,7 +26,7 @@ def result(**changes):
         validation_nominal=(ValidationFit('run', np.array([90.0]), np.array([2e-4])),),
         validation_calibrated=(ValidationFit('run', np.array([95.0]), np.array([1e-4])),),
         delays=(1,),
-        delay_costs=(0.8, 0.7, 0.9),
+        delay_costs=((0.8, 0.7, 0.9),),
         notes=(),
     )
     return SimpleNamespace(**{**vars(base), **changes})
@@ -52,7 +52,7 @@ def test_worse_validation_undetermined_delay_and_correlation():
     verdict = assess(result(validation_calibrated=worse))
     assert verdict.status == 'not calibrated'
     assert 'predicts the validation data worse than the nominal one' in verdict.warnings[0]
-    verdict = assess(result(delay_costs=(0.8, 0.8, 0.8)))
+    verdict = assess(result(delay_costs=((0.8, 0.8, 0.8),)))
     assert verdict.status == 'partly calibrated'
     assert (
         'sensor delay is not determined' in verdict.warnings[0]
