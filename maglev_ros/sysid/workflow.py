@@ -457,14 +457,16 @@ def _residual_reason(analysis: ResidualAnalysis, closed_loop: bool, structure: s
             f'limit {analysis.whiteness_limit:.1f}): dynamics or noise the model does not '
             f'describe; {todo}'
         )
+    instruments = analysis.against == 'instruments'
     if 'independence' in failed:
+        what = 'the instruments' if instruments else 'past inputs'
         parts.append(
-            'the residuals depend on past inputs (statistic '
+            f'the residuals depend on {what} (statistic '
             f'{analysis.independence_stat.max(initial=0):.1f}, limit '
             f'{analysis.independence_limit:.1f}): input dynamics the model misses; raise '
-            'nb or check the delay nk'
+            'the orders or check the delay nk'
         )
-    if closed_loop:
+    if closed_loop and not instruments:
         parts.append('in closed loop such a model is also biased')
     return '; '.join(parts)
 
