@@ -5,7 +5,9 @@ the validation data (``compare`` fit on both parts, residual analysis). Each
 model gets its own :class:`ModelRow`, whatever happens to the others:
 
 * ``ok``: stable, and its validation residuals pass (white, independent of
-  past inputs);
+  past inputs), or every validation fit is at least :data:`NEGLIGIBLE_FIT`
+  percent (noise-free or quantised data: the residuals are at the data's
+  resolution; a note says the tests failed);
 * ``reduced``: the model is unstable but its unstable poles cancel against
   zeros (orders above the data's, typical of ``iv4``): validated with the
   cancelling pairs removed (:mod:`~.cancellation`), residuals pass;
@@ -80,6 +82,9 @@ ORDER_NAMES: dict[str, tuple[str, ...]] = {
 USABLE = ('ok', 'reduced', 'unstable', 'no response')
 #: Horizon in samples of the k-step prediction fit shown for every model.
 KSTEP_HORIZON = 5
+#: Validation fit (percent) above which failed residual tests do not count: the
+#: residuals are then at the data's resolution (noise-free or quantised records).
+NEGLIGIBLE_FIT = 99.9
 OFFSET_RATIO = 0.5  # |mean| / std of a channel above which an offset hint is given
 
 
@@ -471,6 +476,13 @@ def _residual_reason(analysis: ResidualAnalysis, closed_loop: bool, structure: s
     return '; '.join(parts)
 
 
+def _negligible(fit_val: np.ndarray, k_val: np.ndarray) -> bool:
+    """True if every finite validation fit is at least :data:`NEGLIGIBLE_FIT` percent."""
+    fits = np.r_[fit_val, k_val]
+    fits = fits[np.isfinite(fits)]
+    return bool(fits.size) and bool(np.all(fits >= NEGLIGIBLE_FIT))
+
+
 def _fit_row(
     spec: ModelSpec,
     est: IdData,
@@ -579,6 +591,13 @@ def _fit_row(
             f'{unstable + "; " if unstable else ""}{method} ignores the feedback in '
             'closed-loop data: the model describes the loop, not the plant; use --iv with '
             '--instruments (an excitation) or --armax/--bj judged on --horizon'
+        )
+    elif not analysis.passed and _negligible(fit_val, k_val):
+        notes.append(
+            f'the residual tests failed ({", ".join(analysis.failed_tests)}), but the model '
+            f'explains {NEGLIGIBLE_FIT:g} % or more of the validation output: the residuals '
+            'are at the resolution of (nearly) noise-free or quantised data, where any '
+            'model error is significant; not counted against the model'
         )
     elif not analysis.passed:
         status = f'{" and ".join(analysis.failed_tests)} failed'

@@ -168,3 +168,16 @@ def test_fortran_text_on_fd_1_is_captured(capfd):
     assert text.text.startswith('** On entry to DLASCL')
     out, _ = capfd.readouterr()
     assert out == 'before\n'
+
+
+def test_failed_residual_tests_at_the_data_resolution_do_not_count():
+    # quantised, otherwise noise-free field: ARX 2 2 1 explains 99.9 % or more, and its
+    # residuals are the quantisation's; the tests fail, a note says so, the model is ok
+    raw = lab_second_order(N=6000, noise=0.0).detrend()
+    step = 2e-8  # T, far below the 1e-4 T signal
+    quantised = IdData(np.round(raw.y / step) * step, raw.u, raw.Ts, ['Bx'], ['Ix'], ['T'], ['A'])
+    result = identify(*quantised.split(0.5), [ModelSpec('arx', {'na': 2, 'nb': 2, 'nk': 1})])
+    (row,) = result.rows
+    assert row.fit_validation[0] >= 99.9 and row.residual_verdict.startswith('fail')
+    assert row.status == 'ok' and row.usable and result.exit_status == 0
+    assert any('resolution' in note for note in row.notes)
