@@ -92,7 +92,13 @@ class BoardProcessing:
         return cls(base[rows], feed[rows], axes[rows] < 2)
 
     def host_pole(self, Ts: float) -> float:
-        """Pole ``a`` of the x/y low-pass at the host's sample time ``Ts`` (s)."""
+        """Return the pole ``a`` of the x/y low-pass at the host's sample time.
+
+        Parameters
+        ----------
+        Ts : float
+            Host sample time, s.
+        """
         steps = max(Ts / self.board_period, 1.0)
         return float((1.0 - self.weight) ** steps)
 

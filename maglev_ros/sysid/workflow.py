@@ -477,7 +477,7 @@ def _residual_reason(analysis: ResidualAnalysis, closed_loop: bool, structure: s
 
 
 def _negligible(fit_val: np.ndarray, k_val: np.ndarray) -> bool:
-    """True if every finite validation fit is at least :data:`NEGLIGIBLE_FIT` percent."""
+    """Return True if every finite validation fit is at least :data:`NEGLIGIBLE_FIT` percent."""
     fits = np.r_[fit_val, k_val]
     fits = fits[np.isfinite(fits)]
     return bool(fits.size) and bool(np.all(fits >= NEGLIGIBLE_FIT))
