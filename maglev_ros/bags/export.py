@@ -11,7 +11,8 @@ Every file holds one :class:`~maglev_ros.sysid.IdData` and loads back with
     inputs, ``Ts``, ``t`` and ``names`` / ``units`` (cell arrays), ``ny``, ``nu``
     (``maglev-sysid data.mat --rows 1,2 3``).
 ``.csv``
-    A header line ``t,<output names>,<input names>`` then one row per sample
+    A header line ``t [s],<output names>,<input names>`` (a name with a unit as
+    ``Bx_0 [T]``) then one row per sample
     (17 significant digits: the doubles round-trip exactly).
 """
 
@@ -122,9 +123,8 @@ def write_dataset(data: IdData, path: str | Path) -> Path:
                 f'channel names {bad} contain commas: name them (NAME=SPEC) before writing CSV'
             )
         table = np.column_stack([t, data.y, data.u])
-        np.savetxt(
-            path, table, delimiter=',', fmt='%.17g', header=','.join(['t', *names]), comments=''
-        )
+        header = ['t [s]'] + [f'{n} [{u}]' if u else n for n, u in zip(names, units, strict=True)]
+        np.savetxt(path, table, delimiter=',', fmt='%.17g', header=','.join(header), comments='')
     return path
 
 

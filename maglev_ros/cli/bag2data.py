@@ -86,7 +86,9 @@ def add_channel_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--allow-gaps',
         action='store_true',
-        help='fill gaps (outputs linearly, inputs by zero-order hold) instead of refusing the bag',
+        help='a bag: fill gaps (outputs linearly, inputs by zero-order hold) instead of '
+        'refusing it; a data file whose time vector has gaps: keep its longest gap-free '
+        'piece (reported) instead of refusing it',
     )
     parser.add_argument(
         '--tolerance',

@@ -18,7 +18,19 @@ Names accept shell patterns; ``--list`` shows every parameter. Where the
 magnet was comes from a bag's run metadata (``magnet``: absent, fixed or
 free), or from ``--magnet``, or from a suffix ``BAG@absent`` / ``BAG@fixed``
 / ``BAG@free``. Static and levitation bags go in separate runs.
-Exit status: 0 on success, 2 on bad input (one line on stderr).
+Data files (``.npz``, ``.mat``, ``.csv``, as ``maglev-sysid`` reads them and
+``maglev-bag2data`` writes them) work like bags: their channels are picked by
+name (``Bx_0``, ``By_0``, ``Bz_0``, ..., ``i0`` .. ``i3`` by default, or the
+names given with ``--output``/``--input``); say where the magnet was with
+``--magnet`` or ``FILE@free``.
+
+Results are checked (:mod:`maglev_ros.greybox.verdict`): a parameter at a
+bound, a calibrated set that validates worse than the nominal one, an
+undetermined sensor delay, two estimates correlated above 0.99, unidentified
+parameters or a diverging predictor each give a warning and the status
+``partly calibrated`` or ``not calibrated``; then no parameter file is
+written. Exit status: 0 calibrated, 1 partly or not calibrated (the warnings
+say why), 2 on bad input (one line on stderr).
 """
 
 from __future__ import annotations
@@ -28,6 +40,8 @@ import datetime
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+
+import numpy as np
 
 from maglev_ros.topics import current_channel, field_channel, field_topic
 
@@ -180,6 +194,14 @@ def build_parser() -> argparse.ArgumentParser:
         help='dynamic mode: linear grey-box (the linearised model, as idgrey) or the full '
         'nonlinear model (as nlgreyest), each with its Kalman predictor (default linear)',
     )
+    p.add_argument(
+        '--measurement',
+        choices=('raw', 'board'),
+        default='raw',
+        help='dynamic mode: what the field channels are: raw (the sensors, as the physics '
+        'model gives them; default) or board (a V4x PC-control firmware: power-up baseline '
+        'and coil feedthrough removed, x/y low-pass). Chosen here, never guessed from the data',
+    )
     p.add_argument('--list', action='store_true', help='list the parameters and exit')
     p.add_argument(
         '--ts',
@@ -224,8 +246,25 @@ def _recorded_magnet(metadata: dict) -> str | None:
 
 
 def _bag_sensors(bag: str, count: int) -> list[int]:
-    """Sensors of the parameter set whose field topic the bag has."""
+    """Sensors of the parameter set whose field topic the bag (or data file) has."""
     from maglev_ros.bags import BagReader
+
+    if Path(bag).suffix.lower() in DATA_SUFFIXES and Path(bag).is_file():
+        from maglev_ros.sysid import load_data
+
+        if Path(bag).suffix.lower() == '.csv':
+            with open(bag) as fh:
+                names = [h.split('[')[0].strip() for h in fh.readline().split(',')]
+        else:
+            data = load_data(bag, Ts=1.0)
+            names = [*data.output_names, *data.input_names]
+        found = [k for k in range(count) if all(f'B{a}_{k}' in names for a in AXES)]
+        if not found:
+            raise UsageError(
+                f'{bag}: no field channels Bx_k, By_k, Bz_k of sensors 0 to {count - 1}; '
+                'name them with --output NAME (three per sensor) and --sensors'
+            )
+        return found
 
     with BagReader(bag) as reader:
         topics = reader.topics
@@ -238,23 +277,75 @@ def _bag_sensors(bag: str, count: int) -> list[int]:
     return found
 
 
+DATA_SUFFIXES = ('.npz', '.mat', '.csv')
+
+
+def _channel_name(spec: str) -> str:
+    """Return the channel name of a spec (``NAME=TOPIC:FIELD`` gives NAME; a plain name itself)."""
+    return spec.partition('=')[0].strip() if '=' in spec else spec.strip()
+
+
+def _file_data(path: str, args, outputs, inputs):
+    """Read a data file (as maglev-sysid does) and pick the channels by name."""
+    from maglev_ros.sysid import IdData, load_data
+
+    out_names = [_channel_name(s) for s in outputs]
+    in_names = [_channel_name(s) for s in inputs]
+    notes: list[str] = []
+    if Path(path).suffix.lower() == '.csv':
+        data = load_data(
+            path, Ts=args.ts, outputs=out_names, inputs=in_names, allow_gaps=args.allow_gaps,
+            notes=notes,
+        )  # fmt: skip
+    else:
+        data = load_data(path, Ts=args.ts, allow_gaps=args.allow_gaps, notes=notes)
+        names = [*data.output_names, *data.input_names]
+        columns = np.hstack([data.y, data.u])
+        missing = [n for n in out_names + in_names if n not in names]
+        if missing:
+            raise UsageError(
+                f'{path} has no channel {missing[0]!r} (its channels: {", ".join(names)}): '
+                'name the field and current channels with --output NAME / --input NAME, or '
+                'write the file with maglev-bag2data using the names '
+                f'{", ".join(out_names[:3])}, ... and {", ".join(in_names[:2])}, ...'
+            )
+        pick = [names.index(n) for n in out_names + in_names]
+        data = IdData(
+            columns[:, pick[: len(out_names)]], columns[:, pick[len(out_names) :]], data.Ts,
+            out_names, in_names,
+        )  # fmt: skip
+    for note in notes:
+        _say(f'  {note}')
+    return data, {}
+
+
 def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
     from maglev_ros.bags import read_bag
     from maglev_ros.greybox import LevitationExperiment, StaticExperiment
 
     _say(f'reading {bag} ...')
-    ds = read_bag(
-        bag,
-        outputs,
-        inputs,
-        Ts=args.ts,
-        allow_gaps=args.allow_gaps,
-        tolerance=args.tolerance,
-    )
-    magnet = mode or _recorded_magnet(ds.metadata)
+    if Path(bag).suffix.lower() in DATA_SUFFIXES and Path(bag).is_file():
+        data, metadata = _file_data(bag, args, outputs, inputs)
+    else:
+        if Path(bag).is_file():
+            raise UsageError(
+                f'{bag} is neither a bag directory nor a data file '
+                f'({", ".join(DATA_SUFFIXES)}): convert it with maglev-bag2data or save it '
+                'as .npz/.mat/.csv with the channels named'
+            )
+        ds = read_bag(
+            bag,
+            outputs,
+            inputs,
+            Ts=args.ts,
+            allow_gaps=args.allow_gaps,
+            tolerance=args.tolerance,
+        )
+        data, metadata = ds.data, ds.metadata
+    magnet = mode or _recorded_magnet(metadata)
     if magnet is None:
         raise UsageError(
-            f'{bag}: the bag does not say whether the magnet was absent, fixed or free '
+            f'{bag}: the data do not say whether the magnet was absent, fixed or free '
             f'(levitating): give --magnet or {bag}@absent / {bag}@fixed / {bag}@free'
         )
     if magnet not in ('absent', 'fixed', 'free'):
@@ -262,7 +353,6 @@ def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
             f'{bag}: recorded with the magnet {magnet!r}; calibration needs it absent, '
             'held fixed or free (levitating)'
         )
-    data = ds.data
     if magnet == 'free':
         exp = LevitationExperiment(
             u=data.u,
@@ -323,6 +413,7 @@ def _header(args, cal, bags) -> list[str]:
 def _run(args: argparse.Namespace) -> int:
     from maglev_ros.greybox import (
         LevitationExperiment,
+        assess,
         calibrate_dynamic,
         calibrate_static,
         parameter_vector,
@@ -350,6 +441,15 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
     if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
         raise UsageError(f'--out must name a .yaml file, got {args.out!r}')
+    if (
+        args.out
+        and Path(args.params).is_file()
+        and Path(args.out).resolve() == Path(args.params).resolve()
+    ):
+        raise UsageError(
+            f'--out {args.out} is the nominal parameter file (--params): write the '
+            'calibrated set to a new file, the nominal one stays as it is'
+        )
     count = len(base.sensors)
     parsed = [_bag_and_magnet(text, args.magnet) for text in args.bags]
     sensors = args.sensors
@@ -375,7 +475,10 @@ def _run(args: argparse.Namespace) -> int:
             'runs: calibrate the static part first, then pass its file as --params'
         )
     if all(levitating):
-        _say(f'dynamic calibration from levitation data ({args.form} grey-box, Kalman predictor)')
+        _say(
+            f'dynamic calibration from levitation data ({args.form} grey-box, Kalman '
+            f'predictor, {args.measurement} field)'
+        )
         cal = calibrate_dynamic(
             vector,
             experiments,
@@ -384,8 +487,14 @@ def _run(args: argparse.Namespace) -> int:
             process_noise=args.process_noise,
             progress=_say,
             form=args.form,
+            measurement=args.measurement,
         )
     else:
+        if args.measurement != 'raw':
+            raise UsageError(
+                '--measurement board is for levitation data: with the magnet absent or '
+                'fixed a processed board reports (nearly) nothing to calibrate against'
+            )
         delays = None if args.delay is None else [args.delay] * len(experiments)
         cal = calibrate_static(
             vector,
@@ -422,10 +531,20 @@ def _run(args: argparse.Namespace) -> int:
             f'{1e3 * new.total_rms:.4g} mT; mean fit nominal {nom.mean_fit:.1f} %, '
             f'calibrated {new.mean_fit:.1f} %'
         )
-    if args.out:
+    verdict = assess(cal)
+    print()
+    for line in verdict.warnings:
+        print(f'warning: {line}')
+    print(f'status: {verdict.status}')
+    if args.out and verdict.status == 'calibrated':
         params = cal.params.replace(name=Path(args.out).stem)
         path = write_parameters(params, args.out, _header(args, cal, bags))
         print(f'wrote     {path}')
+    elif args.out:
+        print(
+            f'not written: {args.out} ({verdict.status}: the warnings above say what failed; '
+            'the nominal parameters stay in use)'
+        )
     plot = args.plot or (str(Path(args.out).with_suffix('.png')) if args.out else None)
     if plot:
         from maglev_ros.greybox.plots import calibration_plot
@@ -436,7 +555,7 @@ def _run(args: argparse.Namespace) -> int:
                 kind = getattr(exp, 'magnet', 'free')
                 target = target.with_name(f'{target.stem}_{i}_{kind}{target.suffix}')
             print(f'wrote     {calibration_plot(cal, i, target, Ts=exp.Ts)}')
-    return 0
+    return verdict.exit_status
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -40,9 +40,9 @@ after the settling::
 Outputs in ``--out``: ``bag/`` (rosbag2, MCAP), ``models.json`` (fits and
 coefficients), ``compare_<output>.png`` (validation data vs model). In lockstep
 exactly ``--samples`` samples are recorded (the excitation stops after that many
-commands). Exit status 0, 1 when a model failed or is unstable (its row says
-why; everything else is written), 2 on bad input (one line on stderr), 130 when
-interrupted (the bag is finalised).
+commands). Exit status 0, 1 when a model is not usable (failed, or a residual
+test failed: its row says why; everything else is written), 2 on bad input
+(one line on stderr), 130 when interrupted (the bag is finalised).
 """
 
 from __future__ import annotations

@@ -10,9 +10,11 @@ Every requested model gets its own result (:mod:`maglev_ros.sysid.workflow`):
 a model that fails or is unstable is reported with the reason and NaN fits,
 and the others, the plots and the saved models are unaffected.
 
-Exit status: 0 when every model is usable, 1 when some model failed or is
-unstable (all results are still printed and written), 2 on bad input (one
-line on stderr).
+Exit status: 0 when every model is usable (``ok``, ``reduced``, ``unstable``
+with passing residuals, ``no response``), 1 when some model is not (a failed
+residual test, closed-loop bias, no excitation, a diverging predictor, a
+failed estimator: its row says why; all results are still printed and
+written), 2 on bad input (one line on stderr).
 """
 
 from __future__ import annotations
@@ -34,8 +36,12 @@ PROG = 'maglev-sysid'
 EPILOG = (
     'Without --detrend the models fit the raw values, offsets included (the '
     'polynomial models have no constant term); --detrend removes the means first, '
-    "as MATLAB's detrend(data). Exit status: 0 every model usable, 1 some model "
-    'failed or is unstable (its row says why; all results are still printed and '
+    "as MATLAB's detrend(data). Closed-loop data are detected and said so, with "
+    'what to do. Every model gets a simulation and a k-step prediction fit (5 '
+    'samples, or --horizon) and a residual verdict. Exit status: 0 every model '
+    'usable (ok, reduced, unstable with passing residuals), 1 some model not usable: '
+    'a residual test failed, closed-loop bias, no excitation, diverging, failed '
+    '(its row says why; all results are still printed and '
     'written), 2 bad input.'
 )
 
@@ -226,22 +232,38 @@ def _plain(value: Any) -> Any:
     return value
 
 
+FIT_FLOOR = -999.0  # fits below are shown as "< -999" (a diverging prediction)
+
+
+def _fit_text(value: float, suffix: str = '') -> str:
+    if not np.isfinite(value):
+        return 'n/a'
+    if value < FIT_FLOOR:
+        return f'<{FIT_FLOOR:.0f}{suffix}'
+    return f'{value:.2f}{suffix}'
+
+
 def _percent(values: np.ndarray) -> str:
-    return ', '.join('n/a' if not np.isfinite(f) else f'{f:.2f}%' for f in values)
+    return ', '.join(_fit_text(f, '%') for f in values)
 
 
 def _row_text(row: Any, what: str, ic: str) -> str:
     lines = [] if row.model is None else [str(row.model)]
-    if row.status == 'failed':
+    if row.status in ('failed', 'no response'):
         lines.append(f'{row.label}: {row.reason}')
-    elif row.validated is not None:
+    else:
         lines.append(
             f'  Compare ({what}, ic={ic}): fit to estimation data '
             f'{_percent(row.fit_estimation)}; validation data {_percent(row.fit_validation)}'
         )
-        lines.append(f'  Validation {row.residuals.summary()}')
-    if row.status in ('reduced', 'unstable'):
-        lines.append(f'  {row.status.capitalize()}: {row.reason}')
+        lines.append(
+            f'  Compare ({row.kstep}-step prediction, ic={ic}): fit to estimation data '
+            f'{_percent(row.kstep_estimation)}; validation data {_percent(row.kstep_validation)}'
+        )
+        if row.residuals is not None:
+            lines.append(f'  Validation {row.residuals.summary()}')
+        if row.status != 'ok':
+            lines.append(f'  {row.status.capitalize()}: {row.reason}')
     lines += [f'  Note: {note}' for note in row.notes]
     return '\n'.join(lines)
 
@@ -249,26 +271,36 @@ def _row_text(row: Any, what: str, ic: str) -> str:
 def _summary_table(result: Any, what: str) -> str:
     rows = result.rows
     width = max(len('model'), *(len(r.label) for r in rows))
+    kstep = f'{result.kstep}-step val. %'
+    resid_width = max(len('residuals'), *(len(r.residual_verdict) for r in rows))
     lines = [
-        f'Summary ({what}, ic={result.ic}; fits per output):',
-        f'  {"model":<{width}}  {"fit est. %":>12}  {"fit val. %":>12}  status',
+        f'Summary ({what} and {result.kstep}-step prediction, ic={result.ic}; fits per output):',
+        f'  {"model":<{width}}  {"fit est. %":>12}  {"fit val. %":>12}  {kstep:>16}  '
+        f'{"residuals":<{resid_width}}  status',
     ]
     for r in rows:
-        est = ' '.join('n/a' if not np.isfinite(f) else f'{f:.2f}' for f in r.fit_estimation)
-        val = ' '.join('n/a' if not np.isfinite(f) else f'{f:.2f}' for f in r.fit_validation)
+        est = ' '.join(_fit_text(f) for f in r.fit_estimation)
+        val = ' '.join(_fit_text(f) for f in r.fit_validation)
+        ahead = ' '.join(_fit_text(f) for f in r.kstep_validation)
         status = r.status
         if r.status == 'reduced':
             status += f' (validated as {" ".join(r.validated.orders.describe().split())})'
         elif r.status == 'unstable':
-            status += f' (one-step prediction fit {_percent(r.prediction_fit)})'
-        lines.append(f'  {r.label:<{width}}  {est:>12}  {val:>12}  {status}')
+            status += ' (simulation diverges: judged on k-step prediction)'
+        if not r.usable:
+            status += ' - not usable'
+        lines.append(
+            f'  {r.label:<{width}}  {est:>12}  {val:>12}  {ahead:>16}  '
+            f'{r.residual_verdict:<{resid_width}}  {status}'
+        )
     return '\n'.join(lines)
 
 
-def _load(args: argparse.Namespace) -> tuple[Any, int]:
+def _load(args: argparse.Namespace, notes: list[str]) -> tuple[Any, int]:
     """Load the data; ``--instruments`` channels come last among the inputs.
 
-    Returns the data set and the number of instrument columns appended.
+    Returns the data set and the number of instrument columns appended; lines
+    about what ``--allow-gaps`` left out of a data file go into ``notes``.
     """
     from maglev_ros import sysid
     from maglev_ros.bags import is_bag_path, load_bag_dataset
@@ -296,7 +328,10 @@ def _load(args: argparse.Namespace) -> tuple[Any, int]:
             'inputs': args.inputs.split(',') if args.inputs else None,
         }
         options.update(chosen)
-        return sysid.load_data(args.data, Ts=args.ts, matrix=args.matrix, **options)
+        return sysid.load_data(
+            args.data, Ts=args.ts, matrix=args.matrix, allow_gaps=args.allow_gaps,
+            notes=notes, **options,
+        )  # fmt: skip
 
     return _file_with_instruments(args, load) if args.instruments else (load(), 0)
 
@@ -351,9 +386,15 @@ def _file_with_instruments(args: argparse.Namespace, load: Any) -> tuple[Any, in
         np.hstack([data.u, z]),
         data.Ts,
         data.output_names,
-        list(data.input_names) + [f'instrument{k + 1}' for k in range(z.shape[1])],
+        list(data.input_names)
+        + [
+            name if block.shape[1] == 1 else f'{name}_{k + 1}'
+            for name, block in zip(specs, columns, strict=True)
+            for k in range(block.shape[1])
+        ],
         data.output_units,
         list(data.input_units) + [''] * z.shape[1],
+        t0=data.t0,
     )
     return combined, z.shape[1]
 
@@ -366,38 +407,52 @@ def _split_instruments(data: Any, count: int) -> tuple[Any, Any]:
     return data.select(inputs=range(keep)), data.u[:, keep:]
 
 
-def _write_plots(result: Any, directory: Path) -> list[Path]:
+def _write_plots(result: Any, directory: Path) -> tuple[list[Path], str]:
+    """Write the residual, compare and Bode plots; return the files and a note (or '')."""
     from maglev_ros import sysid
 
     directory.mkdir(parents=True, exist_ok=True)
-    shown = [r for r in result.rows if r.validated is not None]
+    shown = [r for r in result.rows if r.validated is not None and r.validated.is_stable]
+    ahead = [r for r in result.rows if r.validated is not None and r.status != 'failed']
     written = []
+    val = result.validation
     for index, row in enumerate(result.rows, start=1):
         if row.residuals is not None:
             written.append(
                 sysid.resid_plot(
                     row.residuals,
                     directory / f'resid_{index}_{row.structure}.png',
-                    result.validation.output_names,
-                    result.validation.input_names,
+                    val.output_names,
+                    val.input_names,
                     model_label=row.label + (' (reduced)' if row.status == 'reduced' else ''),
                 )
             )
-    if shown:
+    if shown and result.horizon is None:
         labels = [r.label + (' (reduced)' if r.status == 'reduced' else '') for r in shown]
         models = [r.validated for r in shown]
         written.append(
-            sysid.compare_plot(
-                result.validation,
-                models,
-                directory / 'compare.png',
-                labels,
-                result.horizon,
-                result.ic,
-            )
+            sysid.compare_plot(val, models, directory / 'compare.png', labels, None, result.ic)
         )
-        written.append(sysid.bode_plot(models, directory / 'bode.png', labels))
-    return written
+    if ahead:
+        labels = [r.label + (' (reduced)' if r.status == 'reduced' else '') for r in ahead]
+        name = 'compare.png' if result.horizon is not None else 'compare_kstep.png'
+        written.append(
+            sysid.compare_plot(
+                val,
+                [r.validated for r in ahead],
+                directory / name,
+                labels,
+                result.kstep,
+                result.ic,
+            )  # fmt: skip
+        )
+    if ahead:
+        labels = [r.label + (' (reduced)' if r.status == 'reduced' else '') for r in ahead]
+        written.append(
+            sysid.bode_plot([r.validated for r in ahead], directory / 'bode.png', labels)
+        )
+    note = '' if written else f'no plots written into {directory}: no model was fitted'
+    return written, note
 
 
 def run(args: argparse.Namespace) -> int:
@@ -411,11 +466,11 @@ def run(args: argparse.Namespace) -> int:
     Returns
     -------
     int
-        Exit status: 0 every model usable, 1 some model failed or is unstable.
+        Exit status: 0 every model usable, 1 some model not usable.
     """
     from maglev_ros import sysid
     from maglev_ros.cli.progress import progress_bar
-    from maglev_ros.sysid.workflow import ModelSpec, identify, offset_hints
+    from maglev_ros.sysid.workflow import ModelSpec, check_channels, identify, offset_hints
 
     if args.ts is not None and not args.ts > 0:
         raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
@@ -442,10 +497,13 @@ def run(args: argparse.Namespace) -> int:
             f'--split must be a fraction such as 0.5 or a sample count such as '
             f'12500, got {split_text!r}'
         ) from None
-    data, n_instruments = _load(args)
+    notes: list[str] = []
+    data, n_instruments = _load(args, notes)
     if n_instruments and not any(spec.structure == 'iv' for spec in specs):
         raise UsageError('--instruments are used by --iv only: add --iv NA NB NK')
-    hints = () if args.detrend else offset_hints(_split_instruments(data, n_instruments)[0])
+    raw = _split_instruments(data, n_instruments)[0]
+    check_channels(raw)  # before detrending: a constant input is named with its value
+    hints = (*notes, *(() if args.detrend else offset_hints(raw)))
     if args.detrend:
         data = data.detrend(args.detrend)
     if args.filter:
@@ -454,7 +512,7 @@ def run(args: argparse.Namespace) -> int:
         data = data.decimate(args.decimate)
     est, val = data.split(split)
     est, instruments = _split_instruments(est, n_instruments)
-    val, _ = _split_instruments(val, n_instruments)
+    val, val_instruments = _split_instruments(val, n_instruments)
     summary: dict[str, Any] = {
         'data': {
             'file': str(args.data),
@@ -466,6 +524,8 @@ def run(args: argparse.Namespace) -> int:
             'n_validation': val.N,
             'outputs': list(data.output_names),
             'inputs': list(est.input_names),
+            'output_units': list(data.output_units),
+            'input_units': list(est.input_units),
             'instruments': list(data.input_names[est.nu :]),
         },
         'hints': list(hints),
@@ -498,8 +558,9 @@ def run(args: argparse.Namespace) -> int:
                 bar.set_postfix_str(f'{label}: iteration {k}, loss {loss:.3g}')
 
         result = identify(
-            est, val, specs, args.horizon, args.ic, args.max_iter, step, hints, instruments
-        )
+            est, val, specs, args.horizon, args.ic, args.max_iter, step, hints, instruments,
+            val_instruments,
+        )  # fmt: skip
         bar.update(1 if started else 0)
     what = 'simulation' if args.horizon is None else f'{args.horizon}-step prediction'
     for row in result.rows:
@@ -517,16 +578,31 @@ def run(args: argparse.Namespace) -> int:
                 'prediction_fit': row.prediction_fit,
                 'fpe': None if row.model is None else row.model.report.fpe,
                 'mse': None if row.model is None else row.model.report.mse,
+                'kstep_horizon': row.kstep,
+                'kstep_estimation': row.kstep_estimation,
+                'kstep_validation': row.kstep_validation,
+                'usable': row.usable,
+                'residuals': row.residual_verdict,
                 'residuals_white': None if row.residuals is None else row.residuals.white,
                 'residuals_independent': (
                     None if row.residuals is None else row.residuals.independent
                 ),
+                'residuals_summary': None if row.residuals is None else row.residuals.summary(),
             }
         )
-        if row.status == 'reduced':
+        if row.validated is not None and row.validated is not row.model:  # reduced
             entry['validated'] = sysid.model_to_dict(row.validated)
         summary['models'].append(entry)
-    written = _write_plots(result, Path(args.plot)) if args.plot else []
+    feedback = None if result.feedback is None else result.feedback.as_dict()
+    summary['closed_loop'] = result.closed_loop
+    summary['feedback'] = feedback
+    summary['kstep_horizon'] = result.kstep
+    summary['fit_kind'] = what
+    warnings = [] if feedback is None or not feedback['closed_loop'] else [feedback['summary']]
+    if feedback is not None and feedback['closed_loop']:
+        warnings.append(feedback['advice'])
+    summary['warnings'] = warnings
+    written, plot_note = _write_plots(result, Path(args.plot)) if args.plot else ([], '')
     extra_texts, extra_written, extra_status = extend_single(args, est, val, result, summary)
     written += extra_written
     exit_status = max(result.exit_status, extra_status)
@@ -538,6 +614,8 @@ def run(args: argparse.Namespace) -> int:
                     row.model, Path(args.save) / f'model_{index}_{row.structure}.json'
                 )
     summary['exit_status'] = exit_status
+    if plot_note:
+        summary['warnings'].append(plot_note)
     if args.json:
         print(json.dumps(_plain(summary), indent=1))
         return exit_status
@@ -553,7 +631,18 @@ def run(args: argparse.Namespace) -> int:
         )
     if summary['data']['instruments']:
         header += '\nInstruments of --iv: ' + ', '.join(summary['data']['instruments'])
+    channels = ', '.join(
+        f'{name} [{unit}]' if unit else name
+        for name, unit in zip(
+            [*data.output_names, *est.input_names],
+            [*data.output_units, *est.input_units],
+            strict=True,
+        )
+    )
+    header += f'\nChannels (outputs, then inputs): {channels}'
     print(header)
+    for warning in warnings:
+        print(f'warning: {warning}')
     for hint in hints:
         print(f'hint: {hint}')
     for row in result.rows:
@@ -564,6 +653,8 @@ def run(args: argparse.Namespace) -> int:
         print('\n' + _summary_table(result, what))
     for path in written:
         print(f'wrote {path}')
+    if plot_note:
+        print(plot_note)
     return exit_status
 
 
@@ -578,7 +669,7 @@ def main(argv: list[str] | None = None) -> int:
     Returns
     -------
     int
-        0 every model usable, 1 some model failed or is unstable, 2 bad input.
+        0 every model usable, 1 some model not usable, 2 bad input.
     """
     return run_command(PROG, build_parser(), _run_quietly, argv)
 

@@ -354,7 +354,8 @@ def run_several(args: argparse.Namespace, load: Any, plain: Any, requested: list
     args : argparse.Namespace
         Parsed arguments (``args.data`` a list of paths).
     load : callable
-        ``load(args) -> (IdData, n_instruments)`` for one file (``args.data`` a path).
+        ``load(args, notes) -> (IdData, n_instruments)`` for one file (``args.data`` a
+        path); what ``--allow-gaps`` left out goes into ``notes``.
     plain : callable
         JSON-safe conversion.
     requested : list of ModelSpec
@@ -375,10 +376,11 @@ def run_several(args: argparse.Namespace, load: Any, plain: Any, requested: list
     if args.select:
         raise UsageError('--select takes one data file; choose orders with --arx on several')
     experiments = []
+    notes: list[str] = []
     for path in args.data:
         one = copy.copy(args)
         one.data = path
-        data, _ = load(one)
+        data, _ = load(one, notes)
         experiments.append(_prepare(args, data))
     labels = _labels(args.data)
     try:
@@ -446,6 +448,7 @@ def run_several(args: argparse.Namespace, load: Any, plain: Any, requested: list
         kind = 'by experiment' if args.by_experiment else 'k-fold over the files'
         blocks.append(f'{model}\n  Validation {kind}:\n' + _indent(table.text(), 4))
     summary['exit_status'] = status
+    summary['notes'] = notes
     if args.json:
         print(json.dumps(plain(summary), indent=1))
         return status
@@ -454,6 +457,8 @@ def run_several(args: argparse.Namespace, load: Any, plain: Any, requested: list
         f'maglev-sysid: {len(experiments)} experiments as one data set, {first.ny} output(s), '
         f'{first.nu} input(s), Ts = {first.Ts:g} s: {sizes}'
     )
+    for note in notes:
+        print(f'note: {note}')
     for block in blocks:
         print('\n' + block)
     return status

@@ -34,6 +34,7 @@ from .static import (
     calibrate_static,
     fit_percent,
 )
+from .verdict import Verdict, assess
 
 __all__ = [
     'GreyBoxError',
@@ -66,4 +67,6 @@ __all__ = [
     'LoopSetup',
     'ClosedLoopFit',
     'calibrate_closed_loop',
+    'Verdict',
+    'assess',
 ]

@@ -28,7 +28,13 @@ noise, its true predictor is the Kalman one with ``q -> 0``; a real board's
 unmeasured disturbances are what ``q`` stands for. The free parameters
 minimise ``sum |eps_k / sigma|^2`` (scipy's ``least_squares``, Jacobian by
 central differences of the predictor); standard deviations from the Jacobian
-at the optimum, scaled by the residual variance.
+at the optimum in the sandwich form with a Newey-West long-run variance of
+the scores (:mod:`.uncertainty`): the prediction errors are correlated in
+time, and the white-noise formula would understate the spread.  Added in
+quadrature: how far the optimum moves when the linearisation's
+finite-difference step is ten times larger (along a flat, correlated
+direction the model's numerical noise moves the optimum by several
+statistical standard deviations).
 
 The currents come from the coil drivers, measured at the samples; the ZOH
 assumes them constant over a sample.
@@ -36,23 +42,30 @@ assumes them constant over a sample.
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import least_squares
 
-from .bounded_fit import fit_bounded, identified, spread
+from .bounded_fit import fit_bounded, identified
 from .errors import GreyBoxError
 from .identifiability import correlated_pairs
 from .parameters import ParameterVector
 from .predictor import LevitationExperiment, LinearGreyBoxProblem, noise_level
 from .static import StaticCalibration, ValidationFit, fit_percent
+from .uncertainty import long_run_spread
 
 __all__ = [
+    'MIN_ESTIMATION',
     'DynamicCalibration',
     'calibrate_dynamic',
 ]
+
+#: Fewest estimation samples per record (split x samples).
+MIN_ESTIMATION = 1000
 
 
 @dataclass(frozen=True)
@@ -70,11 +83,26 @@ class DynamicCalibration(StaticCalibration):
         Kalman gain's input-disturbance level, A rms.
     z_eq : tuple of float
         Equilibrium height of the nominal and the calibrated set, m.
+    notes : tuple of str
+        What went wrong on the way (a diverging nonlinear predictor).
+    std_white : dict
+        Standard deviations if the prediction errors were white (``s^2 (J^T J)^-1``);
+        ``std`` is the sandwich (Newey-West) one, :mod:`.uncertainty`.
+    hac_lags : int
+        Lag window of the Newey-West long-run variance, samples.
+    std_numerical : dict
+        How far the optimum moves when the model's linearisation is computed
+        with a ten times larger finite-difference step (refit from the
+        optimum): the numerical part of the uncertainty, in ``std`` in quadrature.
     """
 
     form: str = 'linear'
     process_noise: float = 0.0
     z_eq: tuple = ()
+    notes: tuple = ()
+    std_white: dict | None = None
+    hac_lags: int = 0
+    std_numerical: dict | None = None
 
 
 def calibrate_dynamic(
@@ -87,6 +115,7 @@ def calibrate_dynamic(
     jacobian: str = 'central',
     max_delay: int = 3,
     form: str = 'linear',
+    measurement: str = 'raw',
 ) -> DynamicCalibration:
     """Estimate the free parameters of ``vector`` from levitation data (linear grey-box).
 
@@ -115,6 +144,10 @@ def calibrate_dynamic(
         ``linear``: the linearised model's Kalman predictor (``idgrey``);
         ``nonlinear``: the full model's predictor with the same gain
         (``nlgreyest``-like, :mod:`~maglev_ros.greybox.nonlinear`).
+    measurement : {'raw', 'board'}
+        What the field channels are: the raw field, or a V4x PC-control
+        firmware's output (baseline and feedthrough removed, x/y low-pass;
+        chosen by the user, never inferred). Linear form only.
 
     Returns
     -------
@@ -158,8 +191,15 @@ def calibrate_dynamic(
             )
         if e.sensors != first.sensors or abs(e.Ts - first.Ts) > 1e-9 * first.Ts:
             raise GreyBoxError(f'{e.name}: every record needs the same sensors and sample time')
-        if e.samples * split < 1000:
-            raise GreyBoxError(f'{e.name}: {e.samples} samples are too few (2000 or more)')
+        if e.samples * split < MIN_ESTIMATION:
+            need = int(np.ceil(MIN_ESTIMATION / split))
+            raise GreyBoxError(
+                f'{e.name}: {e.samples} samples are too few: they give '
+                f'{int(e.samples * split)} for estimation; '
+                f'dynamic calibration needs at least {MIN_ESTIMATION} estimation samples '
+                f'(split {split:g} x samples), so {need} or more samples with --split '
+                f'{split:g}: record longer or raise --split'
+            )
     if not vector.free_names:
         raise GreyBoxError('no free parameter: choose some with --free')
     parts = [e.split(split) if split < 1.0 else (e, e) for e in experiments]
@@ -169,11 +209,13 @@ def calibrate_dynamic(
     say(f'noise level per channel: {", ".join(f"{1e3 * s:.3f}" for s in sigma)} mT rms')
 
     start = time.perf_counter()
+    costs: list[float] = []
     if delay is None:
-        costs = []
         for d in range(max_delay + 1):
             # the linear predictor finds the same delay at a tenth of the cost
-            trial = LinearGreyBoxProblem(vector, estimation, d, sigma, process_noise)
+            trial = LinearGreyBoxProblem(
+                vector, estimation, d, sigma, process_noise, measurement=measurement
+            )
             r = trial.residual(np.zeros(len(trial.free)))
             costs.append(float(r @ r) / r.size)
         delay = int(np.argmin(costs))
@@ -182,11 +224,27 @@ def calibrate_dynamic(
             + ', '.join(f'{d}: {c:.3g}' for d, c in enumerate(costs))
             + ')'
         )
-    problem = problem_type(vector, estimation, delay, sigma, process_noise)
+    if form == 'nonlinear' and measurement != 'raw':
+        raise GreyBoxError(
+            'the nonlinear form models the raw field only: use the linear form with '
+            'the board measurement model'
+        )
+    extra = {'measurement': measurement} if form == 'linear' else {}
+    problem = problem_type(vector, estimation, delay, sigma, process_noise, **extra)
+    if form == 'nonlinear':
+        from .nonlinear import divergence_text
+
+        problem.residual(np.zeros(len(problem.free)))
+        if problem.diverged:
+            raise GreyBoxError(
+                f'{divergence_text(problem)} at the nominal parameters: nothing can be fitted; '
+                'use --form linear, raise --process-noise, or check that the measurement '
+                'model matches the board (--measurement)'
+            )
     fit = identified(
         problem,
         vector,
-        lambda v: problem_type(v, estimation, delay, sigma, process_noise),
+        lambda v: problem_type(v, estimation, delay, sigma, process_noise, **extra),
         say,
     )
     problem, vector_fit, keep, ident = fit.problem, fit.vector, fit.keep, fit.identifiability
@@ -206,14 +264,29 @@ def calibrate_dynamic(
     r = problem.residual(z)
     dof = max(r.size - len(keep), 1)
     s2 = float(r @ r) / dof
-    fitted = spread(problem, problem.jacobian(z), s2)
-    names, std, corr = fitted.names, fitted.std, fitted.correlation
+    blocks = [e.samples - delay - problem.burn for e in estimation]
+    fitted = long_run_spread(problem, problem.jacobian(z), r, blocks, problem.channels.size, s2)
+    names, corr = fitted.spread.names, fitted.spread.correlation
+    say(
+        f'standard deviations from the sandwich covariance (Newey-West, {fitted.lags} lags): '
+        + ', '.join(f'{n} x{fitted.inflation[n]:.2g}' for n in names)
+        + ' the white-noise ones'
+    )
+    numerical = _numerical_spread(problem, z, say)
+    std = {n: float(np.hypot(fitted.spread.std[n], numerical.get(n, 0.0))) for n in names}
+    notes = []
+    if solution.status == 0:
+        notes.append(
+            f'the fit stopped at its evaluation limit without converging ({solution.message}): '
+            'the estimates wander along a flat direction of the cost; free fewer '
+            'parameters or record with more excitation'
+        )
     seconds = time.perf_counter() - start
     say(f'done in {seconds:.2f} s: {solution.message}')
 
     nominal_values = vector.nominal
     fits_nom, fits_cal, predictions = [], [], {}
-    check = problem_type(vector_fit, validation, delay, sigma, process_noise)
+    check = problem_type(vector_fit, validation, delay, sigma, process_noise, **extra)
     z_eq = []
     for label, values_set, sink in (
         ('nominal', nominal_values, fits_nom),
@@ -250,4 +323,49 @@ def calibrate_dynamic(
         form=form,
         process_noise=float(process_noise),
         z_eq=tuple(z_eq),
+        delay_costs=(tuple(costs),) if costs else (),
+        std_white=dict(fitted.white.std),
+        hac_lags=fitted.lags,
+        notes=(*notes, *_divergence_notes(problem)),
+        std_numerical=numerical,
     )
+
+
+NUMERICAL_STEP_FACTOR = 10.0  # the numerical check's linearisation step, times the default
+
+
+def _numerical_spread(problem, z: np.ndarray, say) -> dict[str, float]:
+    """Return how far the optimum moves with a coarser linearisation step, per parameter.
+
+    Along a flat direction of the cost (two strongly correlated parameters) the
+    optimum is set by the model's numerical noise as much as by the data; the
+    statistical standard deviations cannot see that, this refit does.
+    """
+    coarse = copy.copy(problem)
+    coarse.fd_step = problem.fd_step * NUMERICAL_STEP_FACTOR
+    coarse._last = coarse._last_jacobian = None
+    lower = np.array([(s.lower - s.nominal) / s.scale for s in problem.free])
+    upper = np.array([(s.upper - s.nominal) / s.scale for s in problem.free])
+    try:
+        again = least_squares(
+            coarse.residual, np.clip(z, lower, upper), jac=lambda x: coarse.jacobian(x),
+            bounds=(lower, upper), method='trf', x_scale=1.0, ftol=1e-10, xtol=1e-10,
+            gtol=1e-10, max_nfev=20,
+        )  # fmt: skip
+    except (ValueError, np.linalg.LinAlgError):
+        return {}
+    moved = np.abs(again.x - z) * np.array([s.scale for s in problem.free])
+    out = {s.name: float(m) for s, m in zip(problem.free, moved, strict=True)}
+    say(
+        'numerical check (linearisation step x10, refit): the optimum moves by '
+        + ', '.join(f'{n} {problem.vector[n].display(v)}' for n, v in out.items())
+    )
+    return out
+
+
+def _divergence_notes(problem) -> tuple[str, ...]:
+    if not getattr(problem, 'divergences', None):
+        return ()
+    from .nonlinear import divergence_text
+
+    return (divergence_text(problem) + ' during the fit',)

@@ -40,7 +40,7 @@ from ..physics.model import MaggyModel
 from .errors import GreyBoxError
 from .predictor import LinearGreyBoxProblem
 
-__all__ = ['NonlinearGreyBoxProblem', 'DIVERGED']
+__all__ = ['NonlinearGreyBoxProblem', 'DIVERGED', 'divergence_text']
 
 #: Prediction error (T) given to every remaining sample once the predictor leaves
 #: the workspace (the magnet more than 5 mm from where it started): a large,
@@ -117,6 +117,30 @@ def _predict(
     return out.shape[0]
 
 
+def divergence_text(problem: NonlinearGreyBoxProblem) -> str:
+    """Describe the predictor's divergences so far ('' if none).
+
+    Parameters
+    ----------
+    problem : NonlinearGreyBoxProblem
+        A problem whose residuals have been evaluated.
+
+    Returns
+    -------
+    str
+        Count, first record, sample and time, and whether it was in the burn-in.
+    """
+    if not problem.divergences:
+        return ''
+    name, k, t = problem.divergences[0]
+    where = 'in the burn-in, ' if k <= problem.burn else ''
+    return (
+        f'the nonlinear predictor diverged in {problem.diverged} of '
+        f'{problem.evaluations} evaluations (first: {name}, sample {k}, '
+        f't = {t:.4g} s, {where}the predicted magnet moved more than 5 mm from its equilibrium)'
+    )
+
+
 class NonlinearGreyBoxProblem(LinearGreyBoxProblem):
     """The nonlinear grey-box prediction-error problem (same interface as the linear one).
 
@@ -151,8 +175,15 @@ class NonlinearGreyBoxProblem(LinearGreyBoxProblem):
         substeps: int = 1,
     ):
         super().__init__(vector, experiments, delay, sigma, process_noise, burn)
+        if self.measurement != 'raw':
+            raise GreyBoxError(
+                'the nonlinear form models the raw field only: use --form linear with '
+                '--measurement board'
+            )
         self.substeps = int(substeps)
         self.diverged = 0
+        #: (record name, sample, time in s) of the first divergence of each evaluation
+        self.divergences: list[tuple[str, int, float]] = []
 
     def errors(self, values: dict[str, float]) -> list[np.ndarray]:
         """Prediction errors of the nonlinear predictor per experiment (burn-in left out), T.
@@ -197,6 +228,7 @@ class NonlinearGreyBoxProblem(LinearGreyBoxProblem):
             )
             if done < eps.shape[0]:
                 self.diverged += 1
+                self.divergences.append((e.name, int(done), float((done - 1) * self.Ts)))
             out.append(eps[self.burn :])
         return out
 

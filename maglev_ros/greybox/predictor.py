@@ -28,14 +28,24 @@ import numpy as np
 from numba import njit
 from scipy.linalg import solve_discrete_are
 
+from ..physics.board_processing import BoardProcessing, augment
 from ..physics.discretization import zoh
 from ..physics.equilibria import find_equilibria
-from ..physics.linearization import linearize
+from ..physics.linearization import FD_STEP, linearize
 from ..physics.model import MaggyModel
 from .errors import GreyBoxError
 from .parameters import ParameterVector
 
-__all__ = ['GreyBoxSystem', 'LevitationExperiment', 'LinearGreyBoxProblem', 'noise_level']
+__all__ = [
+    'MEASUREMENTS',
+    'GreyBoxSystem',
+    'LevitationExperiment',
+    'LinearGreyBoxProblem',
+    'noise_level',
+]
+
+#: Measurement models: the raw field, or a V4x PC-control firmware's processed field.
+MEASUREMENTS = ('raw', 'board')
 
 
 @dataclass(frozen=True)
@@ -223,6 +233,10 @@ class LinearGreyBoxProblem:
     burn : int
         Samples of each record left out of the criterion while the
         predictor's initial error dies out.
+    measurement : {'raw', 'board'}
+        ``raw``: the sensors' field as the physics model gives it; ``board``:
+        after a V4x PC-control firmware's processing (baseline and coil
+        feedthrough removed, x/y low-pass; :mod:`maglev_ros.physics.board_processing`).
     """
 
     def __init__(
@@ -233,7 +247,15 @@ class LinearGreyBoxProblem:
         sigma: np.ndarray,
         process_noise: float = 1e-3,
         burn: int = 100,
+        measurement: str = 'raw',
     ):
+        if measurement not in MEASUREMENTS:
+            raise GreyBoxError(
+                f'measurement must be one of {", ".join(MEASUREMENTS)}, got {measurement!r}'
+            )
+        self.measurement = measurement
+        #: finite-difference step of the linearisation (the numerical check changes it)
+        self.fd_step = FD_STEP
         self.vector = vector
         self.experiments = tuple(experiments)
         self.delay = int(delay)
@@ -277,10 +299,18 @@ class LinearGreyBoxProblem:
         found = find_equilibria(model)
         if not found:
             raise GreyBoxError(f'no equilibrium for {values}')
-        lin = linearize(model, model.hover_state(found[0].z)).reduced()
+        lin = linearize(model, model.hover_state(found[0].z), step=self.fd_step).reduced()
         ad, bd = zoh(lin.A, lin.B, self.Ts)
         c = np.ascontiguousarray(lin.C[self.channels])
         d = np.ascontiguousarray(lin.D[self.channels])
+        y_eq = lin.y_eq[self.channels]
+        if self.measurement == 'board':
+            full = BoardProcessing.from_model(model)
+            y_eq = y_eq - full.baseline[self.channels]
+            d = d - full.feedthrough[self.channels]
+            ad, bd, c, d = augment(
+                ad, bd, c, d, full.filtered[self.channels], full.host_pole(self.Ts)
+            )
         q = (self.process_noise**2) * (bd @ bd.T) + 1e-30 * np.eye(ad.shape[0])
         r = np.diag(self.sigma**2)
         p = solve_discrete_are(ad.T, c.T, q, r)
@@ -291,7 +321,7 @@ class LinearGreyBoxProblem:
             c,
             d,
             np.ascontiguousarray(gain),
-            np.ascontiguousarray(lin.y_eq[self.channels]),
+            np.ascontiguousarray(y_eq),
             float(found[0].z),
         )
 

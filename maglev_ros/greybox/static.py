@@ -45,6 +45,7 @@ __all__ = [
     'StaticCalibration',
     'StaticProblem',
     'best_delay',
+    'delay_costs',
     'calibrate_static',
     'fit_percent',
 ]
@@ -259,7 +260,12 @@ class AffineStatistics:
         u, y = _shifted(exp, delay)
         z = _regressors(u)
         if z.shape[0] <= 2 * z.shape[1]:
-            raise GreyBoxError(f'{exp.name}: {exp.samples} samples are too few')
+            raise GreyBoxError(
+                f'{exp.name}: {z.shape[0]} valid samples in this part are too few: the '
+                f'affine fit of the field to {u.shape[1]} currents needs more than '
+                f'{2 * z.shape[1]} (twice its {z.shape[1]} coefficients) in the estimation '
+                'and in the validation part; record longer, or move the split with --split'
+            )
         gram = z.T @ z
         try:
             lower = np.linalg.cholesky(gram)
@@ -295,14 +301,34 @@ def best_delay(exp: StaticExperiment, max_delay: int = 5) -> int:
     max_delay : int
         Largest delay tried, samples.
     """
+    return _first_best(delay_costs(exp, max_delay))
+
+
+def _first_best(costs: Sequence[float]) -> int:
+    """Index of the smallest cost; a later one must be smaller by more than 1e-9 relative."""
     best, best_ss = 0, np.inf
-    for d in range(max_delay + 1):
-        if exp.samples - d <= 3 * (exp.u.shape[1] + 1):
-            break
-        ss = float(np.sum(AffineStatistics.of(exp, d).residual_ss / (exp.samples - d)))
+    for d, ss in enumerate(costs):
         if ss < best_ss * (1 - 1e-9):
             best, best_ss = d, ss
     return best
+
+
+def delay_costs(exp: StaticExperiment, max_delay: int = 5) -> tuple[float, ...]:
+    """Return the affine regression's residual per sample for delays ``0..max_delay``.
+
+    Parameters
+    ----------
+    exp : StaticExperiment
+        The record.
+    max_delay : int
+        Largest delay tried, samples (fewer if the record is too short).
+    """
+    costs = []
+    for d in range(max_delay + 1):
+        if exp.samples - d <= 3 * (exp.u.shape[1] + 1):
+            break
+        costs.append(float(np.sum(AffineStatistics.of(exp, d).residual_ss / (exp.samples - d))))
+    return tuple(costs)
 
 
 def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
@@ -562,6 +588,9 @@ class StaticCalibration:
         Wall time of the fit, s.
     message : str
         The optimiser's termination message.
+    delay_costs : tuple of tuple of float
+        Per record, the prediction error for each tried sensor delay (empty
+        when the delays were given): equal costs mean an undetermined delay.
     """
 
     vector: ParameterVector
@@ -582,6 +611,7 @@ class StaticCalibration:
     seconds: float
     message: str = ''
     predictions: dict = field(default_factory=dict, repr=False)
+    delay_costs: tuple = ()
 
     def table(self) -> list[str]:
         """Return the estimates as text lines (name, nominal, estimate, std, change/std)."""
@@ -681,8 +711,10 @@ def calibrate_static(
             vector = vector.with_pose(count, pose, free=fit_pose)
     if not vector.free_names:
         raise GreyBoxError('no free parameter: choose some with --free')
+    costs: tuple = ()
     if delays is None:
-        delays = [best_delay(e) for e in experiments]
+        costs = tuple(delay_costs(e) for e in experiments)
+        delays = [_first_best(c) for c in costs]
         for e, d in zip(experiments, delays, strict=True):
             say(f'{e.name}: sensor delay {d} sample(s) (best affine fit)')
     delays = tuple(int(d) for d in delays)
@@ -759,4 +791,5 @@ def calibrate_static(
         seconds=seconds,
         message=str(solution.message),
         predictions=predictions,
+        delay_costs=costs,
     )

@@ -164,7 +164,8 @@ def compare_figure(
         for k, (result, label) in enumerate(zip(results, labels, strict=True)):
             color = f'C{k}'
             yhat = result.yhat[:, i] * scale
-            text = f'{label}: {result.fit[i]:.2f} %'
+            fit = result.fit[i]
+            text = f'{label}: {fit:.2f} %' if fit >= -999 else f'{label}: < -999 % (diverges)'
             full.plot(t, yhat, color=color, lw=0.7, alpha=0.8, label=text)
             close.plot(t[zs], yhat[zs], color=color, lw=1.2, label=text)
             errors.append((float(np.sqrt(np.mean((y - yhat) ** 2))), k, label, y - yhat))
@@ -174,7 +175,8 @@ def compare_figure(
         )
         # largest error first, so that the best model is drawn on top and stays visible
         for rms, k, label, e in sorted(errors, key=lambda item: -item[0]):
-            rms_text = f'{rms * escale:.3g} {eunit}' if eunit else EngFormatter(places=3)(rms)
+            # no unit stored: a plain number (an SI prefix such as "m" would read as metres)
+            rms_text = f'{rms * escale:.3g} {eunit}' if eunit else f'{rms:.3g}, no unit stored'
             error.plot(t, e * escale, color=f'C{k}', lw=0.6, label=f'{label} (rms {rms_text})')
         if data.nu:
             inputs = axes[2]
@@ -264,10 +266,14 @@ def resid_figure(
     for i in range(ny):
         # lag 0 of the autocorrelation is 1 by definition: left out, it would set the scale
         panels = [(lags[1:], analysis.autocorr[i, 1:], f'autocorrelation of e({onames[i]})')]
-        panels += [
-            (lags, analysis.crosscorr[i, j], f'e({onames[i]}) vs input {inames[j]}')
-            for j in range(nu)
-        ]
+        for j in range(nu):
+            x, values = lags, analysis.crosscorr[i, j]
+            if analysis.feedback_corr is not None:  # lags -M..-1: the input after the residual
+                back = analysis.feedback_corr[i, j, ::-1]
+                x = np.r_[-lags[len(back) : 0 : -1], lags]
+                values = np.r_[back, values]
+            title = f'e({onames[i]}) vs input {inames[j]}'
+            panels.append((x, values, title + '\n(lag < 0: input after residual, feedback)'))
         for ax, (x, values, title) in zip(axes[i], panels, strict=True):
             outside = np.abs(values) > analysis.bound
             ax.vlines(x[~outside], 0, values[~outside], lw=1.5, color='C0')
@@ -277,6 +283,8 @@ def resid_figure(
             ax.set_title(title, fontsize='medium')
             ax.set_xlabel('lag [samples]')
             ax.grid(True, lw=0.3)
+            if x[0] < 0:
+                ax.axvline(0, color='0.4', lw=0.8, ls=':')
     axes[0, 0].legend(loc='upper right', fontsize='small')
     verdict = textwrap.fill(analysis.summary(), width=int(fig.get_figwidth() * 11))
     head = f'{model_label}: ' if model_label else ''

@@ -180,15 +180,18 @@ def identify_groups(
     for group in groups:
         est = _select(est_all, group.outputs, group.inputs)
         val = _select(val_all, group.outputs, group.inputs)
-        z = None
+        z = z_val = None
         used: tuple[str, ...] = ()
         if use_instruments and group.instruments:
             z = np.asarray(_select(est_all, group.outputs, group.instruments).u)
+            z_val = np.asarray(_select(val_all, group.outputs, group.instruments).u)
             used = group.instruments
         step = None
         if progress is not None:
             step = _prefixed(progress, group.name)
-        result = identify(est, val, group.specs, progress=step, instruments=z)
+        result = identify(
+            est, val, group.specs, progress=step, instruments=z, validation_instruments=z_val
+        )
         results.append(GroupResult(group, result, used))
     return tuple(results)
 

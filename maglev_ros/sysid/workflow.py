@@ -4,22 +4,36 @@ One call fits every requested model on the estimation data and validates it on
 the validation data (``compare`` fit on both parts, residual analysis). Each
 model gets its own :class:`ModelRow`, whatever happens to the others:
 
-* ``ok``: fitted and validated;
+* ``ok``: stable, and its validation residuals pass (white, independent of
+  past inputs), or every validation fit is at least :data:`NEGLIGIBLE_FIT`
+  percent (noise-free or quantised data: the residuals are at the data's
+  resolution; a note says the tests failed);
 * ``reduced``: the model is unstable but its unstable poles cancel against
   zeros (orders above the data's, typical of ``iv4``): validated with the
-  cancelling pairs removed (:mod:`~.cancellation`), the row says so;
-* ``unstable``: simulation diverges; the fits are NaN and the model's own
-  one-step prediction fit (``prediction_fit``, finite for any ARX/IV/ARMAX) is
-  kept with the reason;
+  cancelling pairs removed (:mod:`~.cancellation`), residuals pass;
+* ``unstable``: unstable (an open-loop-unstable plant identified from
+  closed-loop data is), its k-step prediction is finite and its residuals pass:
+  its simulation fits are NaN and it is judged on the k-step fit;
+* ``whiteness failed``, ``independence failed``, ``whiteness and independence
+  failed``: the residual test named failed (the reason says what to do);
+* ``closed-loop bias``: the data were taken in closed loop and the method
+  ignores the feedback (OE, IV with the input as instrument);
+* ``diverges``: the simulation, the k-step predictor or the residual filter
+  overflows;
 * ``failed``: the estimator refused (too few samples, singular data, ...):
   NaN fits and the reason;
 * ``no response``: an output that does not move (constant after detrending):
   nothing to identify.
 
+Every fitted model, unstable ones included, also gets a k-step prediction fit
+(:data:`KSTEP_HORIZON` samples unless ``--horizon`` chooses another).  The data
+are tested for feedback first (:mod:`~.feedback`); in closed loop the residual
+independence test skips lag 0.
+
 Nothing raised by one model stops the others, and text LAPACK's Fortran
 runtime might print goes into the row's reason instead of the terminal.
 :attr:`Identification.exit_status` is 0 when every requested model is usable
-(``ok``, ``reduced``, ``no response``) and 1 otherwise.
+(``ok``, ``reduced``, ``unstable``, ``no response``) and 1 otherwise.
 """
 
 from __future__ import annotations
@@ -34,6 +48,7 @@ from .armax import armax
 from .arx import arx
 from .cancellation import cancelling_pairs, root_text, without_cancelling_pairs
 from .dataset import IdData
+from .feedback import FeedbackTest, detect_feedback
 from .fortran_output import captured_fd_stdout
 from .iv import iv4
 from .model import PolyModel
@@ -43,12 +58,15 @@ from .regression import check_data
 from .validation import ResidualAnalysis, compare, resid
 
 __all__ = [
+    'KSTEP_HORIZON',
     'ORDER_NAMES',
     'DegenerateDataError',
     'Identification',
     'ModelRow',
     'ModelSpec',
     'check_channels',
+    'constant_hints',
+    'constant_inputs',
     'identify',
     'identify_outputs',
     'offset_hints',
@@ -61,7 +79,12 @@ ORDER_NAMES: dict[str, tuple[str, ...]] = {
     'oe': ('nb', 'nf', 'nk'),
     'bj': ('nb', 'nc', 'nd', 'nf', 'nk'),
 }
-USABLE = ('ok', 'reduced', 'no response')
+USABLE = ('ok', 'reduced', 'unstable', 'no response')
+#: Horizon in samples of the k-step prediction fit shown for every model.
+KSTEP_HORIZON = 5
+#: Validation fit (percent) above which failed residual tests do not count: the
+#: residuals are then at the data's resolution (noise-free or quantised records).
+NEGLIGIBLE_FIT = 99.9
 OFFSET_RATIO = 0.5  # |mean| / std of a channel above which an offset hint is given
 
 
@@ -212,6 +235,11 @@ class ModelRow:
         Further remarks: iteration cap reached, cancelling pole-zero pairs.
     outputs : tuple of str
         The output channels the row covers.
+    kstep_estimation, kstep_validation : ndarray, shape (ny,)
+        ``compare`` fits of the ``kstep``-step-ahead prediction in percent
+        (computed for every fitted model, unstable ones included).
+    kstep : int
+        Their horizon in samples.
     """
 
     label: str
@@ -226,11 +254,22 @@ class ModelRow:
     residuals: ResidualAnalysis | None
     notes: tuple[str, ...] = ()
     outputs: tuple[str, ...] = ()
+    kstep_estimation: np.ndarray = field(default_factory=lambda: np.full(1, np.nan))
+    kstep_validation: np.ndarray = field(default_factory=lambda: np.full(1, np.nan))
+    kstep: int = 0
 
     @property
     def usable(self) -> bool:
-        """True for ``ok``, ``reduced`` and ``no response`` rows."""
+        """True for ``ok``, ``reduced``, ``unstable`` and ``no response`` rows."""
         return self.status in USABLE
+
+    @property
+    def residual_verdict(self) -> str:
+        """``pass``, ``fail: whiteness``, ``fail: independence``, ... or ``-`` (none)."""
+        if self.residuals is None:
+            return '-'
+        failed = self.residuals.failed_tests
+        return 'pass' if not failed else 'fail: ' + ', '.join(failed)
 
 
 @dataclass(frozen=True)
@@ -249,6 +288,10 @@ class Identification:
         Initial conditions of the fits.
     hints : tuple of str
         Advice about the data (e.g. offsets without detrending).
+    feedback : FeedbackTest or None
+        The closed-loop test of the estimation data (None if not run).
+    kstep : int
+        Horizon in samples of the rows' k-step fits.
     """
 
     estimation: IdData
@@ -257,10 +300,17 @@ class Identification:
     horizon: int | None = None
     ic: str = 'estimate'
     hints: tuple[str, ...] = field(default=())
+    feedback: FeedbackTest | None = None
+    kstep: int = KSTEP_HORIZON
+
+    @property
+    def closed_loop(self) -> bool:
+        """True if the data were found to be taken in closed loop."""
+        return self.feedback is not None and self.feedback.closed_loop
 
     @property
     def exit_status(self) -> int:
-        """0 if every row is usable, 1 if some model failed or is unstable."""
+        """0 if every row is usable, 1 if some model is not (its row says why)."""
         return 0 if all(r.usable for r in self.rows) else 1
 
 
@@ -277,8 +327,17 @@ def check_channels(data: IdData) -> None:
     DegenerateDataError
         If an output is the same signal as an input (the same channel chosen
         twice, e.g. ``--rows 1 1``): the "model" would be ``y = u``, and
-        the estimators' normal equations are singular.
+        the estimators' normal equations are singular; or if every input
+        is constant (nothing excites the plant).
     """
+    constant = constant_inputs(data)
+    if constant and len(constant) == data.nu:
+        shown = ', '.join(constant)
+        raise DegenerateDataError(
+            f'{"input" if len(constant) == 1 else "inputs"} {shown} '
+            f'{"is" if len(constant) == 1 else "are"} constant: nothing excites the plant, '
+            'so no model can be identified; record with a varying input (an excitation)'
+        )
     for i, yname in enumerate(data.output_names):
         for j, uname in enumerate(data.input_names):
             if np.array_equal(data.y[:, i], data.u[:, j]):
@@ -286,6 +345,49 @@ def check_channels(data: IdData) -> None:
                     f'output {yname!r} and input {uname!r} are the same signal: '
                     'choose different channels (--rows OUTPUTS INPUTS)'
                 )
+
+
+def constant_inputs(data: IdData) -> list[str]:
+    """Return the inputs that never change, as ``'name' (always value unit)`` texts.
+
+    Parameters
+    ----------
+    data : IdData
+        The data set (detrended or not).
+
+    Returns
+    -------
+    list of str
+        One text per constant input, empty if all vary.
+    """
+    return [
+        f'{name!r} (always {data.u[0, j]:g}{" " + unit if unit else ""})'
+        for j, (name, unit) in enumerate(zip(data.input_names, data.input_units, strict=True))
+        if data.N and np.ptp(data.u[:, j]) == 0
+    ]
+
+
+def constant_hints(data: IdData) -> tuple[str, ...]:
+    """Return a hint naming the constant inputs (models using them cannot be estimated).
+
+    Parameters
+    ----------
+    data : IdData
+        The data set.
+
+    Returns
+    -------
+    tuple of str
+        One line, or empty if every input varies.
+    """
+    constant = constant_inputs(data)
+    if not constant:
+        return ()
+    return (
+        f'{"input" if len(constant) == 1 else "inputs"} {", ".join(constant)} '
+        f'{"is" if len(constant) == 1 else "are"} constant: it excites nothing, a model '
+        'using it cannot be estimated (give it nb = 0 or leave the channel out)',
+    )
 
 
 def offset_hints(data: IdData) -> tuple[str, ...]:
@@ -335,13 +437,50 @@ def _largest_pole(model: PolyModel) -> float:
     return float(np.max(np.abs(p))) if len(p) else 0.0
 
 
-def _validate(
+def _fits(
     model: PolyModel, est: IdData, val: IdData, horizon: int | None, ic: str
-) -> tuple[np.ndarray, np.ndarray, ResidualAnalysis]:
-    fits = [_finite_fit(compare(model, d, horizon, ic).fit) for d in (est, val)]
-    if not all(np.all(np.isfinite(f)) for f in fits):
-        raise FloatingPointError('the compare fit is not finite (the simulation overflows)')
-    return fits[0], fits[1], resid(model, val)
+) -> tuple[np.ndarray, np.ndarray]:
+    """``compare`` fits on both parts; NaN where the simulation or predictor overflows."""
+    out = []
+    for d in (est, val):
+        try:
+            out.append(_finite_fit(compare(model, d, horizon, ic).fit))
+        except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+            out.append(_nan(model.ny))
+    return out[0], out[1]
+
+
+def _residual_reason(analysis: ResidualAnalysis, closed_loop: bool, structure: str) -> str:
+    failed = analysis.failed_tests
+    parts = []
+    if 'whiteness' in failed:
+        todo = 'raise the orders' + (
+            ' or add a noise model (ARMAX, BJ)' if structure == 'arx' else ''
+        )
+        parts.append(
+            f'the residuals are not white (statistic {analysis.whiteness_stat.max():.1f}, '
+            f'limit {analysis.whiteness_limit:.1f}): dynamics or noise the model does not '
+            f'describe; {todo}'
+        )
+    instruments = analysis.against == 'instruments'
+    if 'independence' in failed:
+        what = 'the instruments' if instruments else 'past inputs'
+        parts.append(
+            f'the residuals depend on {what} (statistic '
+            f'{analysis.independence_stat.max(initial=0):.1f}, limit '
+            f'{analysis.independence_limit:.1f}): input dynamics the model misses; raise '
+            'the orders or check the delay nk'
+        )
+    if closed_loop and not instruments:
+        parts.append('in closed loop such a model is also biased')
+    return '; '.join(parts)
+
+
+def _negligible(fit_val: np.ndarray, k_val: np.ndarray) -> bool:
+    """Return True if every finite validation fit is at least :data:`NEGLIGIBLE_FIT` percent."""
+    fits = np.r_[fit_val, k_val]
+    fits = fits[np.isfinite(fits)]
+    return bool(fits.size) and bool(np.all(fits >= NEGLIGIBLE_FIT))
 
 
 def _fit_row(
@@ -354,6 +493,10 @@ def _fit_row(
     progress: Callable[[int, float], None] | None,
     label: str,
     instruments: np.ndarray | None = None,
+    closed_loop: bool = False,
+    kstep: int = KSTEP_HORIZON,
+    val_instruments: np.ndarray | None = None,
+    unexcited: tuple[str, ...] = (),
 ) -> ModelRow:
     ny = est.ny
     outputs = tuple(est.output_names)
@@ -387,6 +530,7 @@ def _fit_row(
         )
     predicted = _nan(ny) if report is None else _finite_fit(report.fit)
     status, reason, validated = 'ok', '', model
+    unstable = ''
     if not model.is_stable:
         reduced = without_cancelling_pairs(model)
         if reduced is not None and reduced.is_stable:
@@ -397,31 +541,71 @@ def _fit_row(
                 f'pair(s), as {" ".join(reduced.orders.describe().split())}'
             )
         else:
-            status, validated = 'unstable', None
+            status = 'unstable'
+            unstable = f'unstable (largest pole {_largest_pole(model):.3g})'
             reason = (
-                f'unstable (largest pole {_largest_pole(model):.3g}): its simulation '
-                'diverges; lower the orders (the fit shown is the one-step prediction '
-                'on the estimation data)'
+                f'{unstable}: judged on {kstep}-step prediction, its simulation diverges '
+                '(an open-loop-unstable plant, or orders above what the data support)'
             )
-    if validated is None:
-        return ModelRow(
-            label, spec.structure, status, reason, model, None, _nan(ny), _nan(ny),
-            predicted, None, tuple(notes), outputs,
-        )  # fmt: skip
+    fit_est, fit_val = _fits(validated, est, val, horizon, ic)
+    if status == 'unstable' and horizon is None:  # a diverging simulation has no fit
+        fit_est, fit_val = _nan(ny), _nan(ny)
+    k_est, k_val = _fits(validated, est, val, kstep, ic)
+    overflow = status != 'unstable' and not np.all(np.isfinite(np.r_[fit_est, fit_val]))
     try:
-        fit_est, fit_val, analysis = _validate(validated, est, val, horizon, ic)
-    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
-        fit_est = fit_val = None
-        failure = str(err)
-    if fit_est is None:
-        return ModelRow(
-            label, spec.structure, 'unstable' if status == 'ok' else status,
-            f'validation failed: {failure}', model, None, _nan(ny), _nan(ny), predicted,
-            None, tuple(notes), outputs,
+        external = spec.structure == 'iv' and val_instruments is not None
+        analysis: ResidualAnalysis | None = resid(
+            validated, val, closed_loop=closed_loop,
+            instruments=val_instruments if external else None,
+            noise_model=spec.structure not in ('oe', 'iv'),
         )  # fmt: skip
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as err:
+        analysis, failure = None, str(err)
+    if overflow or analysis is None or not np.all(np.isfinite(np.r_[k_est, k_val])):
+        why = (
+            'the simulation overflows' if overflow
+            else failure if analysis is None
+            else f'the {kstep}-step prediction overflows'
+        )  # fmt: skip
+        return ModelRow(
+            label, spec.structure, 'diverges',
+            f'{unstable + ": " if unstable else ""}validation failed: {why}; lower the orders',
+            model, validated, fit_est, fit_val, predicted, analysis, tuple(notes), outputs,
+            k_est, k_val, kstep,
+        )  # fmt: skip
+    biased = closed_loop and (
+        spec.structure == 'oe' or (spec.structure == 'iv' and instruments is None)
+    )
+    if unexcited and not (spec.structure == 'iv' and instruments is not None):
+        status = 'no excitation'
+        reason = (
+            f'{unstable + "; " if unstable else ""}closed loop without external excitation '
+            f'({", ".join(unexcited)} is a linear function of the outputs): these data do not '
+            'determine the plant, a model of the loop predicts as well as the plant; record '
+            'with an excitation and use --iv with --instruments'
+        )
+    elif biased:
+        status = 'closed-loop bias'
+        method = 'output error' if spec.structure == 'oe' else 'IV with the input as instrument'
+        reason = (
+            f'{unstable + "; " if unstable else ""}{method} ignores the feedback in '
+            'closed-loop data: the model describes the loop, not the plant; use --iv with '
+            '--instruments (an excitation) or --armax/--bj judged on --horizon'
+        )
+    elif not analysis.passed and _negligible(fit_val, k_val):
+        notes.append(
+            f'the residual tests failed ({", ".join(analysis.failed_tests)}), but the model '
+            f'explains {NEGLIGIBLE_FIT:g} % or more of the validation output: the residuals '
+            'are at the resolution of (nearly) noise-free or quantised data, where any '
+            'model error is significant; not counted against the model'
+        )
+    elif not analysis.passed:
+        status = f'{" and ".join(analysis.failed_tests)} failed'
+        prior = f'{reason.split(":")[0]}; ' if unstable else f'{reason}; ' if reason else ''
+        reason = prior + _residual_reason(analysis, closed_loop, spec.structure)
     return ModelRow(
         label, spec.structure, status, reason, model, validated, fit_est, fit_val, predicted,
-        analysis, tuple(notes), outputs,
+        analysis, tuple(notes), outputs, k_est, k_val, kstep,
     )  # fmt: skip
 
 
@@ -435,6 +619,7 @@ def identify(
     progress: Callable[[str, int, float], None] | None = None,
     hints: Sequence[str] = (),
     instruments: np.ndarray | None = None,
+    validation_instruments: np.ndarray | None = None,
 ) -> Identification:
     """Fit and validate every requested model; one row each, none lost.
 
@@ -458,6 +643,10 @@ def identify(
     instruments : ndarray, shape (N, nz), optional
         External instruments for the IV models (the excitation of a closed
         loop), samples of ``estimation``.
+    validation_instruments : ndarray, shape (N_val, nz), optional
+        The same signals on the validation samples: IV models with external
+        instruments are then tested for residual independence from them
+        (in closed loop the inputs depend on the noise, the instruments do not).
 
     Returns
     -------
@@ -475,6 +664,11 @@ def identify(
     check_channels(estimation)
     for spec in specs:
         spec.check(estimation)
+    hints = (*hints, *constant_hints(estimation))
+    feedback = _feedback(estimation)
+    closed = feedback is not None and feedback.closed_loop
+    unexcited = () if feedback is None else feedback.unexcited
+    kstep = KSTEP_HORIZON if horizon is None else int(horizon)
     rows = []
     for spec in specs:
         step = None
@@ -483,12 +677,15 @@ def identify(
             step = _bind(progress, spec.label)
         with captured_fd_stdout() as lapack:
             row = _fit_row(
-                spec, estimation, validation, horizon, ic, max_iter, step, spec.label, instruments
-            )
+                spec, estimation, validation, horizon, ic, max_iter, step, spec.label,
+                instruments, closed, kstep, validation_instruments, unexcited,
+            )  # fmt: skip
         if lapack.text:
             row = _with_note(row, 'LAPACK: ' + ' '.join(lapack.text.split()))
         rows.append(row)
-    return Identification(estimation, validation, tuple(rows), horizon, ic, tuple(hints))
+    return Identification(
+        estimation, validation, tuple(rows), horizon, ic, tuple(hints), feedback, kstep
+    )
 
 
 def identify_outputs(
@@ -522,6 +719,8 @@ def identify_outputs(
         One row per output, in order; ``outputs`` names the row's output.
     """
     spread = np.std(np.asarray(estimation.y), axis=0)
+    feedback = _feedback(estimation)
+    closed = feedback is not None and feedback.closed_loop
     rows = []
     for i, name in enumerate(estimation.output_names):
         label = f'{spec.label} {name}'
@@ -548,11 +747,26 @@ def identify_outputs(
             continue
         est, val = estimation.select(outputs=[i]), validation.select(outputs=[i])
         with captured_fd_stdout() as lapack:
-            row = _fit_row(spec, est, val, None, ic, None, None, label)
+            row = _fit_row(
+                spec, est, val, None, ic, None, None, label, None, closed,
+                unexcited=() if feedback is None else feedback.unexcited,
+            )  # fmt: skip
         if lapack.text:
             row = _with_note(row, 'LAPACK: ' + ' '.join(lapack.text.split()))
         rows.append(row)
-    return Identification(estimation, validation, tuple(rows), None, ic, tuple(hints))
+    return Identification(estimation, validation, tuple(rows), None, ic, tuple(hints), feedback)
+
+
+def _feedback(data: IdData) -> FeedbackTest | None:
+    """Return the closed-loop test of ``data``; None if it cannot run (no inputs, too short)."""
+    varying = [j for j in range(data.nu) if np.ptp(data.u[:, j]) > 0]
+    if not varying or np.all(np.ptp(data.y, axis=0) == 0):
+        return None
+    try:
+        with captured_fd_stdout():
+            return detect_feedback(data.select(inputs=varying))
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError):
+        return None
 
 
 def _bind(progress: Callable[[str, int, float], None], label: str) -> Callable[[int, float], None]:

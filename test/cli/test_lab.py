@@ -29,8 +29,12 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
     )
     captured = capfd.readouterr()
     printed = captured.out
-    assert status == 0, captured.err
     summary = json.loads((out / 'models.json').read_text())
+    # noise-free data: what ARX 2 2 1 leaves out of the coil dynamics shows in the
+    # residual tests, which name it (exit 1); the fits are still given
+    assert status == summary['exit_status'] == 1, captured.err
+    for m in summary['models'][:2]:
+        assert m['status'].endswith('failed') and 'residuals' in m['note'], m
     fits = {m['output']: m.get('fit_validation') for m in summary['models']}
     assert fits['Bx_0'] >= 95.0 and fits['By_0'] >= 95.0, printed
     assert summary['run']['timeouts'] == 0 and not summary['run']['crashed']
@@ -44,13 +48,13 @@ def test_fixed_magnet_experiment_identified_from_the_bag(domain, tmp_path, capfd
     assert 'recorded 3000 samples' in printed
     bz = next(m for m in summary['models'] if m['output'] == 'Bz_0')
     assert bz['status'] == 'no response' and bz['fit_validation'] is None
-    assert summary['exit_status'] == 0
 
 
 def test_duration_still_gives_exact_samples(domain, tmp_path, capfd):
     out = tmp_path / 'lab'
     argv = ['--duration', '0.1', '--magnet', 'fixed', '--out', str(out), '--no-plots', '--quiet']
-    assert lab.main(argv) == 0, capfd.readouterr().err
+    # the session's exit status is the models' (0 or 1: residual tests), not bad input
+    assert lab.main(argv) in (0, 1), capfd.readouterr().err
     assert json.loads((out / 'models.json').read_text())['data']['N'] == 500
 
 
@@ -80,11 +84,11 @@ def test_bad_input_is_one_line_and_status_2(argv, match, capfd):
 def test_a_second_session_needs_overwrite(domain, tmp_path, capfd):
     out = tmp_path / 'lab'
     argv = ['--duration', '0.05', '--magnet', 'fixed', '--out', str(out), '--no-plots']
-    assert lab.main(argv) == 0
+    assert lab.main(argv) in (0, 1)  # the models' status, not bad input
     capfd.readouterr()
     assert lab.main(argv) == 2
     err = capfd.readouterr().err
     assert 'exists already; choose another --out or add --overwrite' in err
     assert err.count('\n') == 1
-    assert lab.main([*argv, '--overwrite']) == 0
+    assert lab.main([*argv, '--overwrite']) in (0, 1)
     assert (out / 'bag' / 'metadata.yaml').is_file()

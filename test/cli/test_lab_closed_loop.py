@@ -66,8 +66,13 @@ def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_model
             check = m['physics_check']
             assert check['band_hz'] == [10.0, 300.0] and np.isfinite(check['max_db'])
             assert re.search(rf'{re.escape(m["label"])}.*\d+\.\d\d dB +\d+\.\d deg', printed)
-    usable = [m for m in models if m['status'] in ('ok', 'reduced')]
-    assert len(usable) >= 6, [(m['label'], m['status'], m['reason']) for m in models]
+    # every model is fitted and validated; closed-loop data: the residual tests are strict
+    # (ARX/ARMAX on the loop's coloured noise fail whiteness), each row says which test
+    # failed, and the IV models are judged against their instruments
+    assert all(m['status'] != 'failed' for m in models), [
+        (m['label'], m['reason']) for m in models
+    ]
+    assert all(m['reason'] for m in models if m['status'] != 'ok')
     # the identifier node ran on the same samples: its ARX is the batch ARX of them
     assert summary['online']['samples'] == SAMPLES
     differences = [float(d) for d in re.findall(r'largest difference (\S+) of', printed)]

@@ -100,8 +100,9 @@ def test_overwrite_replaces_an_unfinished_bag(domain, tmp_path):
         lab_command(*argv, '--overwrite'), env=environment(domain), capture_output=True,
         text=True, timeout=START_TIMEOUT,
     )  # fmt: skip
-    assert proc.returncode == 0, proc.stdout + proc.stderr
-    assert (out / 'bag' / 'metadata.yaml').is_file()
+    # 0 or 1: the session's models (residual tests), not a refusal
+    assert proc.returncode in (0, 1), proc.stdout + proc.stderr
+    assert 'wrote' in proc.stdout and (out / 'bag' / 'metadata.yaml').is_file()
 
 
 def test_overwrite_keeps_a_directory_that_is_not_a_bag(tmp_path, capfd):

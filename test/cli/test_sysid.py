@@ -47,21 +47,20 @@ def test_siso_models_text(lab_mat, capsys):
             2,
             1,
             1,
-            '--oe',
-            2,
-            4,
-            1,
             '--bj',
             2,
             1,
-            1,
+            4,
             4,
             1,
         ],
         capsys,
     )
     assert code == 0, err
-    assert out.count('Discrete-time') == 5
+    assert out.count('Discrete-time') == 4
+    summary = out[out.index('Summary') :]
+    assert '5-step val. %' in summary and 'residuals' in summary
+    assert summary.count(' pass ') == 4 and 'no feedback detected' not in out
     assert 'estimation 3000, validation 3000' in out
     assert 'Fit to estimation data' in out and 'validation data' in out
     assert 'FPE:' in out and 'residual analysis' in out
@@ -96,17 +95,25 @@ def test_mimo_spec_json_plot_save(lab_mat, tmp_path, capsys):
         ],
         capsys,
     )
-    assert code == 0, err
+    # ARMAX with these orders cannot describe the ARX data: its residuals say so
+    assert code == 1, err
     result = json.loads(out)
     assert result['data']['n_estimation'] == 4000
     arx_entry, armax_entry = result['models']
+    assert arx_entry['status'] == 'ok' and arx_entry['residuals'] == 'pass'
+    assert armax_entry['status'] == 'whiteness and independence failed'
+    assert not armax_entry['usable'] and 'not white' in armax_entry['reason']
+    assert result['closed_loop'] is False and result['kstep_horizon'] == 5
+    assert len(arx_entry['kstep_validation']) == 2
     assert arx_entry['structure'] == 'arx' and armax_entry['structure'] == 'armax'
     assert arx_entry['orders']['na'] == [[4, 4], [0, 4]]
     assert min(arx_entry['fit_validation']) > 80
     assert len(arx_entry['polynomials']['A'][0][1]) == 5
     assert {'fpe', 'mse', 'fit_estimation', 'theta', 'std'} <= set(arx_entry)
     pngs = sorted(p.name for p in (tmp_path / 'png').iterdir())
-    assert pngs == ['bode.png', 'compare.png', 'resid_1_arx.png', 'resid_2_armax.png']
+    assert pngs == [
+        'bode.png', 'compare.png', 'compare_kstep.png', 'resid_1_arx.png', 'resid_2_armax.png'
+    ]  # fmt: skip
     assert len(list((tmp_path / 'models').iterdir())) == 2
 
 
@@ -195,16 +202,20 @@ def test_readme_siso_example_on_second_order_data_keeps_every_model(
     argv += ['--arx', 7, 9, 1, '--iv', 7, 9, 1, '--armax', 5, 5, 3, 1, '--plot', plots]
     code = main([str(a) for a in argv])
     out, err = capfd.readouterr()
-    assert code == 0, err
+    # white sensor noise: ARX's residuals are not white; the reduced IV 7 9 1 leaves
+    # input dynamics in its residuals; ARMAX describes the data
+    assert code == 1, err
     assert 'DLASCL' not in out + err and 'illegal value' not in out + err
     summary = out[out.index('Summary') :]
     assert 'ARX 7 9 1' in summary and 'ARMAX 5 5 3 1' in summary
-    assert 'IV4 7 9 1' in summary and 'reduced (validated as na=' in summary
+    assert 'IV4 7 9 1' in summary and 'validated without the' in out
     assert 'pole-zero pair(s) nearly cancel' in out
+    assert 'whiteness failed - not usable' in summary
     names = sorted(p.name for p in plots.iterdir())
     assert names == [
         'bode.png',
         'compare.png',
+        'compare_kstep.png',
         'resid_1_arx.png',
         'resid_2_iv.png',
         'resid_3_armax.png',
@@ -217,12 +228,15 @@ def test_json_is_clean_and_holds_the_reduced_model(second_order_mat, capfd):
     code = main([str(a) for a in argv])
     out, err = capfd.readouterr()
     result = json.loads(out)  # nothing but JSON on stdout
-    assert code == 0, err
+    assert code == 1, err
     arx_row, iv_row = result['models']
-    assert arx_row['status'] == 'ok' and arx_row['fit_validation'][0] > 99
-    assert iv_row['status'] == 'reduced' and iv_row['validated']['orders']['na'][0][0] < 7
+    assert arx_row['status'] == 'whiteness failed' and arx_row['fit_validation'][0] > 99
+    assert arx_row['residuals'] == 'fail: whiteness' and not arx_row['usable']
+    assert iv_row['validated']['orders']['na'][0][0] < 7
     assert iv_row['fit_validation'][0] > 99 and 'cancel' in iv_row['reason']
-    assert result['exit_status'] == 0 and result['hints'] == []
+    assert iv_row['kstep_validation'][0] > 99 and iv_row['kstep_horizon'] == 5
+    assert result['exit_status'] == 1 and result['hints'] == []
+    assert result['closed_loop'] is False and result['warnings'] == []
 
 
 def test_output_equal_to_input_is_one_line_and_no_lapack_text(second_order_mat, capfd):
@@ -236,20 +250,22 @@ def test_output_equal_to_input_is_one_line_and_no_lapack_text(second_order_mat, 
 
 def test_offset_hint_without_detrend_and_help_says_detrend_is_off(second_order_mat, capsys):
     code, out, err = run(
-        [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--arx', 2, 2, 1], capsys
+        [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--oe', 2, 2, 1], capsys
     )
-    assert code == 0, err
+    # the offset the model cannot describe shows in its residuals: not usable
+    assert code == 1, err
+    assert 'independence failed - not usable' in out
     assert 'hint: y1 has an offset' in out and '--detrend' in out
     assert main(['--help']) == 0
     text = ' '.join(capsys.readouterr().out.split())
     assert 'off unless given' in text and 'Without --detrend the models fit the raw values' in text
-    assert 'Exit status: 0 every model usable, 1 some model failed' in text
+    assert 'Exit status: 0 every model usable' in text and '1 some model not usable' in text
 
 
 def test_iteration_cap_option_is_reported(second_order_mat, capsys):
     argv = [second_order_mat, '--rows', '1', '4', '--ts', '2e-4', '--detrend']
     code, out, err = run([*argv, '--armax', 2, 2, 2, 1, '--max-iter', 1], capsys)
-    assert code == 0, err
+    assert code in (0, 1), err
     assert 'Stopped at the iteration cap (1)' in out and 'raise it with --max-iter' in out
     code, _, err = run([*argv, '--armax', 2, 2, 2, 1, '--max-iter', 0], capsys)
     assert code == 2 and '--max-iter must be >= 1' in err

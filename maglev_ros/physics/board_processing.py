@@ -1,0 +1,174 @@
+"""What a V4x PC-control firmware does to the field before a host sees it.
+
+The board (``shared/docs/teensy-protocol.md``, "V4x PC-control firmware")
+averages its sensor at power-up as a *baseline*, measures each coil's direct
+*feedthrough* into the sensor's x and y axes, and then reports every sample as::
+
+    b = raw - baseline + feedthrough compensation      (x, y: coil field removed)
+    f_x = 0.2 b_x + 0.8 f_x(prev),  f_y likewise        (per board sample, 5 kHz)
+    f_z = b_z                                           (z is not filtered)
+
+So the host receives the field of whatever changed since power-up (the
+levitating magnet, if it was absent then), without the coils' own field on x
+and y, low-pass filtered on x and y: not the raw field the physics model
+predicts.  :class:`BoardProcessing` is that map for the model: the baseline
+and feedthrough are the model's own (magnet absent, zero currents; field per
+ampere of each coil), which is what the firmware measures on a board the model
+describes.  It is used explicitly (``maglev-calibrate --measurement board``),
+never inferred from the data.
+
+Between two host samples the board runs ``M = Ts / board_period`` filter
+steps; for a signal held over the host period the filter is, at the host rate,
+``f_k = a f_(k-1) + (1 - a) b_k`` with ``a = 0.8^M``.  :func:`augment` adds
+these filter states to a discrete linear model (the grey-box's).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'BoardProcessing', 'augment']
+
+#: The firmware's loop period, s (5 kHz).
+BOARD_PERIOD = 2e-4
+#: Weight of the new sample in the firmware's x/y low-pass (``f = 0.2 raw + 0.8 f``).
+FILTER_WEIGHT = 0.2
+
+
+@dataclass(frozen=True)
+class BoardProcessing:
+    """The firmware's field processing for the channels ``[Bx_0, By_0, Bz_0, Bx_1, ...]``.
+
+    Attributes
+    ----------
+    baseline : ndarray, shape (p,)
+        Field at power-up (magnet absent, coils off), T.
+    feedthrough : ndarray, shape (p, n_coils)
+        Coil field removed per ampere, T/A (zero on z channels: the firmware
+        compensates x and y only).
+    filtered : ndarray of bool, shape (p,)
+        Channels the firmware low-pass filters (x and y).
+    weight : float
+        New-sample weight of the low-pass per board step.
+    board_period : float
+        Board loop period, s.
+    """
+
+    baseline: np.ndarray
+    feedthrough: np.ndarray
+    filtered: np.ndarray
+    weight: float = FILTER_WEIGHT
+    board_period: float = BOARD_PERIOD
+
+    @classmethod
+    def from_model(cls, model, sensors=None) -> BoardProcessing:
+        """Return the processing a board that the physics model describes would apply.
+
+        Parameters
+        ----------
+        model : MaggyModel
+            The physics model (its parameter set).
+        sensors : sequence of int, optional
+            Sensors whose channels are kept (default all).
+
+        Returns
+        -------
+        BoardProcessing
+            Baseline and feedthrough of the model's own field.
+        """
+        n_s = model.params.solenoids.count
+        x = model.hover_state(0.03)  # any state: the magnet is left out
+        base = model.measurement(x, np.zeros(n_s), with_magnet=False)
+        feed = np.column_stack(
+            [model.measurement(x, np.eye(n_s)[j], with_magnet=False) - base for j in range(n_s)]
+        )
+        axes = np.arange(base.size) % 3
+        feed[axes == 2] = 0.0  # z is not compensated
+        rows = np.arange(base.size)
+        if sensors is not None:
+            rows = np.concatenate([np.arange(3 * k, 3 * k + 3) for k in sensors])
+        return cls(base[rows], feed[rows], axes[rows] < 2)
+
+    def host_pole(self, Ts: float) -> float:
+        """Return the pole ``a`` of the x/y low-pass at the host's sample time.
+
+        Parameters
+        ----------
+        Ts : float
+            Host sample time, s.
+        """
+        steps = max(Ts / self.board_period, 1.0)
+        return float((1.0 - self.weight) ** steps)
+
+    def apply(self, raw: np.ndarray, currents: np.ndarray, Ts: float) -> np.ndarray:
+        """Process a raw field record as the firmware would (host-rate filter).
+
+        Parameters
+        ----------
+        raw : ndarray, shape (N, p)
+            Raw field, T (what the physics model predicts).
+        currents : ndarray, shape (N, n_coils)
+            Coil currents, A.
+        Ts : float
+            Host sample time, s.
+
+        Returns
+        -------
+        ndarray, shape (N, p)
+            What the host receives, T; the filter starts settled on the first sample.
+        """
+        b = (
+            np.asarray(raw, float)
+            - self.baseline
+            - np.asarray(currents, float) @ self.feedthrough.T
+        )
+        a = self.host_pole(Ts)
+        out = b.copy()
+        cols = np.flatnonzero(self.filtered)
+        for k in range(1, b.shape[0]):
+            out[k, cols] = a * out[k - 1, cols] + (1 - a) * b[k, cols]
+        return out
+
+
+def augment(
+    ad: np.ndarray,
+    bd: np.ndarray,
+    c: np.ndarray,
+    d: np.ndarray,
+    filtered: np.ndarray,
+    a: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Add the firmware's x/y low-pass to a discrete model ``x+ = Ad x + Bd u, y = C x + D u``.
+
+    The filter state ``f_(k-1)`` of each filtered channel is appended to the
+    state; the output of a filtered channel is ``a f_(k-1) + (1 - a)(C x_k + D u_k)``.
+
+    Parameters
+    ----------
+    ad, bd, c, d : ndarray
+        Discrete model, shapes (n, n), (n, m), (p, n), (p, m).
+    filtered : ndarray of bool, shape (p,)
+        Channels with the low-pass.
+    a : float
+        Filter pole at the model's sample time.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``Ad, Bd, C, D`` of the augmented model, ``n + (filtered channels)`` states.
+    """
+    rows = np.flatnonzero(filtered)
+    n, q = ad.shape[0], rows.size
+    cf, df = c[rows], d[rows]
+    ad2 = np.zeros((n + q, n + q))
+    ad2[:n, :n] = ad
+    ad2[n:, :n] = (1 - a) * cf
+    ad2[n:, n:] = a * np.eye(q)
+    bd2 = np.vstack([bd, (1 - a) * df])
+    c2 = np.hstack([c, np.zeros((c.shape[0], q))])
+    d2 = d.copy()
+    c2[rows] = np.hstack([(1 - a) * cf, a * np.eye(q)])
+    d2[rows] = (1 - a) * df
+    return ad2, bd2, c2, d2

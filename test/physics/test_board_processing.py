@@ -1,0 +1,70 @@
+"""The V4x PC-control firmware's field processing, as a measurement model."""
+
+import numpy as np
+import pytest
+
+from maglev_ros.physics import MaggyModel, load_parameters
+from maglev_ros.physics.board_processing import BoardProcessing, augment
+
+
+@pytest.fixture(scope='module')
+def model():
+    return MaggyModel(load_parameters('maggy_v4'))
+
+
+def test_baseline_and_feedthrough_are_the_models_own_field(model):
+    bp = BoardProcessing.from_model(model)
+    x = model.hover_state(0.03)
+    n = model.params.solenoids.count
+    rng = np.random.default_rng(0)
+    u = rng.uniform(-1, 1, n)
+    raw = model.measurement(x, u, with_magnet=False)
+    processed = raw - bp.baseline - bp.feedthrough @ u
+    axes = np.arange(raw.size) % 3
+    # magnet absent: nothing is left on x and y; z keeps the coils' field (not compensated)
+    np.testing.assert_allclose(processed[axes < 2], 0.0, atol=1e-12)
+    np.testing.assert_allclose(processed[axes == 2], (raw - bp.baseline)[axes == 2])
+    # the permanent magnets' field (tens of mT) is what the baseline takes away
+    assert np.abs(bp.baseline).max() > 0.01
+    assert list(bp.filtered) == [True, True, False] * (raw.size // 3)
+    selected = BoardProcessing.from_model(model, sensors=[1])
+    np.testing.assert_array_equal(selected.baseline, bp.baseline[3:6])
+
+
+def test_host_rate_filter_matches_the_board_loop_for_held_signals(model):
+    bp = BoardProcessing.from_model(model, sensors=[0])
+    Ts = 1e-3  # 5 board steps per host sample
+    a = bp.host_pole(Ts)
+    assert a == pytest.approx(0.8**5)
+    # the board's own loop on a signal held over each host period
+    b = np.repeat([0.0, 1.0, 1.0, -2.0, 0.5], 5)
+    f, board = 0.0, []
+    for v in b:
+        f = 0.2 * v + 0.8 * f
+        board.append(f)
+    raw = np.zeros((5, 3))
+    raw[:, 0] = b[::5] + bp.baseline[0]
+    host = bp.apply(raw, np.zeros((5, 4)), Ts)
+    np.testing.assert_allclose(host[1:, 0], np.array(board)[9::5], rtol=1e-12)
+
+
+def test_augmented_model_equals_filtering_its_output():
+    rng = np.random.default_rng(1)
+    ad = np.diag([0.9, 0.5])
+    bd = rng.standard_normal((2, 1))
+    c = rng.standard_normal((3, 2))
+    d = rng.standard_normal((3, 1))
+    filtered = np.array([True, True, False])
+    a = 0.3
+    ad2, bd2, c2, d2 = augment(ad, bd, c, d, filtered, a)
+    u = rng.standard_normal((50, 1))
+    x = np.zeros(2)
+    s = np.zeros(4)
+    f = np.zeros(2)
+    for k in range(50):
+        y = c @ x + d @ u[k]
+        f = a * f + (1 - a) * y[:2] if k else (1 - a) * y[:2]
+        y2 = c2 @ s + d2 @ u[k]
+        np.testing.assert_allclose(y2, np.r_[f, y[2]], atol=1e-12)
+        x = ad @ x + bd @ u[k]
+        s = ad2 @ s + bd2 @ u[k]
