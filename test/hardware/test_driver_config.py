@@ -59,3 +59,18 @@ def test_explicit_values_win():
 def test_settings_that_do_not_fit_together(changes, match):
     with pytest.raises(DriverConfigError, match=match):
         driver_config(VALUES | changes)
+
+
+def test_limit_above_full_scale_names_both():
+    with pytest.raises(
+        DriverConfigError, match=r"current_limit 3.5 A is above the board's full scale 3 A"
+    ):
+        driver_config(VALUES | {'current_limit': 3.5})  # 4096 counts at 1365 counts/A
+
+
+def test_v4x_pc_scaling_is_8_bit():
+    config = driver_config(VALUES | {'firmware': 'v4x_pc', 'n_sensors': 1, 'sensor_frames': ()})
+    assert config.scaling.full_scale == 255
+    assert config.scaling.counts_per_ampere == pytest.approx(85.0)
+    assert config.current_limit == pytest.approx(3.0)
+    assert config.baudrate == 115200
