@@ -39,6 +39,7 @@ work follows the published sketch:
 
 from __future__ import annotations
 
+import struct
 from collections import Counter, deque
 from collections.abc import Callable
 
@@ -57,7 +58,8 @@ FREEZE_LIMIT = 20  # identical readings in a row before the sensor reset
 FREEZE_RESET_US = 160_000  # us without samples during the sensor reset
 READ_TIMEOUT_US = 1_000_000  # us: Stream timeout per byte of readBytesUntil
 BUFFER = 64  # bytes of the firmware's frame buffer (63 usable)
-ALPHA, DALPHA = np.float32(0.2), np.float32(0.05)
+# the sketch's constexpr floats, widened to double in its expressions
+_ALPHA, _DALPHA = float(np.float32(0.20)), float(np.float32(0.05))
 _BASELINE_READS, _BASELINE_STEP_US = 1000, 1000
 _LEVELS = (50, 100, 150)
 _SETTLE_US, _SEGMENT_US, _READ_STEP_US, _PAUSE_US = 50_000, 100_000, 10_000, 50_000
@@ -65,6 +67,19 @@ _LEVEL_US = _SETTLE_US + _SEGMENT_US + _PAUSE_US
 # calibration order of the sketch: (coil index x+ x- y+ y-, axis, negate slope)
 _CHANNELS = ((0, 0, True), (1, 0, False), (2, 1, True), (3, 1, False))
 SETUP_US = 400_000 + _BASELINE_READS * _BASELINE_STEP_US + len(_CHANNELS) * 3 * _LEVEL_US
+
+
+_F32 = struct.Struct('<f')
+_F32x3 = struct.Struct('<3f')
+
+
+def _f32(value: float) -> float:
+    """Round a double to the nearest float32 (a C ``float`` assignment)."""
+    return _F32.unpack(_F32.pack(value))[0]
+
+
+def _f32_list(values: list[float]) -> tuple[float, float, float]:
+    return _F32x3.unpack(_F32x3.pack(*values))
 
 
 def adc_current(current_A: NDArray) -> NDArray[np.float32]:  # noqa: N803
@@ -138,6 +153,9 @@ class V4xPcFirmware:
         self.now_us = 0
         self._next_tick = 0
         self._pwm = np.zeros(4, dtype=np.int64)  # x+, x-, y+, y-
+        self._adc_key: tuple | None = None
+        self._adc = np.zeros(4, dtype=np.float32)
+        self._adc_floats = [0.0] * 4
         self._input = bytearray()
         self._last_byte_us = 0
         self._blocked = False  # readBytesUntil waits for the rest of a frame
@@ -150,9 +168,11 @@ class V4xPcFirmware:
         self.baseline_mT = np.zeros(3, dtype=np.float32)
         self.slopes = np.full(4, 0.5, dtype=np.float32)  # the sketch's defaults
         self._cal = {}  # (channel, level) -> [sum field, sum current, count]
-        # loop state (float32 like the sketch's floats)
-        self.field_mT = np.zeros(3, dtype=np.float32)  # filtered Bx, By, Bz
-        self.rate_mT_s = np.zeros(3, dtype=np.float32)  # dBx, dBy, dBz (stays 0)
+        # loop state: Python floats holding float32 values, like the sketch's floats
+        self._field = (0.0, 0.0, 0.0)  # filtered Bx, By, Bz
+        self._rate = (0.0, 0.0, 0.0)  # dBx, dBy, dBz (stays 0)
+        self._slopes_floats = self.slopes.astype(float).tolist()
+        self._baseline_floats = [0.0] * 3
         self._prev_sample_us: int | None = None
         self._last_raw: NDArray | None = None
         self._freeze_count = 0
@@ -230,7 +250,12 @@ class V4xPcFirmware:
         return fields.reshape(-1, 3)[self.sensor]
 
     def _currents(self) -> NDArray[np.float32]:
-        return adc_current(self.scaling.to_current(self._pwm))
+        key = tuple(self._pwm.tolist())
+        if key != self._adc_key:  # the ADC reading follows the PWM (steady state)
+            self._adc_key = key
+            self._adc = adc_current(self.scaling.to_current(self._pwm))
+            self._adc_floats = self._adc.astype(float).tolist()
+        return self._adc
 
     def _setup_tick(self, tick: int) -> None:
         source = self.setup_plant if self.setup_plant is not None else self.plant
@@ -248,6 +273,7 @@ class V4xPcFirmware:
                 )
             if t + SAMPLE_US >= base_end:
                 self.baseline_mT = np.asarray(self._baseline_sum, dtype=np.float32)
+                self._baseline_floats = self.baseline_mT.astype(float).tolist()
             return
         t -= base_end
         channel, rest = divmod(t, 3 * _LEVEL_US)
@@ -262,40 +288,58 @@ class V4xPcFirmware:
             (in_level - _SETTLE_US) % _READ_STEP_US == 0
         ):
             acc = self._cal.setdefault((channel, level_index), [0.0, 0.0, 0])
-            acc[0] += float(np.float32(field[axis]))
-            acc[1] += float(self._currents()[coil])
+            acc[0] = _f32(acc[0] + _f32(float(field[axis])))  # float sums
+            acc[1] = _f32(acc[1] + float(self._currents()[coil]))
             acc[2] += 1
         if in_level + SAMPLE_US >= _LEVEL_US and level_index == 2:
-            slopes = []
+            total = 0.0
             for k in range(3):
                 s_field, s_current, n = self._cal[(channel, k)]
-                slope = (s_field / n - float(self.baseline_mT[axis])) / (s_current / n)
-                slopes.append(-slope if negate else slope)
-            self.slopes[coil] = np.float32(sum(slopes) / 3)
+                mean_field, mean_current = _f32(s_field / n), _f32(s_current / n)
+                slope = _f32(_f32(mean_field - float(self.baseline_mT[axis])) / mean_current)
+                total = _f32(total + (-slope if negate else slope))
+            self.slopes[coil] = np.float32(_f32(total / 3))
+            self._slopes_floats = self.slopes.astype(float).tolist()
         if tick + SAMPLE_US >= self.setup_us:
             self._pwm[:] = 0
 
     def _sample(self, tick: int, raw: NDArray[np.float64]) -> None:
+        # float arithmetic as the sketch does it: double expressions, float storage
         dt = 0 if self._prev_sample_us is None else tick - self._prev_sample_us
         self._prev_sample_us = tick
-        i = self._currents().astype(float)
-        s = self.slopes.astype(float)
-        raw32 = np.asarray(raw, dtype=np.float32).astype(float)
-        base = self.baseline_mT.astype(float)
-        x = np.float32(raw32[0] - base[0] + s[0] * i[0] - s[1] * i[1])
-        y = np.float32(raw32[1] - base[1] + s[2] * i[2] - s[3] * i[3])
-        z = np.float32(raw32[2] - base[2])
-        prev = self.field_mT.copy()
-        fx = np.float32(float(ALPHA) * x + (1.0 - float(ALPHA)) * float(prev[0]))
-        fy = np.float32(float(ALPHA) * y + (1.0 - float(ALPHA)) * float(prev[1]))
+        self._currents()
+        i = self._adc_floats
+        s = self._slopes_floats
+        b = self._baseline_floats
+        r = _f32_list(raw.tolist())
+        # float expressions round at every operation (single-precision FPU)
+        x = _f32(_f32(_f32(r[0] - b[0]) + _f32(s[0] * i[0])) - _f32(s[1] * i[1]))
+        y = _f32(_f32(_f32(r[1] - b[1]) + _f32(s[2] * i[2])) - _f32(s[3] * i[3]))
+        z = _f32(r[2] - b[2])
+        px, py, _ = self._field
+        # ALPHA * x is float; (1.0 - ALPHA) is double, so the sum is double
+        fx = _f32(_f32(_ALPHA * x) + (1.0 - _ALPHA) * px)
+        fy = _f32(_f32(_ALPHA * y) + (1.0 - _ALPHA) * py)
         if dt > 0:
-            for k, f in ((0, fx), (1, fy)):
-                rate = (float(f) - float(prev[k])) / float(np.float32(dt)) * 1e6
-                self.rate_mT_s[k] = np.float32(
-                    float(DALPHA) * rate + (1.0 - float(DALPHA)) * float(self.rate_mT_s[k])
-                )
-        self.field_mT[:] = (fx, fy, z)
+            rx, ry, _ = self._rate
+            fdt = _f32(float(dt))
+            self._rate = (
+                _f32(_DALPHA * (_f32(_f32(fx - px) / fdt) * 1e6) + (1.0 - _DALPHA) * rx),
+                _f32(_DALPHA * (_f32(_f32(fy - py) / fdt) * 1e6) + (1.0 - _DALPHA) * ry),
+                0.0,
+            )
+        self._field = (fx, fy, z)
         self.samples += 1
+
+    @property
+    def field_mT(self) -> NDArray[np.float32]:  # noqa: N802 (unit symbol mT)
+        """Filtered Bx, By and unfiltered Bz (mT) of the latest sample, float32 (3,)."""
+        return np.array(self._field, dtype=np.float32)
+
+    @property
+    def rate_mT_s(self) -> NDArray[np.float32]:  # noqa: N802 (unit symbol mT)
+        """dBx, dBy (mT/s) of the latest sample and dBz (always 0), float32 (3,)."""
+        return np.array(self._rate, dtype=np.float32)
 
     def _freeze_check(self, tick: int, raw: NDArray[np.float64]) -> None:
         reading = np.asarray(raw, dtype=np.float32)
