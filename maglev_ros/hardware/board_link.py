@@ -96,6 +96,7 @@ class BoardLink:
         except LinkError:
             self.counts['commands_unsent'] += 1
             return
+        self.stream.note_command(counts)  # a PWM the records may now show
         self.applied = counts
         self.counts['commands_sent'] += 1
 

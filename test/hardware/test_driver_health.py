@@ -61,3 +61,24 @@ def test_rates_over_the_interval_and_every_counter(tmp_path):
     link.counts['records'] = 600
     assert health.report(link, guard, now=11.5).values['records/s'] == '100.0'
     assert list(driver_counters(link, guard)) == list(COUNTERS)
+
+
+def test_resync_rate_warns_above_the_threshold(tmp_path):
+    from maglev_ros.hardware.driver_health import RESYNC_WARN_PER_S
+
+    link, guard = parts(tmp_path)
+    link.state = 'connected'
+    health = DriverHealth('v2x', now=0.0)
+    decoder = link.stream.decoder
+    decoder._resyncs = int(RESYNC_WARN_PER_S)  # exactly the threshold over 1 s: OK
+    decoder._dropped = 240
+    report = health.report(link, guard, now=1.0)
+    assert report.level == OK
+    assert report.values['resyncs/s'] == f'{RESYNC_WARN_PER_S:.1f}'
+    assert report.values['dropped bytes/s'] == '240.0'
+    decoder._resyncs += 143  # one fault every 7 ms
+    decoder._dropped += 3400
+    report = health.report(link, guard, now=2.0)
+    assert report.level == WARN
+    assert report.message.startswith('corrupted link: 143 resyncs/s, 3400 bytes/s dropped')
+    assert health.report(link, guard, now=3.0).level == OK  # the next interval is clean
