@@ -50,7 +50,7 @@ def test_setup_baseline_and_feedthrough_slopes():
     fw, plant = booted()
     np.testing.assert_allclose(fw.baseline_mT, OFFSET, atol=0.002)  # 1000 noisy reads
     # slope = field per A on the coil's axis (negated for x+ and y+): gain * 85 counts/A,
-    # up to the ADC's 3.2 mA resolution
+    # up to the ADC's 6.45 mA step
     expected = [-GAIN[0, 0] * 85, GAIN[0, 1] * 85, -GAIN[1, 2] * 85, GAIN[1, 3] * 85]
     np.testing.assert_allclose(fw.slopes, expected, rtol=0.01)
     assert fw.pwm.tolist() == [0, 0, 0, 0]
