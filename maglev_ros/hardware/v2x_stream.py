@@ -311,8 +311,7 @@ class RecordDecoder:
         self._head = False  # buf[:size] is an accepted record not yet emitted
         self._prev_ts = 0  # raw timestamp of the last accepted record
         self._last_emit_ts: int | None = None
-        self._emitted_ts: int | None = None  # raw stamp of the newest record queued to emit
-        self._emitted_pwm: tuple[int, ...] | None = None  # and its PWM
+        self._emitted_run: _Run | None = None  # the newest run queued for emission
         self._overlaps = 0
         self._repeats = 0
         self._last_time_us = 0
@@ -582,10 +581,21 @@ class RecordDecoder:
         return held == after or held == self._emitted_pwm or held in self._commands
 
     def _push(self, out: list[_Run], run: _Run) -> None:
-        """Queue a run of records for emission; remember the newest one's stamp and PWM."""
+        """Queue a run of records for emission; remember it (its newest record)."""
         out.append(run)
-        self._emitted_ts = int(run[0][-1])
-        self._emitted_pwm = tuple(run[2][-1].tolist())
+        self._emitted_run = run
+
+    @property
+    def _emitted_ts(self) -> int | None:
+        """Raw stamp of the newest record queued for emission, None before any."""
+        run = self._emitted_run
+        return None if run is None else int(run[0][-1])
+
+    @property
+    def _emitted_pwm(self) -> tuple[int, ...] | None:
+        """PWM of the newest record queued for emission, None before any."""
+        run = self._emitted_run
+        return None if run is None else tuple(run[2][-1].tolist())
 
     def _emit(self, out: list[_Run]) -> RecordBatch:
         """Unwrap the timestamps of emitted record runs and join them."""
