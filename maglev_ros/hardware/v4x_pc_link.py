@@ -135,7 +135,10 @@ class V4xPcLink:
         return self._open
 
     def open(self) -> V4xPcLink:
-        """Open the port and check the board with the ping.
+        """Open the port, check the board with the ping, and reset its coils (``04``).
+
+        The board has no watchdog: it may still drive the PWM of an earlier
+        session (or of garbage it took for a ``03``), so the link starts from zero.
 
         Returns
         -------
@@ -151,6 +154,7 @@ class V4xPcLink:
         self._serial.open()
         try:
             self._resync(self.open_timeout)
+            self.reset()
         except LinkError:
             self._serial.close()
             raise

@@ -51,7 +51,7 @@ def test_every_pwm_difference_reaches_the_board(board):
                 pwm = fw_state(board, 'pwm')
                 expected = [diff, -diff, 0, 0] if pair == 0 else [0, 0, diff, -diff]
                 assert pwm.tolist() == expected
-        assert link.counts.requests == 2 * 511
+        assert link.counts.requests == 2 * 511 + 1  # and the reset of open
         assert link.counts.resyncs == 1  # the one of open
 
 
@@ -151,3 +151,29 @@ def test_no_answer_to_the_ping_names_port_and_firmware():
 def test_missing_port():
     with pytest.raises(LinkError, match='cannot open /nonexistent/ttyACM9'):
         V4xPcLink('/nonexistent/ttyACM9').open()
+
+
+def test_a_megabyte_of_garbage_and_half_frames_towards_the_board(board):
+    import serial
+
+    rng = np.random.default_rng(12)
+    garbage = rng.integers(0, 256, 1 << 20, dtype=np.uint8).tobytes()
+    with serial.Serial(board.path, 115200, timeout=0.01) as port:
+        for k in range(0, len(garbage), 8192):
+            port.write(garbage[k : k + 8192])
+            port.read(1 << 16)  # the board answers what it took for requests
+        port.write(b'\x02\x01')  # and a half frame at the end
+    with board.lock:
+        fw = board.firmware
+        executed = sum(count for code, count in fw.requests.items() if code != 0x100)
+        assert executed > 1000 and fw.errors_sent > 0 and fw.split_frames > 0
+    with V4xPcLink(board.path, timeout=0.5) as link:  # resynchronises, resets the coils
+        assert fw_state(board, 'pwm').tolist() == [0, 0, 0, 0]
+        link.command(10, -10)
+        field, _ = link.read_sensors()
+        with board.lock:
+            sent = [r for r in board.firmware.replies if r[0] == p.READ_SENSORS][-1]
+        np.testing.assert_array_equal(field, p.decode_reply(sent, p.READ_SENSORS).field_mT)
+        assert fw_state(board, 'pwm').tolist() == [10, -10, -10, 10]
+        assert link.counts.resyncs == 1
+    board.check()  # the emulator thread did not fail
