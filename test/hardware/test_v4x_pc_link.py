@@ -177,3 +177,17 @@ def test_a_megabyte_of_garbage_and_half_frames_towards_the_board(board):
         assert fw_state(board, 'pwm').tolist() == [10, -10, -10, 10]
         assert link.counts.resyncs == 1
     board.check()  # the emulator thread did not fail
+
+
+def test_unplug_gives_a_link_error_and_close_still_works():
+    factory = partial(V4xPcFirmware, NoisyPlant(), scaling=SCALING, init_delay=0.0)
+    with VirtualBoard(factory) as vb:
+        assert vb.wait_until(lambda b: b.firmware.running, TIMEOUT)
+        link = V4xPcLink(vb.path, timeout=0.2).open()
+        link.command(30, 30)
+        vb.unplug()
+        with pytest.raises(LinkError, match=vb.path):
+            for _ in range(3):  # the first request may still see the closing pty
+                link.read_sensors()
+        link.close()  # best effort reset on a port that is gone: no exception
+        assert not link.is_open
