@@ -12,7 +12,10 @@ Measured in the same run, alternating, on the same board:
 * **baseline**: pyserial as the lab's host example uses it per request
   (``reset_input_buffer``, ``write``, ``flush``, ``read_until`` up to 0x00), with the
   ``cobs`` package;
-* **V4xPcLink**: this package's link (exact-frame replies, poll-based reads).
+* **V4xPcLink**: this package's link (exact-frame replies, poll-based reads),
+  ``read_sensors`` then ``command``: two round trips;
+* **V4xPcLink.cycle**: ``01``, ``02`` and ``03`` written together, one round trip
+  (reads the currents too).
 
 Run: ``python benchmarks/v4x_pc_link.py [--seconds 5] [--rounds 3]``; prints cycles/s
 of each, the ratio, and the round-trip percentiles of the link.
@@ -68,6 +71,20 @@ def link_cycles(port: str, seconds: float) -> tuple[float, np.ndarray]:
     return len(durations) / seconds, np.array(durations)
 
 
+def pipelined_cycles(port: str, seconds: float) -> tuple[float, np.ndarray]:
+    """Cycles/s with V4xPcLink.cycle (01 + 02 + 03 in one write), and each cycle's duration."""
+    durations = []
+    with V4xPcLink(port, timeout=0.5) as link:
+        end = time.perf_counter() + seconds
+        while True:
+            start = time.perf_counter()
+            if start >= end:
+                break
+            link.cycle(0, 0)
+            durations.append(time.perf_counter() - start)
+    return len(durations) / seconds, np.array(durations)
+
+
 def main() -> None:
     """Run the benchmark and print the figures."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
@@ -81,24 +98,30 @@ def main() -> None:
         port = board.stdout.readline().strip()
         with V4xPcLink(port, open_timeout=60.0):  # waits for the board's set-up
             pass
-        base, ours, durations = [], [], []
+        base, ours, piped, durations, piped_durations = [], [], [], [], []
         for _ in range(args.rounds):
             base.append(baseline_cycles(port, args.seconds))
             rate, d = link_cycles(port, args.seconds)
             ours.append(rate)
             durations.append(d)
+            rate, d = pipelined_cycles(port, args.seconds)
+            piped.append(rate)
+            piped_durations.append(d)
     finally:
         board.terminate()
         board.wait(timeout=10)
-    d = np.concatenate(durations) * 1e3
     print(f'baseline (pyserial read_until): {np.median(base):7.0f} cycles/s  {base}')
-    print(f'V4xPcLink:                      {np.median(ours):7.0f} cycles/s  {ours}')
-    print(f'ratio (median): {np.median(ours) / np.median(base):.2f}x')
-    print(
-        'link cycle (01 + 03) ms: median {:.3f}, p90 {:.3f}, p99 {:.3f}, max {:.3f}'.format(
-            *np.percentile(d, [50, 90, 99, 100])
+    print(f'V4xPcLink 01 then 03:           {np.median(ours):7.0f} cycles/s  {ours}')
+    print(f'V4xPcLink.cycle 01+02+03:       {np.median(piped):7.0f} cycles/s  {piped}')
+    print(f'ratio (median) link: {np.median(ours) / np.median(base):.2f}x')
+    print(f'ratio (median) cycle: {np.median(piped) / np.median(base):.2f}x')
+    for name, runs in (('01 then 03', durations), ('cycle', piped_durations)):
+        d = np.concatenate(runs) * 1e3
+        print(
+            f'{name} ms: median {{:.3f}}, p90 {{:.3f}}, p99 {{:.3f}}, max {{:.3f}}'.format(
+                *np.percentile(d, [50, 90, 99, 100])
+            )
         )
-    )
 
 
 if __name__ == '__main__':

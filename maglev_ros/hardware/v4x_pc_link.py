@@ -33,6 +33,7 @@ from .serial_link import LinkError, SerialLink
 
 __all__ = [
     'FIRMWARE_NAME',
+    'Cycle',
     'V4X_PC_BAUD',
     'BoardReplyError',
     'LinkCounts',
@@ -54,6 +55,29 @@ class ReplyTimeoutError(LinkError):
 
 class BoardReplyError(LinkError):
     """The board answered with its error reply (``00 67``: unknown request)."""
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """What one :meth:`V4xPcLink.cycle` returns.
+
+    Attributes
+    ----------
+    stamp_ns : int
+        Host time (``time.time_ns``) when the sensor reply had arrived, ns.
+    field_mT : ndarray, shape (3,)
+        Processed Bx, By, Bz, mT (see docs/boards.md: baseline and feedthrough
+        removed, x and y low-pass filtered).
+    rate_mT_s : ndarray, shape (3,)
+        dBx, dBy, dBz, mT/s (dBz is always 0).
+    currents_A : ndarray, shape (4,)
+        Coil currents, A, order x+, x-, y+, y-.
+    """
+
+    stamp_ns: int
+    field_mT: np.ndarray  # noqa: N815 (unit symbol mT)
+    rate_mT_s: np.ndarray  # noqa: N815 (unit symbol mT)
+    currents_A: np.ndarray  # noqa: N815 (unit symbol A)
 
 
 @dataclass
@@ -218,12 +242,53 @@ class V4xPcLink:
         """Request ``05``: the status bytes and the board's uptime."""
         return self._transact(proto.request(proto.STATUS), proto.STATUS)
 
+    def cycle(self, p_x: int, p_y: int) -> Cycle:
+        """One control step in one round trip: ``01``, ``02`` and ``03`` sent together.
+
+        The board answers the three in order (it reads one frame per loop pass,
+        microseconds apart), so a step costs one round trip instead of three.
+        The field is the board's latest sample before the command, the currents
+        its ADC reading just before the command is applied.
+
+        Parameters
+        ----------
+        p_x, p_y : int
+            Pair differences to apply, -255 .. 255.
+
+        Returns
+        -------
+        Cycle
+            Host time at the sensor reply, field, rate and currents.
+        """
+        frames = (
+            proto.request(proto.READ_SENSORS)
+            + proto.request(proto.READ_CURRENTS)
+            + proto.set_pwm_request(p_x, p_y)
+        )
+        (sensors, currents, _), stamp_ns = self._exchange(
+            frames, (proto.READ_SENSORS, proto.READ_CURRENTS, proto.SET_PWM)
+        )
+        self.last_command = (int(p_x), int(p_y))
+        return Cycle(
+            stamp_ns,
+            np.array(sensors.field_mT),
+            np.array(sensors.rate_mT_s),
+            np.array(currents.currents_A),
+        )
+
     # -- internals ------------------------------------------------------------------------
 
     def _transact(self, frame: bytes, code: int):
+        return self._exchange(frame, (code,))[0][0]
+
+    def _exchange(self, frames: bytes, codes: tuple[int, ...]) -> tuple[list, int]:
+        """Send request frames; return their replies and the host time (ns) of the first."""
+        names = ' '.join(f'{c:02x}' for c in codes)
         try:
-            self._serial.write(frame)
-            payload, problem = self._read_frame(time.monotonic() + self.timeout)
+            self._serial.write(frames)
+            payloads, problem, stamp_ns = self._read_frames(
+                time.monotonic() + self.timeout, len(codes)
+            )
         except LinkError:
             self._safe_reset()  # the port may be gone: best effort
             raise
@@ -231,56 +296,59 @@ class V4xPcLink:
             self.counts.timeouts += 1
             self._recover()
             raise ReplyTimeoutError(
-                f'{self.port}: no reply to request {code:02x} within {self.timeout:g} s '
+                f'{self.port}: no reply to request {names} within {self.timeout:g} s '
                 f'(the {FIRMWARE_NAME} answers every request); coils reset'
             )
         try:
             if problem:
                 raise proto.ProtocolError(problem)
-            reply = proto.decode_reply(payload, code)
+            replies = [proto.decode_reply(p, c) for p, c in zip(payloads, codes, strict=True)]
         except proto.ProtocolError as err:
             self.counts.bad_replies += 1
-            self.counts.dropped_bytes += len(payload)
+            self.counts.dropped_bytes += sum(len(p) for p in payloads)
             self._recover()
             raise LinkError(f'{self.port}: {err}; resynchronised, coils reset') from None
-        if isinstance(reply, proto.ErrorReply):
-            self.counts.bad_replies += 1
-            raise BoardReplyError(
-                f'{self.port}: the board answered request {code:02x} with error {reply.code}'
-            )
-        self.counts.requests += 1
-        return reply
+        for reply, code in zip(replies, codes, strict=True):
+            if isinstance(reply, proto.ErrorReply):
+                self.counts.bad_replies += 1
+                raise BoardReplyError(
+                    f'{self.port}: the board answered request {code:02x} with error {reply.code}'
+                )
+        self.counts.requests += len(codes)
+        return replies, stamp_ns
 
-    def _read_frame(self, deadline: float) -> tuple[bytes, str]:
-        """Read one reply frame: ``(payload, '')``, or the bytes and what is wrong.
+    def _read_frames(self, deadline: float, count: int) -> tuple[list[bytes], str, int]:
+        """Read ``count`` reply frames: ``(payloads, '', host ns at the first frame's end)``.
 
-        The problem is ``_TIMEOUT`` when no frame ended by the deadline.
-
-        A reply is accepted only when the bytes received since the request are
-        exactly one valid COBS frame: garbage before it (it would merge into the
-        frame), a second frame or bytes after it (a late or foreign reply) make
-        the whole exchange suspect.
+        On failure the problem is ``_TIMEOUT`` (not all frames ended by the
+        deadline) or what is wrong. Replies are accepted only when the bytes
+        received since the request are exactly ``count`` valid COBS frames:
+        garbage before them (it would merge into a frame), another frame or
+        bytes after them (a late or foreign reply) make the exchange suspect.
         """
         got = bytearray()
+        stamp_ns = 0
         while True:
             if time.monotonic() > deadline:
                 self.counts.dropped_bytes += len(got)
-                return bytes(got), _TIMEOUT
+                return [bytes(got)], _TIMEOUT, 0
             data = self._serial.read()
             if not data:
                 continue
             got += data
-            end = got.find(0)
-            if end < 0:
-                if len(got) > _MAX_REPLY:
-                    return bytes(got), f'{len(got)} bytes without a frame end'
+            ends = got.count(0)
+            if ends and not stamp_ns:
+                stamp_ns = time.time_ns()  # the first reply (the sensors) is complete
+            if ends < count:
+                if len(got) > count * _MAX_REPLY:
+                    return [bytes(got)], f'{len(got)} bytes without {count} frame ends', 0
                 continue
-            if end != len(got) - 1:
-                return bytes(got), 'bytes after the reply frame (garbage or a late reply)'
+            if ends > count or got[-1] != 0:
+                return [bytes(got)], 'bytes after the reply frames (garbage or a late reply)', 0
             try:
-                return decode_frame(got), ''
+                return [decode_frame(f) for f in bytes(got[:-1]).split(b'\x00')], '', stamp_ns
             except FrameError as err:
-                return bytes(got), str(err)
+                return [bytes(got)], str(err), 0
 
     def _drain(self) -> None:
         """Read and drop bytes until the port is quiet for ``_QUIET_S``."""
@@ -320,9 +388,9 @@ class V4xPcLink:
         """Send ``04`` and wait briefly for its reply; never raise."""
         try:
             self._serial.write(proto.request(proto.RESET))
-            payload, problem = self._read_frame(time.monotonic() + self.timeout)
+            payloads, problem, _ = self._read_frames(time.monotonic() + self.timeout, 1)
         except LinkError:
             return
-        if not problem and payload == bytes([proto.RESET]):
+        if not problem and payloads == [bytes([proto.RESET])]:
             self.counts.resets += 1
             self.last_command = (0, 0)

@@ -1,6 +1,7 @@
 """The V4x PC-control link against the emulated board on a real pty."""
 
 import threading
+import time
 from functools import partial
 
 import numpy as np
@@ -191,3 +192,23 @@ def test_unplug_gives_a_link_error_and_close_still_works():
                 link.read_sensors()
         link.close()  # best effort reset on a port that is gone: no exception
         assert not link.is_open
+
+
+def test_cycle_reads_and_commands_in_one_round_trip(board):
+    with V4xPcLink(board.path, timeout=1.0) as link:
+        link.command(85, 0)
+        before = time.time_ns()
+        step = link.cycle(-170, 42)
+        assert before < step.stamp_ns < time.time_ns()
+        # the currents are read before the command is applied: the previous one's
+        expected = adc_current(np.array([1.0, -1.0, 0.0, 0.0])).astype(float)
+        np.testing.assert_array_equal(step.currents_A, expected)
+        with board.lock:
+            sent = [r for r in board.firmware.replies if r[0] == p.READ_SENSORS][-1]
+        np.testing.assert_array_equal(step.field_mT, p.decode_reply(sent, 1).field_mT)
+        assert fw_state(board, 'pwm').tolist() == [-170, 170, 42, -42]
+        requests = link.counts.requests
+        for k in range(200):
+            link.cycle(k - 100, 100 - k)
+        assert link.counts.requests == requests + 600 and link.counts.resyncs == 1
+        assert fw_state(board, 'pwm').tolist() == [99, -99, -99, 99]
