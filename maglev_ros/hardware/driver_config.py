@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from ..topics import sensor_frame
 from .packet import PWM_FULL_SCALE
 from .scaling import V4X_PWM_FULL_SCALE, CurrentScaling
+from .v4x_pc_poller import DEFAULT_POLL_RATE
 
 __all__ = [
     'DEFAULT_BAUD',
@@ -68,6 +69,9 @@ class DriverConfig:
     intra_process : bool
         Hand the samples to nodes of the same process directly and take a
         composed controller's commands (the node's ``intra_process``).
+    poll_rate : float
+        V4x PC control: steps (read sensors and currents, write the command)
+        per second; 0: as fast as the board answers.
     """
 
     port: str
@@ -85,6 +89,7 @@ class DriverConfig:
     confirm_records: bool = True
     read_interval: float = 0.0
     intra_process: bool = False
+    poll_rate: float = DEFAULT_POLL_RATE
 
 
 def driver_config(v: Mapping[str, object]) -> DriverConfig:
@@ -107,10 +112,16 @@ def driver_config(v: Mapping[str, object]) -> DriverConfig:
     Raises
     ------
     DriverConfigError
-        Frames not one per sensor, a current limit above the scaling's full
-        scale, or a back-off maximum below its minimum.
+        More than one sensor for V4x PC control, frames not one per sensor, a
+        current limit above the scaling's full scale, or a back-off maximum
+        below its minimum.
     """
     n_sensors = v['n_sensors']
+    if v['firmware'] == 'v4x_pc' and n_sensors != 1:
+        raise DriverConfigError(
+            f'n_sensors must be 1 for the V4x PC-control firmware (it reads one sensor), '
+            f'got {n_sensors}'
+        )
     frames = v['sensor_frames'] or tuple(sensor_frame(k) for k in range(n_sensors))
     if len(frames) != n_sensors:
         raise DriverConfigError(
@@ -150,4 +161,5 @@ def driver_config(v: Mapping[str, object]) -> DriverConfig:
         confirm_records=v['confirm_records'],
         read_interval=v['read_interval'],
         intra_process=bool(v.get('intra_process', False)),
+        poll_rate=float(v.get('poll_rate', DEFAULT_POLL_RATE)),
     )

@@ -200,7 +200,13 @@ class V4xPcFirmware:
         return self._pwm.copy()
 
     def receive(self, data: bytes) -> None:
-        """Queue host bytes (read by the loop when it gets to them)."""
+        """Queue host bytes (read by the loop when it gets to them).
+
+        Parameters
+        ----------
+        data : bytes
+            Bytes from the host.
+        """
         if data:
             self._input += data
             self._last_byte_us = self.now_us
@@ -209,7 +215,13 @@ class V4xPcFirmware:
         """Do nothing: opening the USB port does not reset a Teensy."""
 
     def tamper_next_burst(self, edit: Callable[[bytes], bytes]) -> None:
-        """Pass the next output through ``edit`` (fault injection)."""
+        """Pass the next output through ``edit`` (fault injection).
+
+        Parameters
+        ----------
+        edit : callable
+            ``edit(bytes) -> bytes``: what the host receives instead.
+        """
         self._tampers.append(edit)
 
     def advance_to(self, t_us: int) -> bytes:

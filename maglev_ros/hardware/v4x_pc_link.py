@@ -201,7 +201,18 @@ class V4xPcLink:
     # -- requests -------------------------------------------------------------------------
 
     def ping(self, timeout: float | None = None) -> bool:
-        """Send ``AA``; return whether exactly the byte ``EE`` came back within ``timeout`` s."""
+        """Send ``AA``; return whether exactly the byte ``EE`` came back in time.
+
+        Parameters
+        ----------
+        timeout : float, optional
+            s to wait (default: the link's ``timeout``).
+
+        Returns
+        -------
+        bool
+            True when ``EE`` came back.
+        """
         self._serial.write(proto.request(proto.PING))
         deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
         while time.monotonic() < deadline:
@@ -350,10 +361,14 @@ class V4xPcLink:
             except FrameError as err:
                 return [bytes(got)], str(err), 0
 
-    def _drain(self) -> None:
-        """Read and drop bytes until the port is quiet for ``_QUIET_S``."""
+    def _drain(self, deadline: float) -> None:
+        """Read and drop bytes until the port is quiet for ``_QUIET_S`` (or ``deadline``).
+
+        A board with another firmware may never be quiet (a V2x board streams):
+        the deadline ends the drain, and the ping then fails.
+        """
         quiet_until = time.monotonic() + _QUIET_S
-        while time.monotonic() < quiet_until:
+        while time.monotonic() < min(quiet_until, deadline):
             data = self._serial.read()
             if data:
                 self.counts.dropped_bytes += len(data)
@@ -365,9 +380,9 @@ class V4xPcLink:
         deadline = time.monotonic() + timeout
         self._serial.write(DELIMITER)
         while True:
-            self._drain()
+            self._drain(deadline)
             if self.ping(min(0.25, max(deadline - time.monotonic(), 0.01))):
-                self._drain()  # bytes after EE (none from a sound board)
+                self._drain(deadline + _QUIET_S)  # bytes after EE (none from a sound board)
                 return
             if time.monotonic() > deadline:
                 raise LinkError(

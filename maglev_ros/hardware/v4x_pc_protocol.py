@@ -290,7 +290,18 @@ def status_payload(uptime_s: int) -> bytes:
 
 
 def error_payload(code: int = ERROR_UNKNOWN_REQUEST) -> bytes:
-    """Payload of the error reply: ``00 code``."""
+    """Payload of the error reply: ``00 code``.
+
+    Parameters
+    ----------
+    code : int, optional
+        Error code (103: unknown request).
+
+    Returns
+    -------
+    bytes
+        The payload before COBS encoding.
+    """
     return bytes([ERROR, code])
 
 

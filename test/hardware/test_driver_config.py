@@ -54,6 +54,10 @@ def test_explicit_values_win():
             r"sensor_frames must name 2 frames \(n_sensors\), got \['a'\]",
         ),
         ({'reconnect_max_delay': 0.1}, r'reconnect_max_delay must be >= reconnect_min_delay'),
+        (
+            {'firmware': 'v4x_pc'},
+            r'n_sensors must be 1 for the V4x PC-control firmware \(it reads one sensor\), got 2',
+        ),
     ],
 )
 def test_settings_that_do_not_fit_together(changes, match):
@@ -74,3 +78,4 @@ def test_v4x_pc_scaling_is_8_bit():
     assert config.scaling.counts_per_ampere == pytest.approx(85.0)
     assert config.current_limit == pytest.approx(3.0)
     assert config.baudrate == 115200
+    assert config.poll_rate == 1000.0  # the default: above the lab host's 800 Hz

@@ -212,3 +212,14 @@ def test_cycle_reads_and_commands_in_one_round_trip(board):
             link.cycle(k - 100, 100 - k)
         assert link.counts.requests == requests + 600 and link.counts.resyncs == 1
         assert fw_state(board, 'pwm').tolist() == [99, -99, -99, 99]
+
+
+def test_a_streaming_board_of_another_firmware_fails_the_ping_in_time():
+    """A V2x board never falls quiet: the drain must still end at the open deadline."""
+    with VirtualBoard(partial(V2xFirmware, LinearPlant.default(1), 1, startup_delay=0.0)) as vb:
+        link = V4xPcLink(vb.path, open_timeout=0.5)
+        start = time.monotonic()
+        with pytest.raises(LinkError, match=f'{vb.path}: no answer to the ping .* V4x PC-control'):
+            link.open()
+        assert time.monotonic() - start < 5.0
+        assert not link.is_open
