@@ -48,6 +48,7 @@ __all__ = ['DEFAULT_POLL_RATE', 'V4xPcPoller']
 
 DEFAULT_POLL_RATE = 1000.0  # Hz: above the lab host's 800 Hz, inside the board's round trip
 _LATENCY_WINDOW = 2000  # commands kept for the latency percentiles
+_CATCH_UP = 20  # steps behind the schedule that are made up (beyond: the schedule restarts)
 
 
 class V4xPcPoller:
@@ -204,11 +205,14 @@ class V4xPcPoller:
             if not self.board.is_open and not self._reconnect(stop):
                 continue
             if self._period_ns:
-                wait_ns = next_ns - time.monotonic_ns()
-                if wait_ns > 0:
-                    stop.wait(wait_ns * 1e-9)
-                # a late step starts the schedule again (no burst of catch-up steps)
-                next_ns = max(next_ns + self._period_ns, time.monotonic_ns())
+                now_ns = time.monotonic_ns()
+                if next_ns > now_ns:
+                    stop.wait((next_ns - now_ns) * 1e-9)
+                # a fixed schedule: a step the OS woke late is made up by the next ones
+                # (no wait while behind); more than _CATCH_UP steps behind starts it again
+                next_ns += self._period_ns
+                if now_ns - next_ns > _CATCH_UP * self._period_ns:
+                    next_ns = now_ns + self._period_ns
             try:
                 self._step(publish)
             except LinkError as err:

@@ -79,6 +79,7 @@ best-effort publishers.
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
@@ -139,6 +140,7 @@ __all__ = [
 NODE_NAME = 'maglev_driver'
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
 MAX_POLL_RATE = 5000.0  # Hz: the V4x PC-control board samples every 200 us
+GIL_SWITCH_S = 0.0002  # s, the interpreter's switch interval while a V4x PC board is polled
 
 
 class DriverParameterError(NodeParameterError):
@@ -362,7 +364,12 @@ class DriverNode(Node):
             pairs=self._pc,
         )
         backoff = Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay)
+        self._switch_interval = None  # the interpreter's, while a V4x PC-control loop runs
         if self._pc:
+            # each step waits for the board's reply: a thread holding the GIL would hand
+            # it back only after the switch interval (default 5 ms), capping the poll rate
+            self._switch_interval = sys.getswitchinterval()
+            sys.setswitchinterval(min(self._switch_interval, GIL_SWITCH_S))
             self.stream = None
             self.link = V4xPcPoller(
                 V4xPcLink(cfg.port), backoff, self.get_logger(), poll_rate=cfg.poll_rate
@@ -662,6 +669,9 @@ class DriverNode(Node):
     def destroy_node(self) -> None:
         """Close the board link (zero currents first), then destroy the node."""
         self.close()
+        if self._switch_interval is not None:
+            sys.setswitchinterval(self._switch_interval)
+            self._switch_interval = None
         for topic, obj in self._intra:
             intra_process.unregister(self.context, topic, obj)
         self._intra = []
