@@ -9,7 +9,8 @@ Re-exports only; see the modules: ``packet`` (V2x command packets),
 ``physics_plant`` (the physics simulator as an emulator plant),
 ``virtual_board`` (an emulator on a pty), and for the V4x PC-control firmware
 ``cobs_frame`` (COBS frames), ``v4x_pc_protocol`` (its messages),
-``v4x_pc_link`` (the request/response link) and ``v4x_pc_firmware`` (its emulator).
+``v4x_pc_link`` (the request/response link), ``v4x_pc_poller`` (the driver's loop on
+it) and ``v4x_pc_firmware`` (its emulator).
 """
 
 from .board_clock import BoardClock
@@ -39,6 +40,7 @@ from .v2x_stream import (
 )
 from .v4x_pc_firmware import V4xPcFirmware
 from .v4x_pc_link import BoardReplyError, ReplyTimeoutError, V4xPcLink
+from .v4x_pc_poller import V4xPcPoller
 from .v4x_telemetry import (
     InfoMessage,
     Severity,
@@ -60,6 +62,7 @@ __all__ = [
     'ReplyTimeoutError',
     'V4xPcFirmware',
     'V4xPcLink',
+    'V4xPcPoller',
     'decode_frame',
     'encode_frame',
     'pair_differences',

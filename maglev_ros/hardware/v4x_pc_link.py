@@ -178,7 +178,12 @@ class V4xPcLink:
         self._serial.open()
         try:
             self._resync(self.open_timeout)
-            self.reset()
+            try:
+                self.reset()
+            except LinkError:
+                # a ping's answer that came after its wait (a board or host running
+                # late) precedes the reply: the link resynchronised meanwhile, try again
+                self.reset()
         except LinkError:
             self._serial.close()
             raise
