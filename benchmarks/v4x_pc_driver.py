@@ -28,6 +28,7 @@ poller's CPU time per step (its I/O thread's; less sensitive to the machine's lo
 from __future__ import annotations
 
 import argparse
+import signal
 import subprocess
 import sys
 import threading
@@ -38,9 +39,9 @@ import serial
 from cobs import cobs
 
 from maglev_ros.hardware import v4x_pc_protocol as proto
-from maglev_ros.hardware.serial_link import Backoff
+from maglev_ros.hardware.serial_link import Backoff, LinkError
 from maglev_ros.hardware.v4x_pc_link import V4xPcLink
-from maglev_ros.hardware.v4x_pc_poller import V4xPcPoller
+from maglev_ros.hardware.v4x_pc_poller import REPLY_TIMEOUT_S, V4xPcPoller
 
 CPU_PER_STEP: dict[float, list[float]] = {}  # poll rate -> I/O thread CPU s per step, per run
 
@@ -86,7 +87,8 @@ def baseline(port: str, seconds: float) -> tuple[float, np.ndarray]:
 
 def poller(port: str, seconds: float, rate: float) -> tuple[float, np.ndarray]:
     """Run the driver's loop with a controller in the I/O thread: steps/s, latencies (ns)."""
-    loop = V4xPcPoller(V4xPcLink(port), Backoff(0.1, 1.0), _Log(), poll_rate=rate)
+    link = V4xPcLink(port, timeout=REPLY_TIMEOUT_S)
+    loop = V4xPcPoller(link, Backoff(0.1, 1.0), _Log(), poll_rate=rate)
     loop.open()
     stamps = []
 
@@ -118,9 +120,14 @@ def poller(port: str, seconds: float, rate: float) -> tuple[float, np.ndarray]:
 def cycle_loop(port: str, seconds: float) -> tuple[float, np.ndarray]:
     """Run ``V4xPcLink.cycle`` back to back, nothing else: the link's own steps/s."""
     with V4xPcLink(port) as link:
-        n, end = 0, time.perf_counter() + seconds
+        n, errors, end = 0, 0, time.perf_counter() + seconds
         while time.perf_counter() < end:
-            link.cycle(0, 0)
+            try:
+                link.cycle(0, 0)
+            except LinkError as err:  # a late reply on the loaded machine: counted
+                errors += 1
+                print(f'  cycle loop: {err}')
+                continue
             n += 1
     return n / seconds, np.empty(0)
 
@@ -178,6 +185,53 @@ def driver_node(port: str, seconds: float) -> tuple[float, np.ndarray]:
     return rate, latencies
 
 
+def driver_process(port: str, seconds: float) -> tuple[float, np.ndarray]:
+    """Run ``python -m maglev_ros.nodes.driver`` (v4x_pc, 1000 Hz) alone: its steps/s.
+
+    Read from its ``/diagnostics`` (``records/s`` over each 1 s period, median), by a
+    listener in this process; no controller (commands do not change the step).
+    """
+    import os
+
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.context import Context
+    from rclpy.executors import SingleThreadedExecutor
+
+    domain = 96
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    cmd = [sys.executable, '-m', 'maglev_ros.nodes.driver', '--ros-args', '-p', f'port:={port}']
+    cmd += ['-p', 'firmware:=v4x_pc', '-p', 'diagnostics_period:=1.0']
+    child = subprocess.Popen(cmd, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    ctx = Context()
+    rclpy.init(context=ctx, domain_id=domain)
+    node = rclpy.create_node('bench_diagnostics', context=ctx)
+    rates = []
+
+    def on_diagnostics(msg):
+        for status in msg.status:
+            values = {kv.key: kv.value for kv in status.values}
+            if values.get('link state') == 'connected' and 'records/s' in values:
+                rates.append(float(values['records/s']))
+
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
+    executor = SingleThreadedExecutor(context=ctx)
+    executor.add_node(node)
+    deadline = time.monotonic() + 30.0
+    while len(rates) < 2 and time.monotonic() < deadline:  # connected, first full period
+        executor.spin_once(timeout_sec=0.1)
+    rates.clear()
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.1)
+    child.send_signal(signal.SIGINT)
+    child.wait(timeout=15)
+    executor.shutdown()
+    node.destroy_node()
+    rclpy.try_shutdown(context=ctx)
+    return float(np.median(rates)) if rates else 0.0, np.empty(0)
+
+
 def _ms(latencies: np.ndarray) -> str:
     if not latencies.size:
         return 'no commands'
@@ -195,6 +249,7 @@ def main() -> None:
     cmd += ['--magnet', 'fixed']
     board = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
     names = ('baseline', 'cycle loop', 'poller 1000 Hz', 'poller free', 'driver node')
+    names += ('driver process',)
     runs = {name: [] for name in names}
     try:
         port = board.stdout.readline().strip()
@@ -206,6 +261,7 @@ def main() -> None:
             runs['poller 1000 Hz'].append(poller(port, args.seconds, 1000.0))
             runs['poller free'].append(poller(port, args.seconds, 0.0))
             runs['driver node'].append(driver_node(port, args.seconds))
+            runs['driver process'].append(driver_process(port, args.seconds))
     finally:
         board.terminate()
         board.wait(timeout=10)

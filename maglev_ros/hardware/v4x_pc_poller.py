@@ -44,9 +44,12 @@ from .command_guard import pair_differences
 from .serial_link import Backoff, LinkError
 from .v4x_pc_link import FIRMWARE_NAME, V4xPcLink
 
-__all__ = ['DEFAULT_POLL_RATE', 'V4xPcPoller']
+__all__ = ['DEFAULT_POLL_RATE', 'REPLY_TIMEOUT_S', 'V4xPcPoller']
 
 DEFAULT_POLL_RATE = 1000.0  # Hz: above the lab host's 800 Hz, inside the board's round trip
+#: s to wait for a step's replies: longer than the board's longest silence (its 160 ms
+#: sensor reset), so only a board that stopped answering is a link error (and a reset)
+REPLY_TIMEOUT_S = 0.25
 _LATENCY_WINDOW = 2000  # commands kept for the latency percentiles
 _CATCH_UP = 20  # steps behind the schedule that are made up (beyond: the schedule restarts)
 

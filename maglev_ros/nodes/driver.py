@@ -108,7 +108,7 @@ from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLT
 from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
 from maglev_ros.hardware.v2x_stream import DecoderStats
 from maglev_ros.hardware.v4x_pc_link import V4xPcLink
-from maglev_ros.hardware.v4x_pc_poller import DEFAULT_POLL_RATE, V4xPcPoller
+from maglev_ros.hardware.v4x_pc_poller import DEFAULT_POLL_RATE, REPLY_TIMEOUT_S, V4xPcPoller
 from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
@@ -372,7 +372,10 @@ class DriverNode(Node):
             sys.setswitchinterval(min(self._switch_interval, GIL_SWITCH_S))
             self.stream = None
             self.link = V4xPcPoller(
-                V4xPcLink(cfg.port), backoff, self.get_logger(), poll_rate=cfg.poll_rate
+                V4xPcLink(cfg.port, timeout=REPLY_TIMEOUT_S),
+                backoff,
+                self.get_logger(),
+                poll_rate=cfg.poll_rate,
             )
         else:
             self.stream = BoardStream(

@@ -11,7 +11,7 @@ from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.serial_link import Backoff
 from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware, adc_current
 from maglev_ros.hardware.v4x_pc_link import V4xPcLink
-from maglev_ros.hardware.v4x_pc_poller import V4xPcPoller
+from maglev_ros.hardware.v4x_pc_poller import REPLY_TIMEOUT_S, V4xPcPoller
 from maglev_ros.hardware.virtual_board import VirtualBoard
 
 SCALING = CurrentScaling.from_supply(12.0, 4.0, full_scale=255)
@@ -50,10 +50,10 @@ def board():
 class Running:
     """A poller on its own thread, collecting what it hands on."""
 
-    def __init__(self, path, poll_rate=1000.0):
+    def __init__(self, path, poll_rate=1000.0, timeout=0.1):
         self.log = Log()
         self.poller = V4xPcPoller(
-            V4xPcLink(path), Backoff(0.05, 0.2), self.log, poll_rate=poll_rate
+            V4xPcLink(path, timeout=timeout), Backoff(0.05, 0.2), self.log, poll_rate=poll_rate
         )
         self.poller.open()
         self.samples = []
@@ -146,6 +146,27 @@ def test_poll_rate_is_kept(board):
         assert rate <= 500.0 * 1.05  # paced, not free running (at least as slow)
     finally:
         run.close()
+
+
+def test_the_boards_sensor_reset_is_no_link_error():
+    """A field without noise reads alike 20 times: the board resets its sensor, 160 ms
+    without replies. The driver's reply timeout outlasts it: no error, no coil reset."""
+    factory = lambda: V4xPcFirmware(  # noqa: E731
+        lambda pwm, t: np.array([[0.5, -0.3, 40.0]]), scaling=SCALING, init_delay=0.0
+    )
+    with VirtualBoard(factory) as vb:
+        assert vb.wait_until(lambda b: b.firmware.running, TIMEOUT)
+        run = Running(vb.path, timeout=REPLY_TIMEOUT_S)
+        try:
+            run.poller.send(np.array([40, -40, 0, 0]))
+            assert vb.wait_until(lambda b: b.firmware.freeze_resets >= 3, TIMEOUT)
+            n = len(run.samples)
+            run.wait(lambda: len(run.samples) > n + 20, 'samples after the resets')
+            assert run.poller.counts['io_errors'] == 0
+            with vb.lock:
+                assert vb.firmware.pwm.tolist() == [40, -40, 0, 0]
+        finally:
+            run.close()
 
 
 def test_bad_poll_rate():
