@@ -244,6 +244,20 @@ def test_disable_resets_the_coils(board, make_harness):
     assert fw(board, 'pwm').tolist() == [0, 0, 0, 0]
 
 
+def test_link_error_resets_the_coils(board, make_harness):
+    h = make_harness(board.path, start_enabled=True, command_timeout=1.0)
+    h.command_until([1.0, -1.0, 0.5, -0.5], board, [85, -85, 42, -42])
+    before = resets(board)
+    board.inject(b'\x05garbage\x00')  # bytes no request asked for: a bad reply
+    wait_for(lambda: h.driver.counters['io_errors'] >= 1, timeout=TIMEOUT, what='the error')
+    assert board.wait_until(lambda b: b.firmware.requests[proto.RESET] > before, TIMEOUT)
+    n = h.driver.counters['records']
+    wait_for(lambda: h.driver.counters['records'] > n + 50, timeout=TIMEOUT, what='samples')
+    assert fw(board, 'pwm').tolist() == [0, 0, 0, 0]  # the old command is not re-applied
+    assert h.driver.link_state == 'connected'
+    h.command_until([1.0, -1.0, 0.5, -0.5], board, [85, -85, 42, -42])  # a new one is
+
+
 def test_unplug_then_plug_resets_the_coils_first(ctx):
     factory = PoweredThroughUnplug()
     with VirtualBoard(factory) as board:
