@@ -57,6 +57,7 @@ setup(
         'control>=0.10',
         'filterpy>=1.4.5',
         'pyserial>=3.5',
+        'cobs>=1.2',
         'rosbags>=0.10',
         'matplotlib>=3.7',
         'tqdm>=4.60',

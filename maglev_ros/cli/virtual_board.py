@@ -9,6 +9,13 @@ SIGTERM. Examples::
     maglev-virtual-board --plant physics --magnet fixed    # the physics core, 3 sensors
     maglev-virtual-board --plant physics --magnet free --noise 1e-4 --quantization 0.098e-3
     maglev-virtual-board --plant mypkg.plants:make_plant   # factory(n_sensors)
+    maglev-virtual-board --firmware v4x_pc --magnet free   # V4x PC control, physics plant
+
+``--firmware v4x_pc`` emulates the V4x PC-control firmware (COBS requests,
+docs/boards.md) on the physics plant by default, with the TLV493D's noise
+(0.1 mT) and resolution (0.098 mT) unless given: without noise a static field
+reads identically 20 times in a row and the firmware resets its sensor.
+The board calibrates with the magnet absent unless ``--magnet-at-power-up present``.
 
 Exit status: 0 after a signal, 2 for bad arguments (one line on stderr).
 """
@@ -25,7 +32,8 @@ from functools import partial
 
 from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
-from maglev_ros.hardware.scaling import CurrentScaling
+from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
+from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
 from maglev_ros.hardware.virtual_board import VirtualBoard
 
 from .usage import Parser, UsageError, non_negative_float, run_command
@@ -33,6 +41,9 @@ from .usage import Parser, UsageError, non_negative_float, run_command
 __all__ = ['build_parser', 'load_plant', 'main']
 
 PROG = 'maglev-virtual-board'
+FIRMWARES = ('v2x', 'v4x', 'v4x_pc')
+V4X_PC_NOISE = 1e-4  # T rms: the TLV493D's noise, the default of a V4x PC-control board
+V4X_PC_QUANTIZATION = 0.098e-3  # T per LSB of the TLV493D
 
 
 def _integer_from(low: int):
@@ -86,15 +97,15 @@ def _clock(text: str) -> int:
 def build_parser() -> argparse.ArgumentParser:
     """Return the argument parser of ``maglev-virtual-board``."""
     parser = Parser(prog=PROG, description=__doc__.split('\n\n')[0])
-    parser.add_argument('--firmware', choices=('v2x', 'v4x'), default='v2x')
+    parser.add_argument('--firmware', choices=FIRMWARES, default='v2x')
     parser.add_argument(
         '--sensors', type=_positive_int, help='number of sensors (default 1; physics: the model)'
     )
     parser.add_argument('--link', help='stable device path (symlink); default: a temp dir')
     parser.add_argument(
         '--plant',
-        default='linear',
-        help="'linear', 'physics' or 'module:factory' with factory(n_sensors) -> plant(pwm, t)",
+        help="'linear', 'physics' or 'module:factory' with factory(n_sensors) -> plant(pwm, t) "
+        '(default: physics for v4x_pc, else linear)',
     )
     parser.add_argument(
         '--magnet', choices=MAGNET_MODES, default='fixed', help='physics plant: magnet mode'
@@ -110,10 +121,26 @@ def build_parser() -> argparse.ArgumentParser:
         '--clock-start', type=_clock, default=0, help='uint32 us clock at power-up (V2x)'
     )
     parser.add_argument(
-        '--noise', type=non_negative_float, default=0.0, help='T rms per axis (physics; default 0)'
+        '--noise',
+        type=non_negative_float,
+        help='T rms per axis (physics; default 0, v4x_pc: 1e-4)',
     )
     parser.add_argument(
-        '--quantization', type=non_negative_float, default=0.0, help='T per LSB (physics; 0: none)'
+        '--quantization',
+        type=non_negative_float,
+        help='T per LSB (physics; default none, v4x_pc: 0.098e-3)',
+    )
+    parser.add_argument(
+        '--board-sensor',
+        type=_integer_from(0),
+        default=0,
+        help="v4x_pc: which of the plant's sensors the board reads (default 0)",
+    )
+    parser.add_argument(
+        '--magnet-at-power-up',
+        choices=('absent', 'present'),
+        default='absent',
+        help='v4x_pc: where the magnet is while the board calibrates (default absent)',
     )
     parser.add_argument(
         '--sensor-delay', type=_integer_from(0), default=0, help='samples (physics; default 0)'
@@ -127,15 +154,24 @@ def build_parser() -> argparse.ArgumentParser:
 
 def _physics_plant(args: argparse.Namespace) -> SimulatorPlant:
     if args.firmware == 'v4x' and args.magnet == 'free':
-        raise UsageError('--magnet free needs --firmware v2x (a V4x host cannot close the loop)')
+        raise UsageError(
+            '--magnet free needs --firmware v2x or v4x_pc (a V4x PD board takes no commands)'
+        )
     from maglev_ros.physics import SensorEffects
 
-    scaling = CurrentScaling.from_supply(args.supply_voltage, args.coil_resistance)
+    full_scale = V4X_PWM_FULL_SCALE if args.firmware == 'v4x_pc' else 4096
+    scaling = CurrentScaling.from_supply(args.supply_voltage, args.coil_resistance, full_scale)
     sensor = SensorEffects(
         noise_rms=args.noise, quantization=args.quantization, delay_samples=args.sensor_delay
     )
     try:
         plant = make_simulator_plant(args.magnet, args.params, scaling, sensor, args.seed)
+        args.setup_plant = None
+        if args.firmware == 'v4x_pc' and args.magnet_at_power_up == 'absent':
+            # the board calibrates on a second simulator without the levitating magnet
+            args.setup_plant = make_simulator_plant(
+                'absent', args.params, scaling, sensor, args.seed + 1
+            )
     except (ValueError, OSError) as err:
         raise UsageError(f'--params {args.params!r}: {err}') from None
     if args.sensors is not None and args.sensors != plant.n_sensors:
@@ -181,6 +217,30 @@ def load_plant(spec: str, n_sensors: int) -> Plant:
 
 
 def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], object]:
+    if args.firmware == 'v4x_pc':
+        setup = getattr(args, 'setup_plant', None)
+        if args.board_sensor >= args.sensors:
+            raise UsageError(
+                f"--board-sensor must be below the plant's {args.sensors} sensors, "
+                f'got {args.board_sensor}'
+            )
+        make = partial(
+            V4xPcFirmware,
+            plant,
+            scaling=getattr(plant, 'scaling', None),
+            setup_plant=setup,
+            sensor=args.board_sensor,
+        )
+        if isinstance(plant, SimulatorPlant):
+
+            def power_up_pc() -> object:
+                plant.reset()
+                if setup is not None:
+                    setup.reset()
+                return make()
+
+            return power_up_pc
+        return make
     if args.firmware == 'v2x':
         make = partial(
             V2xFirmware,
@@ -228,6 +288,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 
 def _run(args: argparse.Namespace) -> int:
+    if args.plant is None:
+        args.plant = 'physics' if args.firmware == 'v4x_pc' else 'linear'
+    if args.firmware == 'v4x_pc':
+        args.noise = V4X_PC_NOISE if args.noise is None else args.noise
+        if args.quantization is None:
+            args.quantization = V4X_PC_QUANTIZATION
+    args.noise = args.noise or 0.0
+    args.quantization = args.quantization or 0.0
     if args.plant == 'physics':
         plant = _physics_plant(args)
     else:

@@ -6,13 +6,17 @@ Re-exports only; see the modules: ``packet`` (V2x command packets),
 ``command_guard`` (which commands reach the coils, as PWM counts),
 ``board_stream`` (the board's bytes to stamped samples in SI units),
 ``serial_link`` (the port handle), ``firmware`` (board emulators),
-``physics_plant`` (the physics simulator as an emulator plant) and
-``virtual_board`` (an emulator on a pty).
+``physics_plant`` (the physics simulator as an emulator plant),
+``virtual_board`` (an emulator on a pty), and for the V4x PC-control firmware
+``cobs_frame`` (COBS frames), ``v4x_pc_protocol`` (its messages),
+``v4x_pc_link`` (the request/response link), ``v4x_pc_poller`` (the driver's loop on
+it) and ``v4x_pc_firmware`` (its emulator).
 """
 
 from .board_clock import BoardClock
 from .board_stream import BoardStream, StreamOutput
-from .command_guard import CommandGuard, GuardDecision
+from .cobs_frame import FrameError, FrameSplitter, decode_frame, encode_frame
+from .command_guard import CommandGuard, GuardDecision, pair_differences
 from .firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from .packet import (
     CommandParser,
@@ -34,6 +38,9 @@ from .v2x_stream import (
     record_dtype,
     record_size,
 )
+from .v4x_pc_firmware import V4xPcFirmware
+from .v4x_pc_link import BoardReplyError, ReplyTimeoutError, V4xPcLink
+from .v4x_pc_poller import V4xPcPoller
 from .v4x_telemetry import (
     InfoMessage,
     Severity,
@@ -49,6 +56,16 @@ from .virtual_board import BoardStatus, VirtualBoard, VirtualBoardError
 __all__ = [
     'MAGNET_MODES',
     'Backoff',
+    'BoardReplyError',
+    'FrameError',
+    'FrameSplitter',
+    'ReplyTimeoutError',
+    'V4xPcFirmware',
+    'V4xPcLink',
+    'V4xPcPoller',
+    'decode_frame',
+    'encode_frame',
+    'pair_differences',
     'BoardClock',
     'BoardStatus',
     'BoardStream',

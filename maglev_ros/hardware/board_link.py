@@ -96,8 +96,33 @@ class BoardLink:
         except LinkError:
             self.counts['commands_unsent'] += 1
             return
+        self.stream.note_command(counts)  # a PWM the records may now show
         self.applied = counts
         self.counts['commands_sent'] += 1
+
+    def send_zero(self, zero: np.ndarray) -> None:
+        """Send the zero counts (V2x: a packet; the board applies them at once).
+
+        Parameters
+        ----------
+        zero : ndarray of int64, shape (4,)
+            The guard's zero counts.
+        """
+        self.send(zero)
+
+    @property
+    def resyncs(self) -> int:
+        """Decoder resynchronisations over all connections."""
+        return self.stream.resyncs
+
+    @property
+    def dropped_bytes(self) -> int:
+        """Bytes the decoder dropped while resynchronising, over all connections."""
+        return self.stream.dropped_bytes
+
+    def health_values(self) -> dict[str, str]:
+        """Values for ``/diagnostics`` beyond the common ones (none)."""
+        return {}
 
     def run(
         self,

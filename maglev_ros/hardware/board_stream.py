@@ -152,6 +152,16 @@ class BoardStream:
         self._earlier['dropped_bytes'] += self.decoder.stats.dropped_bytes
         self.decoder = RecordDecoder(self.n_sensors, confirm=self.confirm_records)
 
+    def note_command(self, counts: np.ndarray) -> None:
+        """Tell the V2x decoder the PWM counts of a command sent (see ``RecordDecoder``).
+
+        Parameters
+        ----------
+        counts : ndarray of int, shape (4,)
+            PWM counts sent, x+ x- y+ y-.
+        """
+        self.decoder.note_command(counts)
+
     @property
     def decoder_stats(self) -> DecoderStats:
         """Counters of the record decoder of the current connection (V2x)."""

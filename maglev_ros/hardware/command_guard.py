@@ -10,7 +10,19 @@ guard before the driver writes it to the board (V2x):
   disabling sends zero currents at once;
 * **timeout**: when no valid command came for ``command_timeout`` s, zero
   currents are sent (once, until the next valid command);
-* **scale**: currents become signed PWM counts (:class:`CurrentScaling`).
+* **pairs** (V4x PC control, ``pairs=True``): the firmware drives each pair
+  antisymmetrically (x+ gets ``p_x``, x- gets ``-p_x``; likewise y), so only
+  the pair differences can reach the coils. The command is replaced by its
+  nearest antisymmetric one (least squares): ``u_x = (I_x+ - I_x-) / 2`` on
+  x+ and ``-u_x`` on x-, likewise y; the common part ``(I_x+ + I_x-) / 2``
+  cannot be applied and is dropped (counted in ``common_mode_dropped`` when it
+  exceeds one PWM count);
+* **scale**: currents become signed PWM counts (:class:`CurrentScaling`),
+  at most the scaling's full scale.
+
+The current limit may not exceed the scaling's full scale (the largest
+current the PWM can ask for): a larger limit would be capped silently, so it
+is refused with an error naming both.
 
 A read-only board (V4x firmware: its own controller runs) ignores commands.
 Rejections, clamps, ignored commands and timeouts are counted and come with
@@ -28,7 +40,7 @@ import numpy as np
 
 from .scaling import CurrentScaling
 
-__all__ = ['GUARD_COUNTERS', 'CommandGuard', 'GuardDecision']
+__all__ = ['GUARD_COUNTERS', 'CommandGuard', 'GuardDecision', 'pair_differences']
 
 GUARD_COUNTERS = ('commands_rejected', 'commands_clamped', 'commands_ignored', 'timeouts')
 _ZERO = np.zeros(4)
@@ -65,6 +77,9 @@ class CommandGuard:
         Enable state at start.
     read_only : bool, optional
         The board takes no commands (V4x): every command is ignored.
+    pairs : bool, optional
+        The board applies pair differences only (V4x PC control): commands
+        are made antisymmetric per pair (module docstring).
 
     Attributes
     ----------
@@ -74,7 +89,8 @@ class CommandGuard:
     Raises
     ------
     ValueError
-        If the limit or the timeout is not a positive finite number.
+        If the limit or the timeout is not a positive finite number, or the
+        limit is above the scaling's full scale.
     """
 
     def __init__(
@@ -85,10 +101,13 @@ class CommandGuard:
         *,
         enabled: bool = False,
         read_only: bool = False,
+        pairs: bool = False,
     ) -> None:
         self.scaling = scaling
         self.read_only = bool(read_only)
+        self.pairs = bool(pairs)
         self.counters = dict.fromkeys(GUARD_COUNTERS, 0)
+        self.common_mode_dropped = 0
         self._enabled = bool(enabled)
         self._last_command_ns: int | None = None
         self._timed_out = False
@@ -107,7 +126,8 @@ class CommandGuard:
         Raises
         ------
         ValueError
-            Naming the value that is not a positive finite number.
+            Naming the value that is not a positive finite number, or the
+            limit above the scaling's full scale.
         """
         for name, value in (
             ('current_limit', current_limit),
@@ -115,6 +135,15 @@ class CommandGuard:
         ):
             if not (math.isfinite(value) and value > 0):
                 raise ValueError(f'{name} must be a positive finite number, got {value!r}')
+        full = self.scaling.max_current
+        if current_limit > full * (1 + 1e-9):
+            raise ValueError(
+                f"current_limit {current_limit:g} A is above the board's full scale "
+                f'{full:.4g} A ({self.scaling.full_scale} PWM counts at '
+                f'{self.scaling.counts_per_ampere:.4g} counts/A): commands would be capped '
+                'silently; lower current_limit or fix the scaling (supply_voltage, '
+                'coil_resistance, counts_per_ampere)'
+            )
         self.current_limit = float(current_limit)
         self.command_timeout = float(command_timeout)
 
@@ -166,6 +195,10 @@ class CommandGuard:
                 None, f'rejected command: currents must be finite, got {values.tolist()}'
             )
         warning = ''
+        if self.pairs:
+            values, common = _antisymmetric(values)
+            if np.any(np.abs(common) * self.scaling.counts_per_ampere > 1.0):
+                self.common_mode_dropped += 1
         limit = self.current_limit
         if np.any(np.abs(values) > limit):
             self.counters['commands_clamped'] += 1
@@ -214,3 +247,34 @@ class CommandGuard:
         self._timed_out = True
         self.counters['timeouts'] += 1
         return age
+
+
+def _antisymmetric(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Nearest command with x- = -x+ and y- = -y+, and the dropped common parts (A)."""
+    u_x, u_y = (values[0] - values[1]) / 2, (values[2] - values[3]) / 2
+    common = np.array([(values[0] + values[1]) / 2, (values[2] + values[3]) / 2])
+    return np.array([u_x, -u_x, u_y, -u_y]), common
+
+
+def pair_differences(counts) -> tuple[int, int]:
+    """Return the pair differences ``(p_x, p_y)`` of antisymmetric counts (x+, x-, y+, y-).
+
+    Parameters
+    ----------
+    counts : array_like of int, shape (4,)
+        Counts from a pairs guard: ``(p_x, -p_x, p_y, -p_y)``.
+
+    Returns
+    -------
+    tuple of 2 int
+        ``(p_x, p_y)``, the arguments of the ``03`` request.
+
+    Raises
+    ------
+    ValueError
+        If the counts are not antisymmetric per pair.
+    """
+    c = np.asarray(counts, dtype=np.int64)
+    if c.shape != (4,) or c[1] != -c[0] or c[3] != -c[2]:
+        raise ValueError(f'counts must be (p_x, -p_x, p_y, -p_y), got {np.ravel(c).tolist()}')
+    return int(c[0]), int(c[2])

@@ -12,7 +12,9 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 from ..topics import sensor_frame
-from .scaling import CurrentScaling
+from .packet import PWM_FULL_SCALE
+from .scaling import V4X_PWM_FULL_SCALE, CurrentScaling
+from .v4x_pc_poller import DEFAULT_POLL_RATE
 
 __all__ = [
     'DEFAULT_BAUD',
@@ -22,7 +24,7 @@ __all__ = [
     'driver_config',
 ]
 
-DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200}  # ignored by USB CDC, set anyway
+DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200, 'v4x_pc': 115200}  # ignored by USB CDC, set anyway
 MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
 
 
@@ -39,7 +41,7 @@ class DriverConfig:
     port : str
         Serial device path.
     firmware : str
-        ``'v2x'`` or ``'v4x'``.
+        ``'v2x'``, ``'v4x'`` or ``'v4x_pc'`` (V4x PC control: 8-bit PWM scaling).
     baudrate : int
         Baud rate.
     n_sensors : int
@@ -67,6 +69,9 @@ class DriverConfig:
     intra_process : bool
         Hand the samples to nodes of the same process directly and take a
         composed controller's commands (the node's ``intra_process``).
+    poll_rate : float
+        V4x PC control: steps (read sensors and currents, write the command)
+        per second; 0: as fast as the board answers.
     """
 
     port: str
@@ -84,6 +89,7 @@ class DriverConfig:
     confirm_records: bool = True
     read_interval: float = 0.0
     intra_process: bool = False
+    poll_rate: float = DEFAULT_POLL_RATE
 
 
 def driver_config(v: Mapping[str, object]) -> DriverConfig:
@@ -106,18 +112,34 @@ def driver_config(v: Mapping[str, object]) -> DriverConfig:
     Raises
     ------
     DriverConfigError
-        Frames not one per sensor, or a back-off maximum below its minimum.
+        More than one sensor for V4x PC control, frames not one per sensor, a
+        current limit above the scaling's full scale, or a back-off maximum
+        below its minimum.
     """
     n_sensors = v['n_sensors']
+    if v['firmware'] == 'v4x_pc' and n_sensors != 1:
+        raise DriverConfigError(
+            f'n_sensors must be 1 for the V4x PC-control firmware (it reads one sensor), '
+            f'got {n_sensors}'
+        )
     frames = v['sensor_frames'] or tuple(sensor_frame(k) for k in range(n_sensors))
     if len(frames) != n_sensors:
         raise DriverConfigError(
             f'sensor_frames must name {n_sensors} frames (n_sensors), got {list(frames)}'
         )
+    # the V4x PC-control firmware takes 8-bit PWM, the V2x firmware 12-bit
+    full_scale = V4X_PWM_FULL_SCALE if v['firmware'] == 'v4x_pc' else PWM_FULL_SCALE
     if v['counts_per_ampere']:
-        scaling = CurrentScaling(v['counts_per_ampere'])
+        scaling = CurrentScaling(v['counts_per_ampere'], full_scale)
     else:
-        scaling = CurrentScaling.from_supply(v['supply_voltage'], v['coil_resistance'])
+        scaling = CurrentScaling.from_supply(v['supply_voltage'], v['coil_resistance'], full_scale)
+    if v['current_limit'] > scaling.max_current * (1 + 1e-9):
+        raise DriverConfigError(
+            f"current_limit {v['current_limit']:g} A is above the board's full scale "
+            f'{scaling.max_current:.4g} A (from the scaling: {scaling.counts_per_ampere:.4g} '
+            f'counts/A, {scaling.full_scale} counts at full duty); lower current_limit '
+            '(0: the full scale) or fix the scaling'
+        )
     min_delay, max_delay = v['reconnect_min_delay'], v['reconnect_max_delay']
     if max_delay < min_delay:
         raise DriverConfigError(
@@ -139,4 +161,5 @@ def driver_config(v: Mapping[str, object]) -> DriverConfig:
         confirm_records=v['confirm_records'],
         read_interval=v['read_interval'],
         intra_process=bool(v.get('intra_process', False)),
+        poll_rate=float(v.get('poll_rate', DEFAULT_POLL_RATE)),
     )

@@ -1,15 +1,19 @@
-"""Coil current <-> V2x PWM counts.
+"""Coil current <-> PWM counts (V2x: 12-bit, V4x PC control: 8-bit).
 
-The V2x board applies a signed 12-bit PWM duty to an H-bridge across each
-coil. In the quasi-static (resistive) limit the coil current is
+Each board applies a signed PWM duty to an H-bridge across each coil. In the
+quasi-static (resistive) limit the coil current is
 
-    I = duty * V_supply / R_coil,   duty = counts / 4096,
+    I = duty * V_supply / R_coil,   duty = counts / full_scale,
 
-so ``counts = round(4096 * I * R_coil / V_supply)``, clamped to +-4096. The
-same relation can be given directly as counts per ampere (from a
-calibration with the shunt or a clamp meter). The coil inductance only
-delays the current (time constant L / R); the scaling describes the
-steady state.
+so ``counts = round(full_scale * I * R_coil / V_supply)``, clamped to
++-``full_scale``: 4096 for the V2x firmware (12-bit PWM), 255 for the V4x
+PC-control firmware (8-bit PWM in slow decay: pin 1 at ``255 - |p|``, pin 2
+high, so the bridge drives for ``|p| / 255`` of each period and brakes for
+the rest). The same relation can be given directly as counts per ampere
+(from a calibration with the shunt or a clamp meter). The coil inductance
+only delays the current (time constant L / R); the scaling describes the
+steady state. The largest current a scaling can ask for is its full scale,
+``full_scale / counts_per_ampere`` (3 A at 12 V and 4 ohm).
 """
 
 from __future__ import annotations
@@ -22,7 +26,13 @@ from numpy.typing import ArrayLike, NDArray
 
 from .packet import PWM_FULL_SCALE
 
-__all__ = ['BOARD_COIL_RESISTANCE', 'BOARD_SUPPLY_VOLTAGE', 'CurrentScaling', 'ScalingError']
+__all__ = [
+    'BOARD_COIL_RESISTANCE',
+    'BOARD_SUPPLY_VOLTAGE',
+    'V4X_PWM_FULL_SCALE',
+    'CurrentScaling',
+    'ScalingError',
+]
 
 #: V, the board's H-bridge rail: 12 V over USB-C power delivery (docs/maggy-model.md,
 #: hardware limits; 9 V if the charger cannot give 12 V).
@@ -33,6 +43,8 @@ BOARD_SUPPLY_VOLTAGE = 12.0
 #: as an order-of-magnitude L/R model, not a measurement; for a real board measure
 #: the current (shunt, clamp meter) and set ``coil_resistance`` or ``counts_per_ampere``.
 BOARD_COIL_RESISTANCE = 4.0
+#: counts: the V4x PC-control firmware's largest |PWM| (8-bit ``analogWrite``).
+V4X_PWM_FULL_SCALE = 255
 
 
 class ScalingError(ValueError):
@@ -54,16 +66,25 @@ class CurrentScaling:
     ----------
     counts_per_ampere : float
         PWM counts per ampere of steady-state coil current (> 0); equals
-        ``4096 * R_coil / V_supply`` for a resistive coil.
+        ``full_scale * R_coil / V_supply`` for a resistive coil.
+    full_scale : int, optional
+        Counts at full duty: 4096 (V2x, default) or 255 (V4x PC control).
     """
 
     counts_per_ampere: float
+    full_scale: int = PWM_FULL_SCALE
 
     def __post_init__(self) -> None:
         _positive('counts_per_ampere', self.counts_per_ampere)
+        if isinstance(self.full_scale, bool) or not isinstance(self.full_scale, int):
+            raise ScalingError(f'full_scale must be an int, got {self.full_scale!r}')
+        if self.full_scale < 1:
+            raise ScalingError(f'full_scale must be >= 1 count, got {self.full_scale}')
 
     @classmethod
-    def from_supply(cls, supply_voltage: float, coil_resistance: float) -> CurrentScaling:
+    def from_supply(
+        cls, supply_voltage: float, coil_resistance: float, full_scale: int = PWM_FULL_SCALE
+    ) -> CurrentScaling:
         """Build the scaling from the H-bridge supply and the coil resistance.
 
         Parameters
@@ -72,20 +93,22 @@ class CurrentScaling:
             H-bridge supply voltage in volt (> 0).
         coil_resistance : float
             Coil resistance in ohm, wiring and bridge included (> 0).
+        full_scale : int, optional
+            Counts at full duty (4096: V2x; 255: V4x PC control).
 
         Returns
         -------
         CurrentScaling
-            ``counts_per_ampere = 4096 * coil_resistance / supply_voltage``.
+            ``counts_per_ampere = full_scale * coil_resistance / supply_voltage``.
         """
         volts = _positive('supply_voltage', supply_voltage)
         ohms = _positive('coil_resistance', coil_resistance)
-        return cls(PWM_FULL_SCALE * ohms / volts)
+        return cls(full_scale * ohms / volts, full_scale)
 
     @property
     def max_current(self) -> float:
-        """Current at full duty, in ampere (4096 counts)."""
-        return PWM_FULL_SCALE / self.counts_per_ampere
+        """Current at full duty, in ampere (``full_scale`` counts)."""
+        return self.full_scale / self.counts_per_ampere
 
     def to_counts(self, current: ArrayLike) -> NDArray[np.int64]:
         """Convert coil currents to PWM counts.
@@ -99,7 +122,7 @@ class CurrentScaling:
         -------
         ndarray of int64, same shape
             ``rint(counts_per_ampere * current)`` (round half to even),
-            clamped to -4096 .. 4096.
+            clamped to -full_scale .. full_scale.
 
         Raises
         ------
@@ -110,7 +133,7 @@ class CurrentScaling:
         if not np.all(np.isfinite(amps)):
             raise ScalingError(f'current must be finite, got {amps.tolist()}')
         counts = np.rint(amps * self.counts_per_ampere)
-        return np.clip(counts, -PWM_FULL_SCALE, PWM_FULL_SCALE).astype(np.int64)
+        return np.clip(counts, -self.full_scale, self.full_scale).astype(np.int64)
 
     def to_current(
         self, counts: ArrayLike, out: NDArray[np.float64] | None = None

@@ -11,6 +11,7 @@ from __future__ import annotations
 import os
 import select
 import threading
+import time
 
 import serial
 
@@ -196,7 +197,27 @@ class SerialLink:
         """
         with self._write_lock:
             ser = self._port()
+            # os.write on the (non-blocking) fd, waiting for room only while the device's
+            # buffer is full: pyserial's write raises 'Write timeout' after a complete
+            # write when the thread was descheduled for write_timeout (a loaded machine)
             try:
-                ser.write(data)
-            except (serial.SerialException, OSError, TypeError, AttributeError) as err:
+                fd = ser.fileno()
+                view = memoryview(bytes(data))
+                deadline = time.monotonic() + self.write_timeout
+                while view:
+                    try:
+                        view = view[os.write(fd, view) :]
+                    except BlockingIOError:
+                        pass
+                    if not view:
+                        break
+                    left = deadline - time.monotonic()
+                    if left <= 0 or not select.select([], [fd], [], left)[1]:
+                        raise LinkError(
+                            f'write to {self.port} failed: the device took no data for '
+                            f'{self.write_timeout:g} s'
+                        )
+            except LinkError:
+                raise
+            except (serial.SerialException, OSError, TypeError, ValueError) as err:
                 raise LinkError(f'write to {self.port} failed: {err}') from err

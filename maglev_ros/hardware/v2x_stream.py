@@ -37,6 +37,21 @@ plausible-looking splice. A run may start inside the held record only if its
 first record follows it by a sample period, as its second follows its first
 (the held record then lost its tail).
 
+**Prefer losing a record to publishing a wrong one.** Two more rules check
+each new run against its neighbours:
+
+* when a run starts inside the held record and that record also looks whole
+  (its PWM equals its predecessor's, the run's first record's, or one of the
+  last commands the host sent, :meth:`RecordDecoder.note_command`), either it
+  lost its tail or the next record lost its head and begins with its last
+  bytes; which one cannot be told, so both are dropped (``overlaps``). When
+  the held record's PWM is none of those, it is the damaged one (its last bytes
+  are the next record's timestamp) and only it is dropped;
+* a record whose timestamp is not after the newest accepted one (up to
+  ``repeat_window`` back: a repeated chunk of the stream) is dropped
+  (``repeats``), so no sample is published twice or out of order. A larger
+  backward jump is a board restart (below).
+
 Once locked, records are viewed with ``numpy.frombuffer`` over aligned
 chunks and checked, and their timestamps unwrapped, by compiled loops
 (:mod:`maglev_ros.hardware.v2x_kernels`: one call per burst instead of a
@@ -77,6 +92,7 @@ __all__ = [
 ]
 
 SAMPLE_PERIOD_US = 200  # us between samples (5 kHz)
+COMMAND_MEMORY = 4  # commands sent that a record's PWM may still show
 BURST_RECORDS = 5  # records per burst (bursts at 1 kHz)
 _CLOCK_WRAP = 1 << 32  # us, uint32 timestamp
 _HALF_WRAP = 1 << 31  # us; a larger forward step is a backward jump
@@ -232,6 +248,12 @@ class DecoderStats:
         Backward clock jumps (board resets) seen.
     locked : bool
         Whether the decoder currently knows the record boundary.
+    overlaps : int
+        Pairs of records dropped because a new run started inside a record that
+        looked whole (one of the two was damaged; which one cannot be told).
+    repeats : int
+        Records dropped because they were not after the newest accepted record
+        (a repeated chunk of the stream).
     """
 
     records: int
@@ -240,6 +262,8 @@ class DecoderStats:
     wraps: int
     clock_restarts: int
     locked: bool
+    overlaps: int = 0
+    repeats: int = 0
 
 
 class RecordDecoder:
@@ -254,6 +278,9 @@ class RecordDecoder:
     confirm : bool, optional
         Hold the newest record back until the next one confirms its end
         (default True; see the module docstring).
+    repeat_window : float, optional
+        s: a record up to this much before the newest accepted one is a repeat
+        and dropped; further back is a board restart (its clock starts again).
     """
 
     def __init__(
@@ -262,7 +289,12 @@ class RecordDecoder:
         *,
         bounds: PlausibilityBounds | None = None,
         confirm: bool = True,
+        repeat_window: float = 1.0,
     ) -> None:
+        if not 0 < repeat_window < 2000:
+            raise ValueError(f'repeat_window must be in 0 .. 2000 s, got {repeat_window!r}')
+        self.repeat_window_us = round(repeat_window * 1e6)
+        self._commands: tuple[tuple[int, ...], ...] = ()
         self.n_sensors = _check_n_sensors(n_sensors)
         self.bounds = bounds if bounds is not None else PlausibilityBounds()
         self.confirm = bool(confirm)
@@ -279,6 +311,9 @@ class RecordDecoder:
         self._head = False  # buf[:size] is an accepted record not yet emitted
         self._prev_ts = 0  # raw timestamp of the last accepted record
         self._last_emit_ts: int | None = None
+        self._emitted_run: _Run | None = None  # the newest run queued for emission
+        self._overlaps = 0
+        self._repeats = 0
         self._last_time_us = 0
         self._records = 0
         self._dropped = 0
@@ -290,8 +325,30 @@ class RecordDecoder:
     def stats(self) -> DecoderStats:
         """Snapshot of the counters."""
         return DecoderStats(
-            self._records, self._dropped, self._resyncs, self._wraps, self._restarts, self._locked
+            self._records,
+            self._dropped,
+            self._resyncs,
+            self._wraps,
+            self._restarts,
+            self._locked,
+            self._overlaps,
+            self._repeats,
         )
+
+    def note_command(self, pwm: ArrayLike) -> None:
+        """Tell the decoder a command the host sent (its PWM counts, x+ x- y+ y-).
+
+        The last ``COMMAND_MEMORY`` commands are PWM values the board may apply:
+        a held record whose PWM is one of them is judged intact when a damaged
+        record overlaps it. Safe to call from another thread than ``feed``.
+
+        Parameters
+        ----------
+        pwm : array_like of int, shape (4,)
+            The counts sent.
+        """
+        command = tuple(int(v) for v in np.asarray(pwm).reshape(4))
+        self._commands = (command, *self._commands[: COMMAND_MEMORY - 1])
 
     @property
     def buffered(self) -> int:
@@ -330,9 +387,9 @@ class RecordDecoder:
         RecordBatch
             The held-back record, or an empty batch.
         """
-        out = []
+        out: list[_Run] = []
         if self._head:
-            out.append(self._views(self._buf, 1))
+            self._push(out, self._views(self._buf, 1))
             self._buf = self._buf[self._size :]
             self._head = False
         return self._emit(out)
@@ -352,7 +409,7 @@ class RecordDecoder:
         start = 1 if self._head else 0
         if n <= start:
             if self._head and not self.confirm:
-                out.append(self._views(buf, 1))
+                self._push(out, self._views(buf, 1))
                 self._buf = buf[size:]
                 self._head = False
             return False
@@ -373,7 +430,7 @@ class RecordDecoder:
         failed = not ok
         emit_end = last if self.confirm else last + 1
         if emit_end > 0:
-            out.append((ts[:emit_end], field[:emit_end], pwm[:emit_end]))
+            self._push(out, (ts[:emit_end], field[:emit_end], pwm[:emit_end]))
         if last >= 0:
             self._prev_ts = int(ts[last])
         self._head = self.confirm and last >= 0
@@ -456,7 +513,7 @@ class RecordDecoder:
         return offset, m
 
     def _search(self, out: list[_Run]) -> bool:
-        """Look for a boundary; return True once locked."""
+        """Look for a boundary; return True once locked or after dropping records."""
         size = self._size
         buf = self._buf
         first = 1 if self._head else 0
@@ -467,7 +524,7 @@ class RecordDecoder:
             if self._head:
                 if ruled_out < size:
                     return False
-                out.append(self._views(buf, 1))
+                self._push(out, self._views(buf, 1))
                 self._head = False
                 self._dropped += ruled_out - size
             else:
@@ -476,17 +533,69 @@ class RecordDecoder:
             return False
         if self._head:
             if offset >= size:  # the held-back record ends before the new boundary
-                out.append(self._views(buf, 1))
+                self._push(out, self._views(buf, 1))
                 self._dropped += offset - size
-            else:  # it overlaps the next valid record: its tail was lost
+            elif self._head_consistent(buf, offset):
+                # The run starts inside the held-back record, and both look whole: the
+                # held record's PWM is one the board applied, and the run's first record
+                # follows it by a sample period. Either the held record lost its tail or
+                # the next one lost its head, and its first bytes are the held record's
+                # last ones; which one cannot be told, so both are dropped.
+                self._dropped += offset + size
+                self._overlaps += 1
+                offset += size
+            else:  # the held record lost its tail: its last bytes start the next record
                 self._dropped += offset
         else:
             self._dropped += offset
+        self._head = False
+        # A record that is not after the newest one accepted repeats it or an earlier
+        # one (a repeated chunk of the stream): drop it, never publish a sample twice.
+        skipped = 0
+        ref = self._emitted_ts
+        while ref is not None and offset + size <= len(buf):
+            back = (ref - int(np.frombuffer(buf, '<u4', count=1, offset=offset)[0])) & _CLOCK_MASK
+            if back >= self.repeat_window_us:
+                break
+            offset += size
+            skipped += 1
+        self._dropped += skipped * size
+        self._repeats += skipped
         self._buf = buf[offset:]
+        if skipped:  # search again from there (the rest of the run is checked anew)
+            return True
         self._head = True  # the first record of the run is accepted
         self._prev_ts = int(np.frombuffer(self._buf, '<u4', count=1)[0])
         self._locked = True
         return True
+
+    def _head_consistent(self, buf: bytes, offset: int) -> bool:
+        """Whether the held record's PWM is one the board applied (a neighbour's or a command).
+
+        ``buf[:size]`` is the held record, ``buf[offset:offset + size]`` the first
+        record of a new run that overlaps it.
+        """
+        size = self._size
+        held = tuple(np.frombuffer(buf, '<i2', count=4, offset=size - 8).tolist())
+        after = tuple(np.frombuffer(buf, '<i2', count=4, offset=offset + size - 8).tolist())
+        return held == after or held == self._emitted_pwm or held in self._commands
+
+    def _push(self, out: list[_Run], run: _Run) -> None:
+        """Queue a run of records for emission; remember it (its newest record)."""
+        out.append(run)
+        self._emitted_run = run
+
+    @property
+    def _emitted_ts(self) -> int | None:
+        """Raw stamp of the newest record queued for emission, None before any."""
+        run = self._emitted_run
+        return None if run is None else int(run[0][-1])
+
+    @property
+    def _emitted_pwm(self) -> tuple[int, ...] | None:
+        """PWM of the newest record queued for emission, None before any."""
+        run = self._emitted_run
+        return None if run is None else tuple(run[2][-1].tolist())
 
     def _emit(self, out: list[_Run]) -> RecordBatch:
         """Unwrap the timestamps of emitted record runs and join them."""

@@ -1,10 +1,10 @@
 """A virtual Maggy board behind a pseudo-terminal (Linux).
 
-``VirtualBoard`` runs a firmware emulator (``firmware.V2xFirmware`` or
-``V4xFirmware``) paced to the wall clock in a background thread and
-connects it to the master side of a pty. Hosts open the slave side through
-a stable symlink (``path``), exactly like a USB serial device, e.g. with
-``serial.Serial(board.path)``.
+``VirtualBoard`` runs a firmware emulator (``firmware.V2xFirmware``,
+``V4xFirmware`` or ``v4x_pc_firmware.V4xPcFirmware``) paced to the wall
+clock in a background thread and connects it to the master side of a pty.
+Hosts open the slave side through a stable symlink (``path``), exactly like
+a USB serial device, e.g. with ``serial.Serial(board.path)``.
 
 * Port open and close by the host are detected on the master side (a read
   fails with EIO while no process holds the slave open); each open makes the
@@ -36,10 +36,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .firmware import V2xFirmware, V4xFirmware
+from .v4x_pc_firmware import V4xPcFirmware
 
 __all__ = ['BoardStatus', 'VirtualBoard', 'VirtualBoardError']
 
-Firmware = V2xFirmware | V4xFirmware
+Firmware = V2xFirmware | V4xFirmware | V4xPcFirmware
 _POLL_S = 0.0005  # s: input poll and pacing granularity (bursts are 1 ms apart)
 _CLOSED_POLL_S = 0.002  # s: how often a closed port is checked for a new open
 _MAX_BACKLOG = 1 << 20  # bytes held for a slow host (about 8 s of 1-sensor V2x data)

@@ -58,6 +58,18 @@ feeds the taps of composed recorders and identifiers; topics nobody
 subscribes to are then not published. The loop closes in the I/O thread:
 read, estimate, command, send, with no middleware hop (``maglev-lab --board``).
 
+V4x PC control (``firmware: v4x_pc``, ROS-free loop in
+:mod:`~maglev_ros.hardware.v4x_pc_poller`): the driver pings the board at
+start (no answer, or a port that cannot be opened: one line naming the port
+and the firmware, exit status 2), then polls it ``poll_rate`` times a second
+(default 1000 Hz): each step sends 01 (sensors), 02 (currents) and 03 (the
+newest command's pair differences) together and reads the three replies. The
+field published is the board's processed one (``/diagnostics``: field kind),
+the currents the board's measured ones; each sample is stamped with the host's
+system clock when the sensor reply arrived. The firmware has no watchdog: the
+coils are reset (04) on a command timeout, when disabled, on shutdown, after a
+link error and at every (re)connection (docs/boards.md).
+
 QoS: sensor fields and currents are RELIABLE, KEEP_LAST 1000 (every sample
 must arrive for identification; 1000 samples = 0.2 s at 5 kHz); the command
 subscription is BEST_EFFORT, KEEP_LAST 10, which matches both reliable and
@@ -67,6 +79,7 @@ best-effort publishers.
 from __future__ import annotations
 
 import math
+import sys
 import threading
 import time
 
@@ -89,11 +102,13 @@ from maglev_ros.hardware.driver_config import (
     DriverConfigError,
     driver_config,
 )
-from maglev_ros.hardware.driver_health import DriverHealth, driver_counters
+from maglev_ros.hardware.driver_health import FIELD_KINDS, DriverHealth, driver_counters
 from maglev_ros.hardware.packet import WATCHDOG_S
 from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE
-from maglev_ros.hardware.serial_link import Backoff, SerialLink
+from maglev_ros.hardware.serial_link import Backoff, LinkError, SerialLink
 from maglev_ros.hardware.v2x_stream import DecoderStats
+from maglev_ros.hardware.v4x_pc_link import V4xPcLink
+from maglev_ros.hardware.v4x_pc_poller import DEFAULT_POLL_RATE, REPLY_TIMEOUT_S, V4xPcPoller
 from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.contract import (  # shared with the simulator
     COMMAND_QOS,
@@ -117,16 +132,23 @@ __all__ = [
     'DriverConfig',
     'DriverNode',
     'DriverParameterError',
+    'BoardNotFoundError',
     'build_config',
     'main',
 ]
 
 NODE_NAME = 'maglev_driver'
 WARN_THROTTLE_S = 1.0  # s between repeated warnings of one kind
+MAX_POLL_RATE = 5000.0  # Hz: the V4x PC-control board samples every 200 us
+GIL_SWITCH_S = 0.0002  # s, the interpreter's switch interval while a V4x PC board is polled
 
 
 class DriverParameterError(NodeParameterError):
     """A driver parameter has an invalid value."""
+
+
+class BoardNotFoundError(DriverParameterError):
+    """The port holds no board answering as the firmware parameter says (V4x PC control)."""
 
 
 def _positive(name: str, value: float) -> float:
@@ -141,7 +163,9 @@ def _positive_or_zero(name: str, value: float) -> float:
 
 def _firmware(name: str, value: str) -> str:
     if value not in DEFAULT_BAUD:
-        raise DriverParameterError(f"{name} must be 'v2x' or 'v4x', got {value!r}")
+        raise DriverParameterError(
+            f"{name} must be 'v2x', 'v4x' or 'v4x_pc' (V4x PC control), got {value!r}"
+        )
     return value
 
 
@@ -175,6 +199,15 @@ def _read_interval(name: str, value: float) -> float:
     return value
 
 
+def _poll_rate(name: str, value: float) -> float:
+    if not (value == 0 or 100.0 <= value <= MAX_POLL_RATE):
+        raise DriverParameterError(
+            f'{name} must be 0 (as fast as the board answers) or in 100 .. '
+            f'{MAX_POLL_RATE:g} Hz (the board samples at 5 kHz), got {value!r}'
+        )
+    return value
+
+
 def _frames(name: str, value: tuple[str, ...]) -> tuple[str, ...]:
     return tuple(f for f in value if f)  # empty strings: the default frame
 
@@ -185,7 +218,10 @@ PARAMETERS = ParameterTable(
     {
         'port': Param('/dev/ttyACM0', 'serial device path (a udev symlink is best)', check=_port),
         'firmware': Param(
-            'v2x', "board firmware family: 'v2x' (binary) or 'v4x' (text)", check=_firmware
+            'v2x',
+            "board firmware: 'v2x' (binary stream), 'v4x' (text, read only) or 'v4x_pc' "
+            '(V4x PC control, COBS request/response)',
+            check=_firmware,
         ),
         'baudrate': Param(0, 'baud rate; 0: 9600 for v2x, 115200 for v4x', check=_baudrate),
         'n_sensors': Param(
@@ -242,6 +278,12 @@ PARAMETERS = ParameterTable(
             's, shortest time between reads of the port (0: every burst as it arrives; '
             '0.002: two 1 ms bursts per read, less CPU, up to 2 ms more latency)',
             check=_read_interval,
+        ),
+        'poll_rate': Param(
+            DEFAULT_POLL_RATE,
+            'v4x_pc: Hz, steps (read field and currents, write the command) per second; '
+            '0: as fast as the board answers',
+            check=_poll_rate,
         ),
         'intra_process': Param(
             False,
@@ -312,27 +354,44 @@ class DriverNode(Node):
         self.config = cfg = build_config(PARAMETERS.declare(self))
         self.add_on_set_parameters_callback(PARAMETERS.on_set(self, build_config))
         self._v2x = cfg.firmware == 'v2x'
+        self._pc = cfg.firmware == 'v4x_pc'  # V4x PC control: polled, commands as pairs
         self.guard = CommandGuard(
             cfg.scaling,
             cfg.current_limit,
             cfg.command_timeout,
             enabled=cfg.start_enabled,
-            read_only=not self._v2x,
+            read_only=cfg.firmware == 'v4x',
+            pairs=self._pc,
         )
-        self.stream = BoardStream(
-            cfg.firmware,
-            cfg.n_sensors,
-            cfg.scaling,
-            confirm_records=cfg.confirm_records,
-            read_interval=cfg.read_interval,
-        )
-        self.link = BoardLink(
-            SerialLink(cfg.port, cfg.baudrate),
-            self.stream,
-            Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay),
-            self.get_logger(),
-            writes=self._v2x,
-        )
+        backoff = Backoff(cfg.reconnect_min_delay, cfg.reconnect_max_delay)
+        self._switch_interval = None  # the interpreter's, while a V4x PC-control loop runs
+        if self._pc:
+            # each step waits for the board's reply: a thread holding the GIL would hand
+            # it back only after the switch interval (default 5 ms), capping the poll rate
+            self._switch_interval = sys.getswitchinterval()
+            sys.setswitchinterval(min(self._switch_interval, GIL_SWITCH_S))
+            self.stream = None
+            self.link = V4xPcPoller(
+                V4xPcLink(cfg.port, timeout=REPLY_TIMEOUT_S),
+                backoff,
+                self.get_logger(),
+                poll_rate=cfg.poll_rate,
+            )
+        else:
+            self.stream = BoardStream(
+                cfg.firmware,
+                cfg.n_sensors,
+                cfg.scaling,
+                confirm_records=cfg.confirm_records,
+                read_interval=cfg.read_interval,
+            )
+            self.link = BoardLink(
+                SerialLink(cfg.port, cfg.baudrate),
+                self.stream,
+                backoff,
+                self.get_logger(),
+                writes=self._v2x,
+            )
         self.health = DriverHealth(cfg.firmware, time.monotonic())
         self._field_pubs = [
             self.create_publisher(MagneticField, field_topic(k), SENSOR_QOS)
@@ -358,24 +417,39 @@ class DriverNode(Node):
         self.create_service(SetBool, ENABLE_SERVICE, self._on_enable)
         self.create_timer(min(0.02, cfg.command_timeout / 4), self._check_timeout)
         self.create_timer(cfg.diagnostics_period, self._publish_diagnostics)
-        kind = 'raw sensor fields' if self._v2x else 'fields after on-board baseline removal'
-        self.get_logger().info(
-            f'{cfg.firmware} board on {cfg.port}, {cfg.n_sensors} sensor(s), publishing {kind}; '
-            f'{cfg.scaling.counts_per_ampere:.1f} counts/A, limit {cfg.current_limit:.3f} A, '
-            f'{"enabled" if self.enabled else "disabled"}'
-        )
         # compiled kernels load (0.5 to 1.5 s holding the GIL) now, not in the I/O thread
-        self.stream.warm_up()
-        self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, self.stream.n_values)))
+        if self.stream is not None:
+            self.stream.warm_up()
+        self._serialiser.serialise(np.zeros(1, np.int64), np.zeros((1, 3 * cfg.n_sensors + 4)))
         self._stop = threading.Event()
         self._closed = False
         self._io = threading.Thread(target=self._io_loop, name='maglev-driver-io', daemon=True)
         if open_port:
-            self._io.start()
+            self.start()
+        # after start: a V4x PC-control board that is not there gives one line only
+        polled = f', polled at {cfg.poll_rate:g} Hz' if self._pc and cfg.poll_rate else ''
+        self.get_logger().info(
+            f'{cfg.firmware} board on {cfg.port}, {cfg.n_sensors} sensor(s), publishing fields: '
+            f'{FIELD_KINDS[cfg.firmware]}{polled}; '
+            f'{cfg.scaling.counts_per_ampere:.1f} counts/A, limit {cfg.current_limit:.3f} A, '
+            f'{"enabled" if self.enabled else "disabled"}'
+        )
 
     def start(self) -> None:
-        """Open the port and start the I/O thread (if ``open_port`` was False; idempotent)."""
+        """Open the port and start the I/O thread (if ``open_port`` was False; idempotent).
+
+        Raises
+        ------
+        BoardNotFoundError
+            V4x PC control: the port cannot be opened or nothing answers the
+            ping (the message names the port and the firmware expected).
+        """
         if self._io.ident is None and not self._closed:
+            if self._pc:  # a board that is not there is a wrong parameter: say so, exit
+                try:
+                    self.link.open()
+                except LinkError as err:
+                    raise BoardNotFoundError(f'{err} (parameters port, firmware)') from None
             self._io.start()
 
     # -- state ------------------------------------------------------------------
@@ -427,8 +501,12 @@ class DriverNode(Node):
     # -- commands ---------------------------------------------------------------
 
     def _send(self, counts: np.ndarray) -> None:
-        """Send PWM counts (shape (4,)) as one packet (V2x); count failures."""
+        """Send PWM counts (shape (4,)): one packet (V2x), the next step's 03 (V4x PC)."""
         self.link.send(counts)
+
+    def _zero_locked(self) -> None:
+        """Zero the coils (V2x: zero packet; V4x PC control: 04); caller holds the lock."""
+        self.link.send_zero(self.guard.zero)
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         self._take_command(msg.data)
@@ -444,9 +522,8 @@ class DriverNode(Node):
 
     def _on_enable(self, request: SetBool.Request, response: SetBool.Response) -> SetBool.Response:
         with self._lock:
-            zero = self.guard.set_enabled(request.data)
-            if zero is not None:
-                self._send(zero)
+            if self.guard.set_enabled(request.data) is not None:
+                self._zero_locked()
         response.success = True
         response.message = 'enabled' if self.enabled else 'disabled: zero currents sent'
         self.get_logger().info(f'driver {response.message}')
@@ -457,7 +534,7 @@ class DriverNode(Node):
             age = self.guard.check_timeout(time.monotonic_ns())
             if age is None:
                 return
-            self._send(self.guard.zero)
+            self._zero_locked()
         self.get_logger().warning(
             f'no valid command for {age:.3f} s > {self.config.command_timeout} s: '
             'zero currents sent',
@@ -466,7 +543,7 @@ class DriverNode(Node):
 
     def _send_zero(self) -> None:
         with self._lock:
-            self._send(self.guard.zero)
+            self._zero_locked()
 
     # -- composition (intra_process) ---------------------------------------------
 
@@ -578,7 +655,10 @@ class DriverNode(Node):
     # -- shutdown ---------------------------------------------------------------
 
     def close(self) -> None:
-        """Stop the I/O thread, send zero currents (V2x) and close the port (idempotent)."""
+        """Stop the I/O thread, zero the coils and close the port (idempotent).
+
+        V2x: a zero packet; V4x PC control: the link's close sends ``04``.
+        """
         if self._closed:
             return
         self._closed = True
@@ -592,6 +672,9 @@ class DriverNode(Node):
     def destroy_node(self) -> None:
         """Close the board link (zero currents first), then destroy the node."""
         self.close()
+        if self._switch_interval is not None:
+            sys.setswitchinterval(self._switch_interval)
+            self._switch_interval = None
         for topic, obj in self._intra:
             intra_process.unregister(self.context, topic, obj)
         self._intra = []

@@ -97,3 +97,35 @@ def test_physics_plant_arguments(argv, match, capsys):
     assert main(argv) == 2
     lines = capsys.readouterr().err.splitlines()
     assert len(lines) == 1 and match in lines[0]
+
+
+def test_v4x_pc_board_sensor_must_exist(capsys):
+    assert main(['--firmware', 'v4x_pc', '--board-sensor', '3']) == 2
+    lines = capsys.readouterr().err.splitlines()
+    assert len(lines) == 1 and "--board-sensor must be below the plant's 3 sensors" in lines[0]
+
+
+def test_v4x_pc_physics_board_answers_and_stops_on_signal(tmp_path):
+    from maglev_ros.hardware.v4x_pc_link import V4xPcLink
+
+    link = tmp_path / 'ttyMAGGY0'
+    cmd = [sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc']
+    cmd += ['--magnet', 'fixed', '--link', str(link)]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == str(link)
+        with V4xPcLink(str(link), open_timeout=30.0) as board:  # set-up takes about 3.8 s
+            board.command(85, 0)  # 1 A on x+, -1 A on x-
+            currents = board.read_currents()
+            assert currents[0] == pytest.approx(1.0, abs=0.01)
+            assert currents[1] == pytest.approx(-1.0, abs=0.01)
+            field, _ = board.read_sensors()
+            # the magnet was absent at power-up: the board reports its field (tens of mT)
+            assert 1.0 < abs(field[2]) < 200.0
+        proc.send_signal(signal.SIGTERM)
+        assert proc.wait(timeout=10.0) == 0
+        assert proc.stderr.read() == ''
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

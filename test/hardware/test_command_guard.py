@@ -88,3 +88,35 @@ def test_read_only_board_ignores_commands():
 def test_invalid_settings_name_the_value(limit, timeout, name):
     with pytest.raises(ValueError, match=f'{name} must be a positive finite number'):
         CommandGuard(CurrentScaling(1000.0), limit, timeout)
+
+
+def test_limit_above_full_scale_is_refused():
+    scaling = CurrentScaling(1000.0)  # full scale 4.096 A
+    with pytest.raises(
+        ValueError, match=r'current_limit 5 A is above the board\'s full scale 4.096 A'
+    ):
+        CommandGuard(scaling, 5.0, 0.1)
+    guard = CommandGuard(scaling, 4.096, 0.1)  # exactly the full scale is fine
+    with pytest.raises(ValueError, match='current_limit 4.2 A is above'):
+        guard.configure(4.2, 0.1)
+    assert guard.current_limit == 4.096
+
+
+def test_pairs_guard_sends_the_antisymmetric_part():
+    from maglev_ros.hardware.command_guard import pair_differences
+    from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE
+
+    scaling = CurrentScaling.from_supply(12.0, 4.0, full_scale=V4X_PWM_FULL_SCALE)  # 85 /A
+    guard = CommandGuard(scaling, 2.0, 0.1, enabled=True, pairs=True)
+    decision = guard.command([1.0, -1.0, -0.5, 0.5], 0)
+    assert decision.counts.tolist() == [85, -85, -42, 42]  # -42.5 rounds half to even
+    assert pair_differences(decision.counts) == (85, -42)
+    assert guard.common_mode_dropped == 0
+    decision = guard.command([1.0, 0.0, 0.0, 0.0], 1)  # half of it is common mode
+    assert decision.counts.tolist() == [42, -42, 0, 0]
+    assert guard.common_mode_dropped == 1
+    decision = guard.command([3.0, -3.0, 0.0, 0.0], 2)  # clamped to the 2 A limit
+    assert decision.counts.tolist() == [170, -170, 0, 0]
+    assert guard.counters['commands_clamped'] == 1
+    with pytest.raises(ValueError, match='must be'):
+        pair_differences([1, 2, 0, 0])

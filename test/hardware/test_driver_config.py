@@ -54,8 +54,28 @@ def test_explicit_values_win():
             r"sensor_frames must name 2 frames \(n_sensors\), got \['a'\]",
         ),
         ({'reconnect_max_delay': 0.1}, r'reconnect_max_delay must be >= reconnect_min_delay'),
+        (
+            {'firmware': 'v4x_pc'},
+            r'n_sensors must be 1 for the V4x PC-control firmware \(it reads one sensor\), got 2',
+        ),
     ],
 )
 def test_settings_that_do_not_fit_together(changes, match):
     with pytest.raises(DriverConfigError, match=match):
         driver_config(VALUES | changes)
+
+
+def test_limit_above_full_scale_names_both():
+    with pytest.raises(
+        DriverConfigError, match=r"current_limit 3.5 A is above the board's full scale 3 A"
+    ):
+        driver_config(VALUES | {'current_limit': 3.5})  # 4096 counts at 1365 counts/A
+
+
+def test_v4x_pc_scaling_is_8_bit():
+    config = driver_config(VALUES | {'firmware': 'v4x_pc', 'n_sensors': 1, 'sensor_frames': ()})
+    assert config.scaling.full_scale == 255
+    assert config.scaling.counts_per_ampere == pytest.approx(85.0)
+    assert config.current_limit == pytest.approx(3.0)
+    assert config.baudrate == 115200
+    assert config.poll_rate == 1000.0  # the default: above the lab host's 800 Hz

@@ -55,3 +55,15 @@ def test_rejects_bad_counts_per_ampere():
         ScalingError, match='counts_per_ampere must be a positive finite number, got 0.0'
     ):
         CurrentScaling(0.0)
+
+
+def test_v4x_full_scale_is_8_bit():
+    from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE
+
+    scaling = CurrentScaling.from_supply(12.0, 4.0, full_scale=V4X_PWM_FULL_SCALE)
+    assert scaling.counts_per_ampere == pytest.approx(85.0)  # 255 * 4 ohm / 12 V
+    assert scaling.max_current == pytest.approx(3.0)
+    assert scaling.to_counts([1.0, -3.0, 5.0, -0.0059]).tolist() == [85, -255, 255, -1]
+    assert scaling.to_counts([0.0058]).tolist() == [0]  # 0.49 counts
+    with pytest.raises(ScalingError, match='full_scale must be >= 1'):
+        CurrentScaling(85.0, 0)

@@ -51,3 +51,29 @@ def test_read_write_and_unplug():
                     link.read()
             assert np.all(decoder.stats.dropped_bytes == 0)
         assert not link.is_open
+
+
+def test_write_times_out_only_when_the_device_takes_no_data(monkeypatch):
+    import os
+    import tty
+
+    master, slave = os.openpty()
+    tty.setraw(slave)
+    path = os.ttyname(slave)
+    try:
+        with SerialLink(path, 115200, write_timeout=0.2) as link:
+            # a complete write is no timeout, however late the thread runs afterwards
+            clock = iter([0.0, 10.0, 20.0, 30.0])
+            monkeypatch.setattr(time, 'monotonic', lambda: next(clock))
+            link.write(b'\x01\x02\x03')
+            monkeypatch.undo()
+            assert os.read(master, 16) == b'\x01\x02\x03'
+            # nobody reads the other end: the buffer fills, then the write times out
+            start = time.monotonic()
+            with pytest.raises(LinkError, match=f'{path} failed: the device took no data'):
+                for _ in range(10_000):
+                    link.write(bytes(1024))
+            assert 0.15 < time.monotonic() - start < 30.0
+    finally:
+        os.close(master)
+        os.close(slave)

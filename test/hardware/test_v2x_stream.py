@@ -304,3 +304,95 @@ def test_lost_head_bytes_cost_only_that_record(n_sensors, lost, chunk):
     assert_records(out, stamps, field, pwm, kept)
     np.testing.assert_array_equal(out.time_us, stamps[kept])
     assert decoder.stats.clock_restarts == 0
+
+
+# -- a corrupted link: one fault every 7 ms for 20 s of stream --------------------------
+
+
+def smooth_stream(n, pwm_mode, seed):
+    """Records as the board sends them: smooth fields, the PWM of the last command."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(n) * 200e-6
+    stamps = 1_000_000 + 200 * np.arange(n, dtype=np.int64)
+    base = np.stack(
+        [2 * np.sin(2 * np.pi * 3 * t), 1.5 * np.cos(2 * np.pi * 2 * t), 40 + 3 * np.sin(t)], 1
+    )
+    field = (base[:, None, :] + rng.normal(0, 0.05, (n, 1, 3))).astype(np.float32)
+    if pwm_mode == 'zero':  # the board applied 0
+        pwm = np.zeros((n, 4), np.int16)
+    else:  # a new command every 1 ms (5 records)
+        commands = rng.integers(-1500, 1501, (n // 5 + 1, 4)).astype(np.int16)
+        pwm = np.repeat(commands, 5, axis=0)[:n]
+    return stamps, field, pwm
+
+
+def corrupt(stamps, field, pwm, kind, seed, every=35):
+    """Damage one record every ``every`` records (7 ms); return the stream, damaged indices."""
+    rng = np.random.default_rng(seed)
+    parts = record_bytes(stamps, field, pwm)
+    size = len(parts[0])
+    damaged = set()
+    for at in range(every // 2, len(parts) - 2, every):
+        if kind == 'copy':  # a partial copy of a recent record, inserted
+            src = parts[at - int(rng.integers(1, 5))]
+            a = int(rng.integers(0, size - 1))
+            parts[at] = src[a : int(rng.integers(a + 1, size))] + parts[at]
+        elif kind == 'repeat':  # the last bytes sent, sent again (up to 2 records)
+            m = int(rng.integers(1, 2 * size))
+            parts[at] = b''.join(parts[at - 3 : at])[-m:] + parts[at]
+        elif kind == 'head':  # a record lost its first bytes
+            parts[at] = parts[at][int(rng.integers(1, size)) :]
+            damaged.add(at)
+        elif kind == 'tail':  # a record lost its last bytes
+            parts[at] = parts[at][: -int(rng.integers(1, size))]
+            damaged.add(at)
+    return b''.join(parts), damaged
+
+
+def check_published(batch, stamps, field, pwm, damaged):
+    """Every sample is one intact record, byte for byte, once and in order; return lost."""
+    index = np.searchsorted(stamps, batch.time_us)
+    assert np.all(index < len(stamps))
+    np.testing.assert_array_equal(stamps[index], batch.time_us)  # a stamp of the stream
+    np.testing.assert_array_equal(batch.field_mT, field[index])  # its own fields
+    np.testing.assert_array_equal(batch.pwm, pwm[index])  # and PWM
+    assert not damaged & set(index.tolist())  # no damaged record (foreign bytes)
+    assert np.all(np.diff(batch.time_us) > 0)  # none twice, none out of order
+    return len(stamps) - len(damaged) - len(index)
+
+
+@pytest.mark.parametrize('pwm_mode', ['zero', 'commands'])
+@pytest.mark.parametrize('kind', ['copy', 'repeat', 'head', 'tail'])
+def test_one_fault_every_7_ms_for_20_s(kind, pwm_mode):
+    n = 100_000  # 20 s at 5 kHz
+    stamps, field, pwm = smooth_stream(n, pwm_mode, seed=1)
+    stream, damaged = corrupt(stamps, field, pwm, kind, seed=2)
+    decoder = RecordDecoder(1)
+    batches = []
+    for k in range(0, len(stream), 120):  # one 5-record burst per read, as the driver reads
+        if pwm_mode == 'commands':
+            decoder.note_command(pwm[min(k // 24, n - 1)])  # the command just sent
+        batches.append(decoder.feed(stream[k : k + 120]))
+    batches.append(decoder.flush())
+    batch = RecordBatch(*(np.concatenate(parts) for parts in zip(*batches, strict=True)))
+    lost = check_published(batch, stamps, field, pwm, damaged)
+    assert lost <= 0.01 * (n - len(damaged))
+    faults = len(range(17, n - 2, 35))
+    assert decoder.stats.resyncs == faults  # every fault shows: 143 per second
+    assert decoder.stats.dropped_bytes > 0
+
+
+@pytest.mark.parametrize('low_byte', range(0, 11))
+def test_record_that_lost_its_first_byte_is_never_taken(low_byte):
+    # the first byte of record 20 (its timestamp's low byte) lost, the PWM all zero:
+    # the held record's last byte (0) and the rest of record 20 look like a record
+    stamps, field, pwm = smooth_stream(40, 'zero', seed=3)
+    stamps = (stamps - stamps[20]) + (1_000_000 & ~0xFF) + low_byte
+    parts = record_bytes(stamps, field, pwm)
+    parts[20] = parts[20][1:]
+    decoder = RecordDecoder(1)
+    batch = decode_all(decoder, b''.join(parts), chunk_sizes=120)
+    lost = check_published(batch, stamps, field, pwm, {20})
+    assert lost <= 1  # the record before it may go too: prefer losing to a wrong sample
+    if lost:
+        assert decoder.stats.overlaps == 1

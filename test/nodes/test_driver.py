@@ -433,7 +433,10 @@ def test_config_defaults():
 @pytest.mark.parametrize(
     'changes, match',
     [
-        ({'firmware': 'v5x'}, "firmware must be 'v2x' or 'v4x', got 'v5x'"),
+        (
+            {'firmware': 'v5x'},
+            r"firmware must be 'v2x', 'v4x' or 'v4x_pc' \(V4x PC control\), got 'v5x'",
+        ),
         ({'port': ''}, 'port must be a device path'),
         ({'n_sensors': 0}, 'n_sensors must be in 1 .. 64, got 0'),
         ({'sensor_frames': ['a', 'b']}, r'sensor_frames must name 1 frames'),
@@ -524,7 +527,7 @@ def test_main_exits_2_on_invalid_parameters(domain):
     proc = _driver_process('/dev/null', domain, 'firmware:=v9x')
     out, _ = proc.communicate(timeout=30.0)
     assert proc.returncode == 2
-    assert "firmware must be 'v2x' or 'v4x', got 'v9x'" in out
+    assert "firmware must be 'v2x', 'v4x' or 'v4x_pc' (V4x PC control), got 'v9x'" in out
 
 
 def test_unexpected_error_zeroes_the_coils_and_reconnects(make_harness, monkeypatch):
