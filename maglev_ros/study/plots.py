@@ -1,0 +1,332 @@
+"""Figures of a study: success rate per parameter, region of attraction, worst runs.
+
+Success rates carry 95 % Wilson intervals (the runs per point are few).
+Curves are drawn per combination of the study's choices (parameter set,
+controller, estimator, any grid value that is not a number).
+"""
+
+from __future__ import annotations
+
+import os
+from collections import defaultdict
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .parameters import PARAMETERS
+from .results import wilson_interval
+from .spec import StudySpec
+
+__all__ = ['plot_region_of_attraction', 'plot_success', 'plot_worst', 'plot_study', 'worst_rows']
+
+_X0 = ('x0.x', 'x0.y', 'x0.z', 'x0.alpha', 'x0.beta')
+_SCALE = {'m': (1e3, 'mm'), 'T': (1e3, 'mT'), 'rad': (1e3, 'mrad'), '1': (100.0, '%')}
+_RANK = {'crashed': 0, 'left_bounds': 1, 'not_settled': 2, 'error': 3, 'ok': 4}
+
+
+def _numeric(key: str) -> bool:
+    return PARAMETERS[key].kind in ('number', 'integer')
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _scale(key: str) -> tuple[float, str]:
+    unit = PARAMETERS[key].unit
+    factor, shown = _SCALE.get(unit, (1.0, unit))
+    label = key if not shown or shown == 'SI' else f'{key} ({shown})'
+    return factor, label
+
+
+def _groups(spec: StudySpec, rows: Sequence[dict[str, Any]], exclude: Sequence[str]):
+    """Rows grouped by the grid's non-numeric keys (and numeric ones not in ``exclude``)."""
+    keys = [k for k in spec.grid if k not in exclude and len(spec.grid[k]) > 1]
+    keys = [k for k in keys if not _numeric(k)] + [k for k in keys if _numeric(k)]
+    out: dict[tuple, list] = defaultdict(list)
+    for r in rows:
+        out[tuple(r[k] for k in keys)].append(r)
+    return keys, out
+
+
+def _label(keys: Sequence[str], group: tuple) -> str:
+    if not keys:
+        return 'all runs'
+    return ', '.join(
+        str(v) if not isinstance(v, float) else f'{k.split(".")[-1]} {v:g}'
+        for k, v in zip(keys, group, strict=True)
+    )
+
+
+def _rates(values: np.ndarray, success: np.ndarray, bins: np.ndarray | None):
+    if bins is None:
+        points = np.unique(values)
+        index = np.searchsorted(points, values)
+    else:
+        index = np.clip(np.digitize(values, bins) - 1, 0, len(bins) - 2)
+        points = 0.5 * (bins[:-1] + bins[1:])
+    x, rate, low, high = [], [], [], []
+    for i, p in enumerate(points):
+        sel = index == i
+        n = int(sel.sum())
+        if not n:
+            continue
+        k = int(success[sel].sum())
+        lo, hi = wilson_interval(k, n)
+        x.append(p)
+        rate.append(k / n)
+        low.append(lo)
+        high.append(hi)
+    return np.array(x), np.array(rate), np.array(low), np.array(high)
+
+
+def plot_success(
+    spec: StudySpec, rows: Sequence[dict[str, Any]], key: str, path: str | os.PathLike
+) -> Path:
+    """Success rate against one numeric parameter (binned when drawn at random).
+
+    Parameters
+    ----------
+    spec : StudySpec
+    rows : sequence of dict
+    key : str
+        The parameter.
+    path : path
+        PNG to write.
+    """
+    plt = _pyplot()
+    factor, xlabel = _scale(key)
+    bins = None
+    if key in spec.random:
+        values = np.array([r[key] for r in rows], dtype=float)
+        bins = np.linspace(values.min(), values.max(), 11) if values.size else None
+    keys, groups = _groups(spec, rows, [key])
+    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
+    for group, members in sorted(groups.items(), key=lambda g: str(g[0])):
+        v = np.array([r[key] for r in members], dtype=float)
+        s = np.array([bool(r['success']) for r in members])
+        x, rate, low, high = _rates(v, s, bins)
+        line = ax.plot(x * factor, 100 * rate, 'o-', label=_label(keys, group))[0]
+        ax.fill_between(x * factor, 100 * low, 100 * high, color=line.get_color(), alpha=0.15)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel('success rate (%)')
+    ax.set_ylim(-3, 103)
+    ax.grid(alpha=0.3)
+    n_per = len(rows) // max(len(groups), 1)
+    ax.set_title(
+        f'{spec.name}: success against {key}\n({n_per} runs per curve, 95 % intervals shaded)',
+        fontsize=10,
+    )
+    if len(groups) > 1:
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_region_of_attraction(
+    spec: StudySpec, rows: Sequence[dict[str, Any]], path: str | os.PathLike
+) -> Path | None:
+    """Region of attraction over the initial-state grid (a rate curve for one axis, a map for two).
+
+    Parameters
+    ----------
+    spec : StudySpec
+    rows : sequence of dict
+    path : path
+        PNG to write.
+
+    Returns
+    -------
+    Path or None
+        None when the study has no initial-state grid.
+    """
+    axes_keys = [k for k in _X0 if k in spec.grid and len(spec.grid[k]) > 1]
+    if not axes_keys:
+        return None
+    plt = _pyplot()
+    keys, groups = _groups(spec, rows, axes_keys)
+    items = sorted(groups.items(), key=lambda g: str(g[0]))
+    if len(axes_keys) == 1:
+        key = axes_keys[0]
+        factor, xlabel = _scale(key)
+        fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
+        for group, members in items:
+            v = np.array([r[key] for r in members], dtype=float)
+            s = np.array([bool(r['success']) for r in members])
+            x, rate, low, high = _rates(v, s, None)
+            recovered = x[rate == 1.0]
+            reach = (
+                f' (all recover within +-{_reach(x, rate) * factor:.2f})' if recovered.size else ''
+            )
+            line = ax.plot(x * factor, 100 * rate, 'o-', ms=3, label=_label(keys, group) + reach)[
+                0
+            ]
+            ax.fill_between(x * factor, 100 * low, 100 * high, color=line.get_color(), alpha=0.12)
+        ax.set_xlabel(f'initial offset {xlabel}')
+        ax.set_ylabel('recovered (%)')
+        ax.set_ylim(-3, 103)
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+        ax.set_title(
+            f'{spec.name}: region of attraction ({spec.repeats} seeds per point)', fontsize=10
+        )
+    else:
+        kx, ky = axes_keys[:2]
+        fx, lx = _scale(kx)
+        fy, ly = _scale(ky)
+        n = len(items)
+        cols = min(n, 3)
+        fig, axs = plt.subplots(
+            (n + cols - 1) // cols,
+            cols,
+            figsize=(4.2 * cols, 3.6 * ((n + cols - 1) // cols)),
+            dpi=100,
+            squeeze=False,
+        )
+        xs, ys = np.array(spec.grid[kx], float), np.array(spec.grid[ky], float)
+        for ax, (group, members) in zip(axs.flat, items, strict=False):
+            grid = np.zeros((len(ys), len(xs)))
+            count = np.zeros_like(grid)
+            for r in members:
+                i, j = list(ys).index(r[ky]), list(xs).index(r[kx])
+                grid[i, j] += bool(r['success'])
+                count[i, j] += 1
+            image = ax.pcolormesh(
+                xs * fx,
+                ys * fy,
+                100 * grid / np.maximum(count, 1),
+                cmap='RdYlGn',
+                vmin=0,
+                vmax=100,
+                shading='nearest',
+            )
+            ax.set_xlabel(lx)
+            ax.set_ylabel(ly)
+            ax.set_title(_label(keys, group), fontsize=9)
+        for ax in list(axs.flat)[n:]:
+            ax.set_visible(False)
+        fig.colorbar(image, ax=axs, label='recovered (%)', shrink=0.8)
+        fig.suptitle(f'{spec.name}: region of attraction', fontsize=10)
+    if len(axes_keys) == 1:
+        fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def _reach(x: np.ndarray, rate: np.ndarray) -> float:
+    """Largest |offset| such that every grid offset with a smaller |offset| fully recovered."""
+    order = np.argsort(np.abs(x))
+    reach = 0.0
+    for i in order:
+        if rate[i] < 1.0:
+            break
+        reach = abs(x[i])
+    return reach
+
+
+def worst_rows(rows: Sequence[dict[str, Any]], count: int = 4) -> list[dict[str, Any]]:
+    """Return the ``count`` worst runs: crashes first (earliest first), then by settled RMS.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+    count : int
+    """
+
+    def badness(r):
+        rms = max(r['rms_x'], r['rms_y'], r['rms_z'])
+        crash = r['crash_time'] if r['crash_time'] == r['crash_time'] else np.inf
+        return (_RANK.get(r['outcome'], 4), crash, -(rms if rms == rms else np.inf), r['run'])
+
+    return sorted((r for r in rows if r['outcome'] != 'error'), key=badness)[:count]
+
+
+def plot_worst(
+    spec: StudySpec, rows: Sequence[dict[str, Any]], path: str | os.PathLike, count: int = 4
+) -> Path | None:
+    """Trajectories of the worst runs, simulated again here from their seeds.
+
+    Parameters
+    ----------
+    spec : StudySpec
+    rows : sequence of dict
+    path : path
+        PNG to write.
+    count : int
+        Runs shown.
+    """
+    from .loop_adapter import simulate
+
+    worst = worst_rows(rows, count)
+    if not worst:
+        return None
+    plt = _pyplot()
+    fig, axs = plt.subplots(3, 1, figsize=(7.0, 6.4), dpi=100, sharex=True)
+    bound = spec.success.bound * 1e3
+    for r in worst:
+        values = {k: r[k] for k in spec.keys}
+        result = simulate(values, r['seed'], spec.duration)
+        err = result.position_error() * 1e3
+        varied = ', '.join(
+            f'{k.split(".")[-1]}={r[k]:.3g}' if isinstance(r[k], float) else f'{r[k]}'
+            for k in [*spec.grid, *spec.random]
+        )
+        label = f'run {r["run"]} ({r["outcome"]}): {varied}'
+        for i, ax in enumerate(axs):
+            ax.plot(result.t, err[:, i], lw=1, label=label if i == 0 else None)
+    for ax, name in zip(axs, ('x', 'y', 'z - z_eq'), strict=True):
+        ax.axhline(bound, color='k', ls=':', lw=0.8)
+        ax.axhline(-bound, color='k', ls=':', lw=0.8)
+        ax.set_ylabel(f'{name} (mm)')
+        ax.set_ylim(-2.5 * bound, 2.5 * bound)
+        ax.grid(alpha=0.3)
+    axs[-1].set_xlabel('t (s)')
+    axs[0].legend(fontsize=7, loc='upper right')
+    axs[0].set_title(f'{spec.name}: the {len(worst)} worst runs (dotted: the bound)', fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+    return Path(path)
+
+
+def plot_study(
+    spec: StudySpec, rows: Sequence[dict[str, Any]], out: str | os.PathLike
+) -> list[Path]:
+    """Write every figure of a study into ``out``; return the files.
+
+    Parameters
+    ----------
+    spec : StudySpec
+    rows : sequence of dict
+    out : path
+        Directory.
+    """
+    out = Path(out)
+    paths = []
+    if not rows:
+        return paths
+    roa = plot_region_of_attraction(spec, rows, out / 'region_of_attraction.png')
+    if roa:
+        paths.append(roa)
+    for key in [*spec.grid, *spec.random]:
+        if key in _X0 or not _numeric(key):
+            continue
+        if key in spec.grid and len(spec.grid[key]) < 2:
+            continue
+        paths.append(
+            plot_success(spec, rows, key, out / f'success_vs_{key.replace(".", "_")}.png')
+        )
+    worst = plot_worst(spec, rows, out / 'worst_runs.png')
+    if worst:
+        paths.append(worst)
+    return paths
