@@ -58,7 +58,13 @@ class StudyRun:
 
 
 class StudyInterrupted(KeyboardInterrupt):
-    """The study was interrupted; its finished rows are kept (``partial``)."""
+    """The study was interrupted; its finished rows are kept.
+
+    Parameters
+    ----------
+    partial : StudyRun
+        The runs done, their table already written.
+    """
 
     def __init__(self, partial: StudyRun):
         super().__init__(f'{len(partial.rows)} of {partial.total} runs done')

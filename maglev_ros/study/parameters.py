@@ -89,7 +89,11 @@ def _command_delay(value: Any) -> str | None:
 
 def _one_of(choices: tuple) -> Callable[[Any], str | None]:
     def check(value: Any) -> str | None:
-        return None if value in choices else f'expected one of {", ".join(choices)}, got {value!r}'
+        return (
+            None
+            if value in choices
+            else f'expected one of {", ".join(map(str, choices))}, got {value!r}'
+        )
 
     return check
 

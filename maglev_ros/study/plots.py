@@ -72,7 +72,7 @@ def _rates(values: np.ndarray, success: np.ndarray, bins: np.ndarray | None):
     else:
         index = np.clip(np.digitize(values, bins) - 1, 0, len(bins) - 2)
         points = 0.5 * (bins[:-1] + bins[1:])
-    x, rate, low, high = [], [], [], []
+    x, rate, low, high, count = [], [], [], [], []
     for i, p in enumerate(points):
         sel = index == i
         n = int(sel.sum())
@@ -84,7 +84,8 @@ def _rates(values: np.ndarray, success: np.ndarray, bins: np.ndarray | None):
         rate.append(k / n)
         low.append(lo)
         high.append(hi)
-    return np.array(x), np.array(rate), np.array(low), np.array(high)
+        count.append(n)
+    return np.array(x), np.array(rate), np.array(low), np.array(high), np.array(count)
 
 
 def plot_success(
@@ -108,22 +109,21 @@ def plot_success(
         values = np.array([r[key] for r in rows], dtype=float)
         bins = np.linspace(values.min(), values.max(), 11) if values.size else None
     keys, groups = _groups(spec, rows, [key])
-    fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
+    counts: list[int] = []
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
     for group, members in sorted(groups.items(), key=lambda g: str(g[0])):
         v = np.array([r[key] for r in members], dtype=float)
         s = np.array([bool(r['success']) for r in members])
-        x, rate, low, high = _rates(v, s, bins)
-        line = ax.plot(x * factor, 100 * rate, 'o-', label=_label(keys, group))[0]
-        ax.fill_between(x * factor, 100 * low, 100 * high, color=line.get_color(), alpha=0.15)
+        x, rate, low, high, n = _rates(v, s, bins)
+        line = ax.plot(x * factor, 100 * rate, 'o-', ms=4, label=_label(keys, group))[0]
+        if n.size and n.min() >= 10:  # intervals say little with a handful of runs per point
+            ax.fill_between(x * factor, 100 * low, 100 * high, color=line.get_color(), alpha=0.15)
+        counts.extend(n)
     ax.set_xlabel(xlabel)
     ax.set_ylabel('success rate (%)')
     ax.set_ylim(-3, 103)
     ax.grid(alpha=0.3)
-    n_per = len(rows) // max(len(groups), 1)
-    ax.set_title(
-        f'{spec.name}: success against {key}\n({n_per} runs per curve, 95 % intervals shaded)',
-        fontsize=10,
-    )
+    ax.set_title(f'{spec.name}: success against {key}\n{_criterion(spec, counts)}', fontsize=9)
     if len(groups) > 1:
         ax.legend(fontsize=8)
     fig.tight_layout()
@@ -158,27 +158,27 @@ def plot_region_of_attraction(
     if len(axes_keys) == 1:
         key = axes_keys[0]
         factor, xlabel = _scale(key)
-        fig, ax = plt.subplots(figsize=(6.4, 4.0), dpi=100)
+        counts: list[int] = []
+        fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
         for group, members in items:
             v = np.array([r[key] for r in members], dtype=float)
             s = np.array([bool(r['success']) for r in members])
-            x, rate, low, high = _rates(v, s, None)
+            x, rate, _, _, n = _rates(v, s, None)
+            counts.extend(n)
             recovered = x[rate == 1.0]
+            unit = xlabel.rpartition('(')[2].rstrip(')')
             reach = (
-                f' (all recover within +-{_reach(x, rate) * factor:.2f})' if recovered.size else ''
+                f': every run from |offset| <= {_reach(x, rate) * factor:.2f} {unit} recovers'
+                if recovered.size
+                else ': no offset recovers'
             )
-            line = ax.plot(x * factor, 100 * rate, 'o-', ms=3, label=_label(keys, group) + reach)[
-                0
-            ]
-            ax.fill_between(x * factor, 100 * low, 100 * high, color=line.get_color(), alpha=0.12)
+            ax.plot(x * factor, 100 * rate, 'o-', ms=3, label=_label(keys, group) + reach)
         ax.set_xlabel(f'initial offset {xlabel}')
         ax.set_ylabel('recovered (%)')
         ax.set_ylim(-3, 103)
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
-        ax.set_title(
-            f'{spec.name}: region of attraction ({spec.repeats} seeds per point)', fontsize=10
-        )
+        ax.set_title(f'{spec.name}\n{_criterion(spec, counts)}', fontsize=9)
     else:
         kx, ky = axes_keys[:2]
         fx, lx = _scale(kx)
@@ -223,6 +223,28 @@ def plot_region_of_attraction(
     return Path(path)
 
 
+def _value_text(key: str, value: Any) -> str:
+    if not isinstance(value, (int, float)) or isinstance(value, bool):
+        return str(value)
+    factor, label = _scale(key)
+    unit = label.rpartition('(')[2].rstrip(')') if '(' in label else ''
+    return f'{key.split(".")[-1]} {value * factor:.3g} {unit}'.rstrip()
+
+
+def _criterion(spec: StudySpec, counts: Sequence[int]) -> str:
+    """One line: the success criterion and the runs per point."""
+    c = spec.success
+    per = (
+        f'{min(counts)}-{max(counts)}'
+        if counts and min(counts) != max(counts)
+        else (f'{counts[0]}' if counts else '0')
+    )
+    return (
+        f'{per} runs per point. Success: no crash, |x|, |y|, |z - z_eq| <= {c.bound * 1e3:g} mm,'
+        f'\nand their RMS <= {c.rms * 1e3:g} mm over the last {c.window:g} s'
+    )
+
+
 def _reach(x: np.ndarray, rate: np.ndarray) -> float:
     """Largest |offset| such that every grid offset with a smaller |offset| fully recovered."""
     order = np.argsort(np.abs(x))
@@ -234,13 +256,19 @@ def _reach(x: np.ndarray, rate: np.ndarray) -> float:
     return reach
 
 
-def worst_rows(rows: Sequence[dict[str, Any]], count: int = 4) -> list[dict[str, Any]]:
+def worst_rows(
+    rows: Sequence[dict[str, Any]], count: int = 4, by: Sequence[str] = ()
+) -> list[dict[str, Any]]:
     """Return the ``count`` worst runs: crashes first (earliest first), then by settled RMS.
 
     Parameters
     ----------
     rows : sequence of dict
     count : int
+    by : sequence of str
+        Keys whose every combination should show its worst run first (the
+        controllers, the parameter sets, ...), so one failure mode does not
+        fill the figure.
     """
 
     def badness(r):
@@ -248,7 +276,15 @@ def worst_rows(rows: Sequence[dict[str, Any]], count: int = 4) -> list[dict[str,
         crash = r['crash_time'] if r['crash_time'] == r['crash_time'] else np.inf
         return (_RANK.get(r['outcome'], 4), crash, -(rms if rms == rms else np.inf), r['run'])
 
-    return sorted((r for r in rows if r['outcome'] != 'error'), key=badness)[:count]
+    ranked = sorted((r for r in rows if r['outcome'] != 'error'), key=badness)
+    if not by:
+        return ranked[:count]
+    firsts: dict[tuple, dict] = {}
+    for r in ranked:  # the worst of each group first, then the worst of the rest
+        firsts.setdefault(tuple(r[k] for k in by), r)
+    chosen = sorted(firsts.values(), key=badness)[:count]
+    rest = [r for r in ranked if all(r is not c for c in chosen)]
+    return chosen + rest[: count - len(chosen)]
 
 
 def plot_worst(
@@ -267,7 +303,8 @@ def plot_worst(
     """
     from .loop_adapter import simulate
 
-    worst = worst_rows(rows, count)
+    by = [k for k in spec.grid if not _numeric(k) and len(spec.grid[k]) > 1]
+    worst = worst_rows(rows, count, by)
     if not worst:
         return None
     plt = _pyplot()
@@ -277,10 +314,7 @@ def plot_worst(
         values = {k: r[k] for k in spec.keys}
         result = simulate(values, r['seed'], spec.duration)
         err = result.position_error() * 1e3
-        varied = ', '.join(
-            f'{k.split(".")[-1]}={r[k]:.3g}' if isinstance(r[k], float) else f'{r[k]}'
-            for k in [*spec.grid, *spec.random]
-        )
+        varied = ', '.join(_value_text(k, r[k]) for k in [*spec.grid, *spec.random])
         label = f'run {r["run"]} ({r["outcome"]}): {varied}'
         for i, ax in enumerate(axs):
             ax.plot(result.t, err[:, i], lw=1, label=label if i == 0 else None)

@@ -8,7 +8,7 @@ A study is a YAML mapping::
     repeats: 1              # runs per grid point (Monte Carlo draws)
     success:                # optional; these are the defaults
       bound: 3.0e-3         # m: |x|, |y|, |z - z_eq| never exceed it
-      window: 0.3           # s: the RMS is taken over the run's last window
+      window: 0.3           # s: the RMS is taken over the run's last window (at most duration)
       rms: 1.0e-4           # m: largest RMS per axis over that window
     fixed:                  # one value each
       params: maggy_v2
@@ -62,7 +62,8 @@ class SuccessCriterion:
     bound : float
         m: no crash, and |x|, |y|, |z - z_eq| stay at most this over the whole run.
     window : float
-        s: the settled RMS is taken over the run's last ``window``.
+        s: the settled RMS is taken over the run's last ``window`` (default 0.3 s,
+        or the whole run when shorter).
     rms : float
         m: the largest RMS of x, y and z - z_eq over that window.
     """
@@ -295,7 +296,7 @@ def _from_mapping(data: Any, source: str) -> StudySpec:
     for key in raw:
         if key not in ('bound', 'window', 'rms'):
             raise StudyError(f'success.{key}: unknown key (allowed: bound, window, rms)')
-    defaults = SuccessCriterion()
+    defaults = SuccessCriterion(window=min(SuccessCriterion.window, duration))
     success = SuccessCriterion(
         **{
             k: _number(raw.get(k, getattr(defaults, k)), f'success.{k}', positive=True)
