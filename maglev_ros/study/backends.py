@@ -9,8 +9,11 @@ they import :func:`~maglev_ros.study.runner.run_task` themselves.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
+import signal
+import threading
 import warnings
 from collections.abc import Callable, Iterable, Iterator
 from typing import Any
@@ -24,6 +27,24 @@ def local_worker_count() -> int:
         return len(os.sched_getaffinity(0))
     except AttributeError:  # not Linux
         return os.cpu_count() or 1
+
+
+@contextlib.contextmanager
+def _workers_ignore_sigint():
+    """Start worker processes with SIGINT ignored (they inherit it), then restore it.
+
+    Ctrl-C in a terminal reaches every process of the group: this process
+    stops the study (it cancels the runs and closes the cluster); the workers
+    would each print a KeyboardInterrupt traceback.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 class SerialBackend:
@@ -80,7 +101,7 @@ class DaskBackend:
         self._cluster = None
         if scheduler is None:
             n = workers or local_worker_count()
-            with warnings.catch_warnings():
+            with warnings.catch_warnings(), _workers_ignore_sigint():
                 # the scheduler's HTTP routes take another port when 8787 is busy: harmless
                 warnings.filterwarnings('ignore', message='Port .* is already in use')
                 self._cluster = LocalCluster(

@@ -174,5 +174,6 @@ def run_study(
             if on_row is not None:
                 on_row(row)
     except KeyboardInterrupt:
+        rows.update(journal.read())  # a row may be in the journal and not yet here
         raise StudyInterrupted(finish()) from None
     return finish()

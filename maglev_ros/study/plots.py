@@ -23,11 +23,29 @@ __all__ = ['plot_region_of_attraction', 'plot_success', 'plot_worst', 'plot_stud
 
 _X0 = ('x0.x', 'x0.y', 'x0.z', 'x0.alpha', 'x0.beta')
 _SCALE = {'m': (1e3, 'mm'), 'T': (1e3, 'mT'), 'rad': (1e3, 'mrad'), '1': (100.0, '%')}
-_RANK = {'crashed': 0, 'left_bounds': 1, 'not_settled': 2, 'error': 3, 'ok': 4}
+_RANK = {
+    'crashed': 0,
+    'controller_off': 1,
+    'left_bounds': 2,
+    'not_settled': 3,
+    'error': 4,
+    'ok': 5,
+}
 
 
 def _numeric(key: str) -> bool:
     return PARAMETERS[key].kind in ('number', 'integer')
+
+
+def _style(j: int) -> dict:
+    """Marker, size and line style of curve ``j``: curves on top of each other stay visible."""
+    return {
+        'marker': 'osD^v<>'[j % 7],
+        'ms': max(9 - 1.5 * j, 3),
+        'mfc': 'none',
+        'ls': ('-', '--', '-.', ':')[j % 4],
+        'lw': 1.3,
+    }
 
 
 def _pyplot():
@@ -60,7 +78,7 @@ def _label(keys: Sequence[str], group: tuple) -> str:
     if not keys:
         return 'all runs'
     return ', '.join(
-        str(v) if not isinstance(v, float) else f'{k.split(".")[-1]} {v:g}'
+        str(v) if isinstance(v, str) else f'{k.split(".")[-1]} {v}'
         for k, v in zip(keys, group, strict=True)
     )
 
@@ -111,11 +129,11 @@ def plot_success(
     keys, groups = _groups(spec, rows, [key])
     counts: list[int] = []
     fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
-    for group, members in sorted(groups.items(), key=lambda g: str(g[0])):
+    for j, (group, members) in enumerate(sorted(groups.items(), key=lambda g: str(g[0]))):
         v = np.array([r[key] for r in members], dtype=float)
         s = np.array([bool(r['success']) for r in members])
         x, rate, low, high, n = _rates(v, s, bins)
-        line = ax.plot(x * factor, 100 * rate, 'o-', ms=4, label=_label(keys, group))[0]
+        line = ax.plot(x * factor, 100 * rate, label=_label(keys, group), **_style(j))[0]
         if n.size and n.min() >= 10:  # intervals say little with a handful of runs per point
             ax.fill_between(x * factor, 100 * low, 100 * high, color=line.get_color(), alpha=0.15)
         counts.extend(n)
@@ -160,7 +178,7 @@ def plot_region_of_attraction(
         factor, xlabel = _scale(key)
         counts: list[int] = []
         fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=100)
-        for group, members in items:
+        for j, (group, members) in enumerate(items):
             v = np.array([r[key] for r in members], dtype=float)
             s = np.array([bool(r['success']) for r in members])
             x, rate, _, _, n = _rates(v, s, None)
@@ -172,7 +190,7 @@ def plot_region_of_attraction(
                 if recovered.size
                 else ': no offset recovers'
             )
-            ax.plot(x * factor, 100 * rate, 'o-', ms=3, label=_label(keys, group) + reach)
+            ax.plot(x * factor, 100 * rate, label=_label(keys, group) + reach, **_style(j))
         ax.set_xlabel(f'initial offset {xlabel}')
         ax.set_ylabel('recovered (%)')
         ax.set_ylim(-3, 103)

@@ -18,7 +18,7 @@ from .spec import SuccessCriterion
 __all__ = ['METRICS', 'OUTCOMES', 'judge', 'run_task']
 
 #: Outcomes, best first.
-OUTCOMES = ('ok', 'not_settled', 'left_bounds', 'crashed', 'error')
+OUTCOMES = ('ok', 'not_settled', 'left_bounds', 'controller_off', 'crashed', 'error')
 #: Result columns after the parameters: name -> (unit, meaning).
 METRICS = {
     'success': ('', 'the run met the success criterion'),
@@ -51,8 +51,13 @@ def judge(result, duration: float, success: SuccessCriterion) -> dict[str, Any]:
         rms = np.full(3, np.nan)
     else:
         rms = np.sqrt(np.mean(tail**2, axis=0))
+    off = not result.crashed and result.level.size and result.level[-1] != 'OK'
     if result.crashed:
         outcome = 'crashed'
+    elif off:
+        # the controller gave up (magnet lost, input stale, no magnet): coils at zero;
+        # a magnet left exactly at the plant's equilibrium would otherwise pass
+        outcome = 'controller_off'
     elif excursion > success.bound:
         outcome = 'left_bounds'
     elif not np.all(rms <= success.rms):
@@ -70,8 +75,13 @@ def judge(result, duration: float, success: SuccessCriterion) -> dict[str, Any]:
         'rms_z': float(rms[2]),
         'crash_time': crash_time,
         'peak_current': float(np.max(np.abs(currents))) if currents.size else 0.0,
-        'reason': result.reason,
+        'reason': result.reason if not off else _last_controller_message(result),
     }
+
+
+def _last_controller_message(result) -> str:
+    said = [m for m in result.messages if m.startswith('controller')]
+    return said[-1] if said else f'controller {result.level[-1]} at the end'
 
 
 def run_task(task: RunTask) -> dict[str, Any]:

@@ -50,3 +50,13 @@ def test_a_loop_that_cannot_be_built_is_an_error_row():
     row = run_task(task)
     assert row['outcome'] == 'error' and not row['success']
     assert row['reason'].startswith('LQR design failed')
+
+
+def test_a_controller_that_gave_up_is_no_success_even_with_the_magnet_still():
+    # V4's equilibrium moves 3.1 mm with a 20 % stronger magnet: the LQR declares the
+    # magnet lost at once and the magnet rests, exactly still, at the plant's equilibrium
+    result = simulate({'params': 'maggy_v4', 'plant.polarization': 0.2}, 5, 0.1)
+    verdict = judge(result, 0.1, SuccessCriterion(window=0.05))
+    assert verdict['max_excursion'] < 1e-9  # it would pass on the position alone
+    assert verdict['outcome'] == 'controller_off' and not verdict['success']
+    assert verdict['reason'].startswith('controller ERROR: magnet lost')
