@@ -14,15 +14,16 @@ set-up, 1 s each, x offset 0.3 mm, a seed each):
   first (every worker imports the package and builds the loop once), so the
   timings are of the runs, not of the start-up.
 
-Direct and serial are interleaved over ``--rounds`` rounds and compared per
-round (the median ratio is printed), so a change in the others' load hits
-both. Printed: the overhead per run of the serial study and of the 1-worker
-cluster against direct, and the speed-up of 2 workers over 1. The machine is
-shared: the speed-up is bounded by the cores the others leave free.
+Direct and serial are interleaved over ``--rounds`` rounds, in alternating
+order, and compared per round (the median ratio is printed), so a change in
+the others' load hits both; both reuse one loop built before the timing.
+Printed: the overhead per run of the serial study and of the 1-worker
+cluster against direct, and the speed-up of 2 workers over 1. The machine
+is shared: the speed-up is bounded by the cores the others leave free.
 
 Usage::
 
-    python benchmarks/study.py                 # 12 runs of 1 s, 3 rounds
+    python benchmarks/study.py                 # 12 runs of 1 s, 4 rounds
     python benchmarks/study.py --runs 24 --duration 1.0 --rounds 2
 """
 
@@ -52,12 +53,18 @@ def _spec(runs: int, duration: float, seed: int):
     )
 
 
+_LOOP = []
+
+
 def _direct(spec) -> float:
+    """Time the runs of ``spec`` on one loop built once (the first call builds it)."""
     from maglev_ros.control.closed_loop import make_closed_loop
     from maglev_ros.physics import linearize, make_model
 
-    model = make_model('maggy_v2')
-    loop = make_closed_loop(model, linear=linearize(model))
+    if not _LOOP:
+        model = make_model('maggy_v2')
+        _LOOP.append(make_closed_loop(model, linear=linearize(model)))
+    loop = _LOOP[0]
     x0 = loop.simulator.model.hover_state(loop.z_eq)
     x0[0] += 0.3e-3
     tasks = plan_runs(spec)
@@ -86,7 +93,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument('--runs', type=int, default=12)
     parser.add_argument('--duration', type=float, default=1.0, help='s per run')
-    parser.add_argument('--rounds', type=int, default=3)
+    parser.add_argument('--rounds', type=int, default=4)
     args = parser.parse_args(argv)
     n = args.runs
     with tempfile.TemporaryDirectory() as tmp:
@@ -96,8 +103,12 @@ def main(argv=None) -> int:
         ratios = []
         for r in range(args.rounds):
             spec = _spec(n, args.duration, 100 + r)
-            direct = _direct(spec)
-            serial = _study(spec, SerialBackend(), tmp / f'serial{r}')
+            if r % 2:  # alternate the order: a change of the others' load hits both
+                serial = _study(spec, SerialBackend(), tmp / f'serial{r}')
+                direct = _direct(spec)
+            else:
+                direct = _direct(spec)
+                serial = _study(spec, SerialBackend(), tmp / f'serial{r}')
             ratios.append(serial / direct)
             print(
                 f'round {r}: direct {direct / n * 1e3:.0f} ms/run, serial study '

@@ -242,7 +242,9 @@ def plot_region_of_attraction(
 
 
 def _value_text(key: str, value: Any) -> str:
-    if not isinstance(value, (int, float)) or isinstance(value, bool):
+    if isinstance(value, bool):
+        return f'{key.split(".")[-1]} {value}'
+    if not isinstance(value, (int, float)):
         return str(value)
     factor, label = _scale(key)
     unit = label.rpartition('(')[2].rstrip(')') if '(' in label else ''
