@@ -1,38 +1,38 @@
 """maglev-study: speed-up of 2 local workers over 1, and the overhead per run against the loop.
 
-One run of this script measures, on the same runs (V2, KF + LQR, the board's
-set-up, 1 s each, x offset 0.3 mm, a seed each):
+One run of this script measures, on V2 with the KF + LQR in the board's
+set-up (each run from an x offset of 0.3 mm, a seed each):
 
-* **direct**: the baseline, the closed loop called by hand --
-  :func:`~maglev_ros.control.closed_loop.make_closed_loop` once, then for each
-  seed ``loop.simulator.seed = seed; loop.run(1.0, x0=...)`` -- in this process;
-* **serial study**: the same runs through the study machinery in this process
-  (``run_study`` on the serial back end: planning, the loop adapter and its
-  cache, judging, the journal, the table);
-* **Dask, 1 worker** and **Dask, 2 workers**: the same runs on an embedded
-  local cluster (what ``maglev-study`` does by default), each cluster warmed
-  first (every worker imports the package and builds the loop once), so the
-  timings are of the runs, not of the start-up.
-
-Direct and serial are interleaved over ``--rounds`` rounds, in alternating
-order, and compared per round (the median ratio is printed), so a change in
-the others' load hits both; both reuse one loop built before the timing.
-Printed: the overhead per run of the serial study and of the 1-worker
-cluster against direct, and the speed-up of 2 workers over 1. The machine
-is shared: the speed-up is bounded by the cores the others leave free.
+* **the loop called directly**, the baseline: ``make_closed_loop`` once, then
+  ``loop.simulator.seed = seed; loop.run(duration, x0=...)`` per run -- the
+  cost of a ``--duration`` run;
+* **the study around a run**: ``--short`` runs of one sample (0.2 ms), whose
+  loop costs next to nothing, through the study (``run_study``: planning,
+  the adapter and its cache, judging, the journal, the table) serially and on
+  one Dask worker, minus the same runs called directly: what the study adds to
+  each run, measured without the noise of long runs on a shared machine;
+  the overhead per run is that over the direct run's cost;
+* **the speed-up** of 2 local Dask workers over 1 on ``--runs`` runs (wall
+  time; the CPU time per run, the workers' and this process's through
+  ``Client.run``, shows whether the 2 workers did the same work). Each
+  cluster is warmed first (every worker imports the package and builds the
+  loop), so the timings are of the runs, not of the start-up. The machine is
+  shared: the speed-up is bounded by the cores the others leave free, and the
+  load average is printed.
 
 Usage::
 
-    python benchmarks/study.py                 # 12 runs of 1 s, 4 rounds
-    python benchmarks/study.py --runs 24 --duration 1.0 --rounds 2
+    python benchmarks/study.py                 # 12 runs of 1 s, 200 of one sample
+    python benchmarks/study.py --runs 24 --short 500
 """
 
 from __future__ import annotations
 
 import argparse
-import statistics
+import os
 import tempfile
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from maglev_ros.study import DaskBackend, SerialBackend, plan_runs, run_study, study_from_mapping
@@ -56,7 +56,23 @@ def _spec(runs: int, duration: float, seed: int):
 _LOOP = []
 
 
-def _direct(spec) -> float:
+@dataclass
+class Timing:
+    """Wall and CPU time of a batch of runs, s (CPU: this process and the workers)."""
+
+    wall: float
+    cpu: float
+
+
+def _cpu(backend=None) -> float:
+    """CPU time of this process, plus the workers' when given, s."""
+    total = time.process_time()
+    if backend is not None:
+        total += sum(backend.client.run(time.process_time).values())
+    return total
+
+
+def _direct(spec) -> Timing:
     """Time the runs of ``spec`` on one loop built once (the first call builds it)."""
     from maglev_ros.control.closed_loop import make_closed_loop
     from maglev_ros.physics import linearize, make_model
@@ -68,19 +84,20 @@ def _direct(spec) -> float:
     x0 = loop.simulator.model.hover_state(loop.z_eq)
     x0[0] += 0.3e-3
     tasks = plan_runs(spec)
-    start = time.perf_counter()
+    cpu, wall = time.process_time(), time.perf_counter()
     for task in tasks:
         loop.simulator.seed = task.seed
         loop.run(spec.duration, x0=x0)
-    return time.perf_counter() - start
+    return Timing(time.perf_counter() - wall, time.process_time() - cpu)
 
 
-def _study(spec, backend, out: Path) -> float:
-    start = time.perf_counter()
+def _study(spec, backend, out: Path, dask: bool = False) -> Timing:
+    cpu, wall = _cpu(backend if dask else None), time.perf_counter()
     result = run_study(spec, out, backend)
-    elapsed = time.perf_counter() - start
+    wall = time.perf_counter() - wall
+    cpu = _cpu(backend if dask else None) - cpu
     assert result.complete
-    return elapsed
+    return Timing(wall, cpu)
 
 
 def _warm(backend, n: int) -> None:
@@ -88,58 +105,62 @@ def _warm(backend, n: int) -> None:
     backend.client.run(simulate, {'params': 'maggy_v2'}, 0, 0.01)
 
 
+def _ms(t: Timing, n: int) -> str:
+    return f'wall {t.wall / n * 1e3:.0f} ms/run, CPU {t.cpu / n * 1e3:.0f} ms/run'
+
+
 def main(argv=None) -> int:
     """Measure and print the overhead per run and the 2-over-1 speed-up."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument('--runs', type=int, default=12)
+    parser.add_argument('--runs', type=int, default=12, help='runs of --duration')
+    parser.add_argument('--short', type=int, default=200, help='runs of one sample')
     parser.add_argument('--duration', type=float, default=1.0, help='s per run')
-    parser.add_argument('--rounds', type=int, default=4)
     args = parser.parse_args(argv)
-    n = args.runs
+    n, k = args.runs, args.short
+    tiny = 1.0 / 5000  # one sample: the run costs almost nothing, the machinery all
+    loads = [os.getloadavg()[0]]
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         simulate({'params': 'maggy_v2'}, 0, 0.01)  # compile and build once
         _direct(_spec(1, 0.01, 0))
-        ratios = []
-        for r in range(args.rounds):
-            spec = _spec(n, args.duration, 100 + r)
-            if r % 2:  # alternate the order: a change of the others' load hits both
-                serial = _study(spec, SerialBackend(), tmp / f'serial{r}')
-                direct = _direct(spec)
-            else:
-                direct = _direct(spec)
-                serial = _study(spec, SerialBackend(), tmp / f'serial{r}')
-            ratios.append(serial / direct)
-            print(
-                f'round {r}: direct {direct / n * 1e3:.0f} ms/run, serial study '
-                f'{serial / n * 1e3:.0f} ms/run (x{serial / direct:.3f})',
-                flush=True,
-            )
+        run_study(_spec(2, tiny, 1), tmp / 'warm', SerialBackend())  # imports, first table
+        direct = _direct(_spec(n, args.duration, 100))
+        print(f'direct, {n} runs of {args.duration:g} s: {_ms(direct, n)}', flush=True)
+        short_direct = _direct(_spec(k, tiny, 101))
+        short_serial = _study(_spec(k, tiny, 101), SerialBackend(), tmp / 'short_serial')
+        print(f'{k} runs of one sample: direct {_ms(short_direct, k)}', flush=True)
+        print(f'{k} runs of one sample: serial study {_ms(short_serial, k)}', flush=True)
         timings = {}
         for workers in (1, 2):
             with DaskBackend(workers=workers) as backend:
                 _warm(backend, workers)
-                spec = _spec(n, args.duration, 200)
-                direct = _direct(spec)
-                timings[workers] = _study(spec, backend, tmp / f'dask{workers}')
+                if workers == 1:
+                    short_dask = _study(_spec(k, tiny, 101), backend, tmp / 'short_dask', True)
+                    print(
+                        f'{k} runs of one sample: 1 Dask worker {_ms(short_dask, k)}', flush=True
+                    )
+                timings[workers] = _study(
+                    _spec(n, args.duration, 200), backend, tmp / f'dask{workers}', dask=True
+                )
+                loads.append(os.getloadavg()[0])
                 print(
-                    f'Dask, {workers} worker(s): {timings[workers] / n * 1e3:.0f} ms/run '
-                    f'(direct in this process just before: {direct / n * 1e3:.0f} ms/run)',
+                    f'Dask, {workers} worker(s), {n} runs of {args.duration:g} s: '
+                    f'{_ms(timings[workers], n)} (CPU: the workers and this process)',
                     flush=True,
                 )
-                if workers == 1:
-                    dask_ratio = timings[1] / direct
-    ratio = statistics.median(ratios)
-    print(f'\n{n} runs of {args.duration:g} s (V2, KF + LQR):')
+    per_run = direct.wall / n
+    serial_cost = (short_serial.wall - short_direct.wall) / k
+    dask_cost = (short_dask.wall - short_direct.wall) / k
     print(
-        f'  overhead per run, serial study against the loop called directly: '
-        f'{100 * (ratio - 1):+.1f} % (median of {args.rounds} rounds)'
+        f'\nV2, KF + LQR; load average {min(loads):.1f}-{max(loads):.1f} during the run:'
+        f'\n  a {args.duration:g} s run called directly: {per_run * 1e3:.0f} ms'
+        f'\n  the study around a run (one-sample runs, study minus direct): serial '
+        f'{serial_cost * 1e3:.2f} ms, 1 Dask worker {dask_cost * 1e3:.2f} ms'
+        f'\n  overhead per {args.duration:g} s run: serial {100 * serial_cost / per_run:.2f} %, '
+        f'Dask {100 * dask_cost / per_run:.2f} %'
+        f'\n  speed-up of 2 local workers over 1: {timings[1].wall / timings[2].wall:.2f}x wall '
+        f'(CPU per run with 2: {timings[2].cpu / timings[1].cpu:.2f}x that with 1)'
     )
-    print(
-        f'  overhead per run, 1 Dask worker against the loop called directly: '
-        f'{100 * (dask_ratio - 1):+.1f} %'
-    )
-    print(f'  speed-up of 2 local workers over 1: {timings[1] / timings[2]:.2f}x')
     return 0
 
 
