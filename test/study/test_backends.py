@@ -12,7 +12,14 @@ from pathlib import Path
 import pytest
 from waiting import wait_for
 
-from maglev_ros.study import DaskBackend, SerialBackend, load_study, run_study, run_task
+from maglev_ros.study import (
+    DaskBackend,
+    SerialBackend,
+    load_study,
+    plan_runs,
+    run_study,
+    run_task,
+)
 
 REPO = Path(__file__).resolve().parents[2]
 DASK = Path(sys.executable).parent / 'dask'
@@ -114,8 +121,6 @@ def test_an_unreachable_scheduler_is_one_clear_error():
 
 def test_serial_backend_rows_equal_a_direct_call(small_study, tmp_path):
     spec = load_study(small_study)
-    from maglev_ros.study import plan_runs
-
     tasks = plan_runs(spec)[:2]
     rows = list(SerialBackend().imap_unordered(run_task, tasks))
-    assert rows == [run_task(t) for t in tasks]
+    assert json.dumps(rows) == json.dumps([run_task(t) for t in tasks])

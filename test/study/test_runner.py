@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import math
 
+import pytest
+
 from maglev_ros.study import plan_runs, run_task, study_from_mapping
 from maglev_ros.study.loop_adapter import simulate
 from maglev_ros.study.runner import judge
@@ -42,6 +44,7 @@ def test_a_row_holds_run_seed_values_and_metrics():
     assert row['run'] == 0 and row['seed'] == task.seed and row['controller'] == 'pd'
 
 
+@pytest.mark.filterwarnings('ignore::RuntimeWarning')  # scipy, on the absurd weight
 def test_a_loop_that_cannot_be_built_is_an_error_row():
     spec = study_from_mapping(
         {'duration': 0.05, 'fixed': {'controller': 'lqr', 'controller.position_scale': 1e-30}}
