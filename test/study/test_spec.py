@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
-import pytest
+import re
+from pathlib import Path
 
-from maglev_ros.study import StudyError, load_study, study_from_mapping
+import pytest
+import yaml
+
+from maglev_ros.study import StudyError, load_study, plan_runs, study_from_mapping
 from maglev_ros.study.spec import SuccessCriterion
 
 
@@ -93,3 +97,14 @@ def test_a_missing_duration_and_bad_yaml(tmp_path):
         load_study(path)
     with pytest.raises(StudyError, match=r'study file not found'):
         load_study(tmp_path / 'none.yaml')
+
+
+def test_the_documented_study_and_the_shipped_studies_are_valid():
+    docs = Path(__file__).resolve().parents[2] / 'docs'
+    text = (docs / 'studies.md').read_text()
+    block = re.search(r'## A study file\n\n```yaml\n(.*?)```', text, re.S).group(1)
+    assert plan_runs(study_from_mapping(yaml.safe_load(block), 'studies.md'))
+    files = sorted((docs / 'studies').glob('*.yaml'))
+    assert len(files) >= 4
+    for path in files:
+        assert plan_runs(load_study(path)), path
