@@ -206,12 +206,13 @@ def plot_region_of_attraction(
         fig, axs = plt.subplots(
             (n + cols - 1) // cols,
             cols,
-            figsize=(4.2 * cols, 3.6 * ((n + cols - 1) // cols)),
+            figsize=(4.0 * cols + 1.2, 3.4 * ((n + cols - 1) // cols) + 0.9),
             dpi=100,
             squeeze=False,
+            layout='constrained',
         )
         xs, ys = np.array(spec.grid[kx], float), np.array(spec.grid[ky], float)
-        for ax, (group, members) in zip(axs.flat, items, strict=False):
+        for index, (ax, (group, members)) in enumerate(zip(axs.flat, items, strict=False)):
             grid = np.zeros((len(ys), len(xs)))
             count = np.zeros_like(grid)
             for r in members:
@@ -228,12 +229,14 @@ def plot_region_of_attraction(
                 shading='nearest',
             )
             ax.set_xlabel(lx)
-            ax.set_ylabel(ly)
+            if index % cols == 0:
+                ax.set_ylabel(ly)
             ax.set_title(_label(keys, group), fontsize=9)
         for ax in list(axs.flat)[n:]:
             ax.set_visible(False)
         fig.colorbar(image, ax=axs, label='recovered (%)', shrink=0.8)
-        fig.suptitle(f'{spec.name}: region of attraction', fontsize=10)
+        counts = [int(c) for c in np.ravel(count)] if items else [0]
+        fig.suptitle(f'{spec.name}: region of attraction\n{_criterion(spec, counts)}', fontsize=9)
     if len(axes_keys) == 1:
         fig.tight_layout()
     fig.savefig(path)

@@ -284,7 +284,7 @@ def _from_mapping(data: Any, source: str) -> StudySpec:
     for key in data:
         if key not in _TOP:
             raise StudyError(f'{key}: unknown key (allowed: {", ".join(_TOP)})')
-    name = data.get('name', Path(source).stem)
+    name = data.get('name', Path(source).stem if source != '<memory>' else 'study')
     if not isinstance(name, str) or not name:
         raise StudyError(f'name: expected a non-empty string, got {name!r}')
     if 'duration' not in data:
