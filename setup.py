@@ -15,6 +15,7 @@ CLI_TOOLS = {
     'lab': 'maglev_ros.cli.lab:main',
     'bag2data': 'maglev_ros.cli.bag2data:main',
     'calibrate': 'maglev_ros.cli.calibrate:main',
+    'study': 'maglev_ros.cli.study:main',
 }
 # ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.
 NODES: dict[str, str] = {
@@ -63,8 +64,12 @@ setup(
         'tqdm>=4.60',
         # SINDy with control inputs (maglev_ros.sysid.sindy)
         'pysindy>=2.0',
+        # maglev-study's engine: an embedded local cluster by default, or a lab's cluster
+        'dask[distributed]>=2024.1',
     ],
     extras_require={
+        # maglev-study writes Parquet with it (CSV without)
+        'parquet': ['pyarrow>=14'],
         # The PyPI build of ROS 2 Jazzy's Python side, for machines without ROS.
         # A real ROS 2 install keeps its own rclpy: do not install this extra there.
         'ros': [
@@ -74,6 +79,7 @@ setup(
         'test': [
             'pytest>=7',
             'pytest-timeout>=2',
+            'pyarrow>=14',
             'magpylib>=5',
             'colcon-common-extensions',
             # pinned: the formatter's output changes between minor versions

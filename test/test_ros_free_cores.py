@@ -17,6 +17,7 @@ CORES = (
     'maglev_ros.hardware.driver_health',
     'maglev_ros.cdr',
     'maglev_ros.cdr.batch',
+    'maglev_ros.study',
 )
 ROS = ('rclpy', 'sensor_msgs', 'std_msgs', 'nav_msgs', 'rosgraph_msgs', 'builtin_interfaces')
 
