@@ -3,7 +3,8 @@
 Every fenced block is preceded by an HTML comment ``<!-- readme: MARK -->``:
 
 * ``run``: a shell block (run with ``bash -e``) or a Python block (run with this
-  interpreter), from the directory of the earlier blocks;
+  interpreter), from the directory of the earlier blocks; it must exit 0, or with
+  the status its mark names (``run (exits 1: why)``: then the last command's);
 * ``run-after-install``: the first "Two commands" block; its install part is what
   created this environment, the command after the last ``&&`` is run;
 * ``output ...``: what that command prints (compared line by line; the timing in
@@ -56,14 +57,21 @@ def _environment():
     return env
 
 
-def _run(cmd, cwd, env, line):
+def _run(cmd, cwd, env, line, status=0):
     done = subprocess.run(
         cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT, check=False
     )
-    assert done.returncode == 0, (
-        f'README block at line {line} failed ({done.returncode}):\n{done.stdout}\n{done.stderr}'
+    assert done.returncode == status, (
+        f'README block at line {line} exited {done.returncode}, not {status}:\n'
+        f'{done.stdout}\n{done.stderr}'
     )
     return done
+
+
+def _status(mark: str) -> int:
+    """The exit status a ``run`` mark names (``run (exits 1: why)``), else 0."""
+    named = re.match(r'run \(exits (\d+): .+\)$', mark)
+    return int(named[1]) if named else 0
 
 
 def _same_output(printed: str, expected: str, line: int) -> None:
@@ -91,6 +99,7 @@ def test_readme_runs_as_written(tmp_path):
             _run([sys.executable, '-c', body], tmp_path, env, line)
         elif kind == 'run':
             assert lang in ('sh', 'bash'), f'README line {line}: cannot run a {lang!r} block'
-            _run(['bash', '-e', '-c', body], tmp_path, env, line)
+            status = _status(mark)  # a block of several such commands: the last one's
+            _run(['bash', '-e' if status == 0 else '+e', '-c', body], tmp_path, env, line, status)
     assert (tmp_path / 'plots' / 'x' / 'compare.png').is_file()
     assert (tmp_path / 'lab_board' / 'models.json').is_file()
