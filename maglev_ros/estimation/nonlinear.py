@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
-__all__ = ['compiled_arguments', 'require_fast_field']
+import numpy as np
+
+from .filter_model import base_reading
+
+__all__ = ['FilterModel', 'compiled_arguments', 'require_fast_field']
 
 
 def require_fast_field(model, filter_name: str) -> None:
@@ -27,7 +31,7 @@ def require_fast_field(model, filter_name: str) -> None:
 
 
 def compiled_arguments(model) -> tuple[tuple, tuple]:
-    """Arguments of the compiled dynamics f and measurement h of the fast model.
+    """Arguments of the physics core's compiled dynamics f and measurement h.
 
     Parameters
     ----------
@@ -44,3 +48,31 @@ def compiled_arguments(model) -> tuple[tuple, tuple]:
     src, coil, rim, par, work = model.fast_arguments()
     _, _, sens, mag, _ = model.measurement_arguments()
     return (src, coil, rim, par, work), (src, coil, sens, mag, work)
+
+
+class FilterModel:
+    """The compiled f and h a nonlinear filter runs (see :mod:`.filter_model`).
+
+    Parameters
+    ----------
+    model : MaggyModel
+        A model with the fast field (the filter's private copy: its scratch
+        space is not shared).
+
+    Attributes
+    ----------
+    f_args : tuple
+        ``(src, coil, rim, par, work)``: ``physics.kernels.fast_dynamics``'s.
+    h_args : tuple
+        ``(y0, G, sens, mag, own_src, own_coil, work)``:
+        :func:`.filter_model.magnet_reading`'s.
+    """
+
+    def __init__(self, model):
+        self.f_args = tuple(model.fast_arguments())
+        _, _, sens, mag, work = model.measurement_arguments()
+        y0, G = base_reading(model)
+        own_src = np.zeros((1, 6))
+        own_src[0, 3] = mag[0]
+        own_src[0, 4] = mag[1]
+        self.h_args = (y0, G, sens, mag, own_src, np.full(1, -1, dtype=np.int64), work)
