@@ -429,7 +429,8 @@ def ukf_predict(
 ):  # pragma: no cover - jitted
     """UKF prediction: sigma points of (x, P) through f, their unscented transform plus Q.
 
-    Returns ``(x, P, sigmas_f)``.
+    Returns ``(x, P, sigmas_f)``, ``sigmas_f`` the sigma points of the
+    predicted (x, P) (filterpy draws them afresh for the update).
 
     Parameters
     ----------
@@ -489,7 +490,10 @@ def ukf_predict(
                     embed(sig[i], x_eq, reduced), u, dt, src, coil, rim, par, work, reduced, x_eq
                 )
     mean, cov = _unscented(out, Wm, Wc)
-    return mean, cov + Q, out
+    cov += Q
+    # as filterpy: the update's sigma points are drawn afresh from the prediction
+    fresh, _ = sigma_points(mean, cov, lam)
+    return mean, cov, fresh
 
 
 @njit(cache=True)
@@ -527,7 +531,7 @@ def ukf_update(
     x, P : ndarray
         Prior (the unscented transform of ``sigmas_f``, plus Q).
     sigmas_f : ndarray, shape (2 n + 1, n)
-        The predicted sigma points.
+        The sigma points of the prior (x, P).
     y : ndarray, shape (3 k,)
         Readings, T.
     u : ndarray, shape (n_s,)
