@@ -19,11 +19,13 @@ statistical linearisation the sigma points give for free (the differences of
 f across each pair of points against the Cholesky factor). Per sample: one
 evaluation of f per sigma point where RK4 takes four.
 
-Both: h depends on the pose (x, y, z, alpha, beta) only, so the Jacobian's
-velocity columns are zero, and sigma points whose pose equals the centre's
-(those spread along a velocity or a bias, the Cholesky factor being lower
-triangular) share its h; those equal to the centre in every reduced state
-(spread along a bias) share its f (exactly: the same inputs).
+Both: h and the magnetic wrench (the cost of f) depend on the pose (x, y,
+z, alpha, beta) only. So the measurement Jacobian's velocity columns are
+zero; sigma points whose pose equals the centre's (those spread along a
+velocity or a bias, the Cholesky factor being lower triangular) share its h
+and, in the fast prediction, its wrench (only the rigid-body rates are
+evaluated again), as do the EKF's Jacobian columns of the velocities and
+rates. Exactly: the same inputs, the same operations.
 """
 
 from __future__ import annotations
@@ -50,6 +52,32 @@ __all__ = [
 @njit(cache=True)
 def _rates(x12, u, src, coil, rim, par, work, reduced):  # pragma: no cover - jitted
     f = phys.fast_dynamics(x12, u, src, coil, rim, par, work)
+    n_r = reduced.shape[0]
+    out = np.empty(n_r)
+    for i in range(n_r):
+        out[i] = f[reduced[i]]
+    return out
+
+
+@njit(cache=True)
+def _wrench(x12, u, src, coil, rim, par, work):  # pragma: no cover - jitted
+    """Return the magnetic force and torque of ``fast_dynamics`` (its cost)."""
+    r = phys.rotation_matrix(x12[3], x12[4], x12[5])
+    return phys.rim_force_torque(x12, u, src, coil, rim, par, work, r)
+
+
+@njit(cache=True)
+def _rates_with(x12, wrench, par, reduced):  # pragma: no cover - jitted
+    """Reduced rates of ``fast_dynamics`` from a known wrench (the same operations)."""
+    r = phys.rotation_matrix(x12[3], x12[4], x12[5])
+    f = phys.rigid_body_rates(
+        x12,
+        wrench,
+        par[phys.P_MASS],
+        par[phys.P_IXX : phys.P_IZZ + 1],
+        int(par[phys.P_KINEMATICS]),
+        r,
+    )
     n_r = reduced.shape[0]
     out = np.empty(n_r)
     for i in range(n_r):
@@ -140,14 +168,18 @@ def ekf_predict_fast(
     n_r = reduced.shape[0]
     n = dx.shape[0]
     x12 = embed(dx, x_eq, reduced)
-    f0 = _rates(x12, u, src, coil, rim, par, work, reduced)
+    w0 = _wrench(x12, u, src, coil, rim, par, work)
+    f0 = _rates_with(x12, w0, par, reduced)
     first, last = cursor[0], cursor[0] + 1
     if cursor[0] < 0:
         first, last = 0, n_r
     for j in range(first, last):
         xp = x12.copy()
         xp[reduced[j]] += step
-        fp = _rates(xp, u, src, coil, rim, par, work, reduced)
+        if reduced[j] >= 6:  # a velocity or a rate: the same pose, the same wrench
+            fp = _rates_with(xp, w0, par, reduced)
+        else:
+            fp = _rates(xp, u, src, coil, rim, par, work, reduced)
         for i in range(n_r):
             A[i, j] = (fp[i] - f0[i]) / step
     cursor[0] = last % n_r
@@ -455,9 +487,12 @@ def ukf_predict(
     out = sig.copy()
     if fast:
         rates = np.empty((p, n_r))
+        w0 = _wrench(embed(sig[0], x_eq, reduced), u, src, coil, rim, par, work)
         for i in range(p):
             if i > 0 and _same_reduced(sig[i], sig[0], n_r):
                 rates[i] = rates[0]
+            elif _same_pose(sig[i], sig[0], reduced):  # the centre's wrench
+                rates[i] = _rates_with(embed(sig[i], x_eq, reduced), w0, par, reduced)
             else:
                 rates[i] = _rates(
                     embed(sig[i], x_eq, reduced), u, src, coil, rim, par, work, reduced
