@@ -6,7 +6,7 @@ import numpy as np
 
 from .filter_model import base_reading
 
-__all__ = ['FilterModel', 'compiled_arguments', 'require_fast_field']
+__all__ = ['FAST_RIM_POINTS', 'FilterModel', 'compiled_arguments', 'require_fast_field']
 
 
 def require_fast_field(model, filter_name: str) -> None:
@@ -50,6 +50,13 @@ def compiled_arguments(model) -> tuple[tuple, tuple]:
     return (src, coil, rim, par, work), (src, coil, sens, mag, work)
 
 
+#: Rim points of the fast prediction's force and torque (the model's: 32). The rim
+#: integral of a smooth periodic field converges exponentially in the points: against
+#: 32, 24 points change the acceleration by at most 5e-7 m/s^2 (V2) and 3e-4 m/s^2
+#: (V4) over +-2 mm and +-0.05 rad (the process noise: 0.1 m/s^2), 16 by 0.35 m/s^2 (V4).
+FAST_RIM_POINTS = 24
+
+
 class FilterModel:
     """The compiled f and h a nonlinear filter runs (see :mod:`.filter_model`).
 
@@ -63,6 +70,9 @@ class FilterModel:
     ----------
     f_args : tuple
         ``(src, coil, rim, par, work)``: ``physics.kernels.fast_dynamics``'s.
+    fast_f_args : tuple
+        The same with :data:`FAST_RIM_POINTS` rim points (when the model has
+        more): the fast prediction's f.
     h_args : tuple
         ``(y0, G, sens, mag, own_src, own_coil, work)``:
         :func:`.filter_model.magnet_reading`'s.
@@ -70,6 +80,10 @@ class FilterModel:
 
     def __init__(self, model):
         self.f_args = tuple(model.fast_arguments())
+        self.fast_f_args = self.f_args
+        if model.rim_points > FAST_RIM_POINTS:
+            coarse = model.with_options(rim_points=FAST_RIM_POINTS)
+            self.fast_f_args = tuple(coarse.fast_arguments())
         _, _, sens, mag, work = model.measurement_arguments()
         y0, G = base_reading(model)
         own_src = np.zeros((1, 6))
