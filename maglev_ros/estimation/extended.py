@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 
 from ..physics.linearization import FD_STEP
-from ..physics.simulation import _compiled
 from .base import Estimator
 from .filter_model import measurement_jacobian
 from .nonlinear import FilterModel, require_fast_field
@@ -53,7 +52,6 @@ class ExtendedEstimator(Estimator):
             self._fast = self.config.prediction == 'fast'
             fm = self.filter_model
             self._f_args = fm.fast_f_args if self._fast else fm.f_args
-            self._kernel = None  # the compiled step's entry point, at the first step
             self._A = np.zeros((self.n_reduced, self.n_reduced))
             self._cursor = np.zeros(1, dtype=np.int64)
             self._no_currents = np.full(self.n_inputs, np.nan)
@@ -150,7 +148,7 @@ class ExtendedEstimator(Estimator):
         prev = self._no_currents if self._prev_currents is None else self._prev_currents
         f = self.freeze
         out_x = np.empty(12)
-        self._x, self._P, self._out_p, accepted, nis_sensor, nis, dof = self._step_kernel(
+        self._x, self._P, self._out_p, accepted, nis_sensor, nis, dof = ekf_step(
             y,
             currents,
             prev,
@@ -181,14 +179,3 @@ class ExtendedEstimator(Estimator):
         self._out_x = out_x
         self._record(currents, accepted, nis_sensor, nis, dof)
         return self._out_x
-
-    def _step_kernel(self, *args):
-        """Call :func:`nonlinear_kernels.ekf_step` through its compiled entry point.
-
-        The arguments' types never change (C-contiguous float arrays, checked
-        shapes), so after the first call the dispatcher's per-call type
-        resolution (a few microseconds with this many arguments) is skipped.
-        """
-        if self._kernel is None:
-            self._kernel = _compiled(ekf_step, *args)
-        return self._kernel(*args)

@@ -5,7 +5,6 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints
 
-from ..physics.simulation import _compiled
 from .base import Estimator
 from .nonlinear import FilterModel, require_fast_field
 from .nonlinear_kernels import sigma_points, ukf_predict, ukf_step, ukf_update
@@ -53,7 +52,6 @@ class UnscentedEstimator(Estimator):
             self._fast = self.config.prediction == 'fast'
             fm = self.filter_model
             self._f_args = fm.fast_f_args if self._fast else fm.f_args
-            self._kernel = None  # the compiled step's entry point, at the first step
             self._no_currents = np.full(self.n_inputs, np.nan)
         self._x = np.ascontiguousarray(dx, dtype=float)
         self._P = np.ascontiguousarray(P, dtype=float)
@@ -127,48 +125,35 @@ class UnscentedEstimator(Estimator):
         prev = self._no_currents if self._prev_currents is None else self._prev_currents
         f = self.freeze
         out_x = np.empty(12)
-        (self._x, self._P, self._sigmas, self._out_p, accepted, nis_sensor, nis, dof) = (
-            self._step_kernel(
-                y,
-                currents,
-                prev,
-                self.config.sensor_delay == 1,
-                self._fast,
-                self._x,
-                self._P,
-                self._sigmas,
-                self.Q,
-                self.Wm,
-                self.Wc,
-                self._lambda,
-                self.r_diag,
-                self.gate,
-                f._last,
-                f.runs,
-                f.run,
-                f.frozen,
-                f.events,
-                self.missing,
-                self.rejected,
-                self._x_eq,
-                self.reduced,
-                self.dt,
-                *self._f_args,
-                *self.filter_model.h_args[:-1],
-                out_x,
-            )
+        (self._x, self._P, self._sigmas, self._out_p, accepted, nis_sensor, nis, dof) = ukf_step(
+            y,
+            currents,
+            prev,
+            self.config.sensor_delay == 1,
+            self._fast,
+            self._x,
+            self._P,
+            self._sigmas,
+            self.Q,
+            self.Wm,
+            self.Wc,
+            self._lambda,
+            self.r_diag,
+            self.gate,
+            f._last,
+            f.runs,
+            f.run,
+            f.frozen,
+            f.events,
+            self.missing,
+            self.rejected,
+            self._x_eq,
+            self.reduced,
+            self.dt,
+            *self._f_args,
+            *self.filter_model.h_args[:-1],
+            out_x,
         )
         self._out_x = out_x
         self._record(currents, accepted, nis_sensor, nis, dof)
         return self._out_x
-
-    def _step_kernel(self, *args):
-        """Call :func:`nonlinear_kernels.ukf_step` through its compiled entry point.
-
-        The arguments' types never change (C-contiguous float arrays, checked
-        shapes), so after the first call the dispatcher's per-call type
-        resolution (a few microseconds with this many arguments) is skipped.
-        """
-        if self._kernel is None:
-            self._kernel = _compiled(ukf_step, *args)
-        return self._kernel(*args)
