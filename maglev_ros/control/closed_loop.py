@@ -19,7 +19,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..estimation.base import nis_band
-from ..physics.kernels import odometry_round_trip
 from .config import MAX_COMMAND_DELAY
 from .pd import PdController
 
@@ -207,6 +206,10 @@ class LoopResult:
 class ClosedLoop:
     """Simulator -> estimator -> controller, stepped as in the lockstep graph.
 
+    A :class:`~maglev_ros.loop.ControlLoop` on a
+    :class:`~maglev_ros.loop.SimulatedPlant`, with an observer that keeps
+    every sample as the arrays of a :class:`LoopResult`.
+
     Parameters
     ----------
     simulator : Simulator
@@ -272,112 +275,101 @@ class ClosedLoop:
             is the controller's own part. The controller node adds the same
             (:class:`~maglev_ros.control.excitation.ExcitationSchedule`).
         """
-        sim, est, ctrl = self.simulator, self.estimator, self.controller
-        dt = sim.dt
-        n = int(round(duration / dt))
-        n_s = sim.model.n_inputs
-        k_sensors = sim.model.n_outputs // 3
-        t_arr = np.arange(n) * dt
-        xs = np.full((n, 12), np.nan)
-        est_arr = np.full((n, 12), np.nan)
-        std_arr = np.full((n, 10), np.nan)
-        nis = np.zeros(n)
-        dof = np.zeros(n, dtype=np.int64)
-        cmd_arr = np.zeros((n, n_s))
-        cur_arr = np.zeros((n, n_s))
-        ref_arr = np.zeros((n, 3))
-        level = np.empty(n, dtype=object)
-        frozen = np.zeros((n, k_sensors), dtype=bool)
-        readings = np.full((n, sim.model.n_outputs), np.nan)
-        messages: list[str] = []
-        y = sim.reset(x0)
-        if est is not None:
-            est.reset()
-        ctrl.reset()
-        pending = [np.zeros(n_s) for _ in range(self.command_delay)]  # oldest first
-        current_ref = None
-        cut_start, cut_end = (cut[0], cut[0] + cut[1]) if cut else (np.inf, -np.inf)
-        done = n
-        reason = ''
+        from ..loop import ControlLoop, SimulatedPlant
+
+        sim = self.simulator
+        n = int(round(duration / sim.dt))
+        plant = SimulatedPlant(sim, cut=cut)
+        plant.reset(x0)
+        log = _ArrayLog(n, sim.model.n_inputs, sim.model.n_outputs, self.estimator)
+        log.controller = None if self.pd else self.controller
+        observers = [log]
+        if progress is not None:
+            every = int(round(1.0 / sim.dt))
+            observers.append(lambda s: s.index % every == 0 and s.index and progress(s.t))
+        loop = ControlLoop(
+            plant,
+            self.controller,
+            self.estimator,
+            command_delay=self.command_delay,
+            excitation=excitation,
+            reference=reference,
+            observers=observers,
+        )
         wall = time.perf_counter()
-        last_level = 'OK'
-        for k in range(n):
-            t = t_arr[k]
-            if reference is not None:
-                ref = reference(t)
-                if ref is not None and (current_ref is None or np.any(ref != current_ref)):
-                    current_ref = np.array(ref, dtype=float)
-                    ctrl.set_reference(current_ref)
-            currents = sim.currents
-            xs[k] = sim.state
-            cur_arr[k] = currents
-            readings[k] = y
-            ref_arr[k] = ctrl.reference if not self.pd else np.nan
-            is_cut = cut_start <= t < cut_end
-            if self.pd:
-                command = ctrl.command(t, None if is_cut else y, currents)
-            else:
-                if is_cut:
-                    command = ctrl.command(t)
-                else:
-                    x_hat = est.step(y, currents)
-                    est_arr[k] = x_hat
-                    std_arr[k] = est.state_std()
-                    nis[k] = est.last_nis
-                    dof[k] = est.last_dof
-                    frozen[k] = est.freeze.frozen
-                    if est.freeze.frozen.any():
-                        names = est.status().frozen_names()
-                        text = f'estimator: frozen {", ".join(names)} at t = {t:.4f} s'
-                        if not messages or not messages[-1].startswith(
-                            f'estimator: frozen {", ".join(names)}'
-                        ):
-                            messages.append(text)
-                    # the controller node reads the estimate from its Odometry
-                    command = ctrl.command(t, odometry_round_trip(x_hat), currents)
-            cmd_arr[k] = command
-            if excitation is not None and k < len(excitation) and ctrl.active:
-                command = command + excitation[k]
-            if not ctrl.active or last_level != 'OK':
-                status = ctrl.status()
-                level[k] = status.level
-                if status.level != 'OK' and (not messages or messages[-1] != status.message):
-                    if status.level == 'ERROR' or k > 0:
-                        messages.append(f'controller {status.level}: {status.message}')
-                last_level = status.level
-            else:
-                level[k] = 'OK'
-            if self.command_delay:
-                pending.append(command)
-                applied = pending.pop(0)
-            else:
-                applied = command
-            y = sim.step(applied)
-            if sim.crashed:
-                done = k + 1
-                reason = f'{sim.reason} at t = {sim.crash_time:.4f} s'
-                break
-            if progress is not None and k % int(round(1.0 / dt)) == 0 and k:
-                progress(t)
+        loop.run(n)
         wall = time.perf_counter() - wall
+        return log.result(self.z_eq, sim.crashed, loop.reason if sim.crashed else '', wall)
+
+
+class _ArrayLog:
+    """A loop observer keeping every sample as arrays, and the distinct status messages."""
+
+    def __init__(self, n: int, n_s: int, n_y: int, estimator) -> None:
+        self.estimator = estimator
+        self.done = 0
+        self.t = np.arange(n) / 1.0
+        self.x = np.full((n, 12), np.nan)
+        self.estimate = np.full((n, 12), np.nan)
+        self.std = np.full((n, 10), np.nan)
+        self.nis = np.zeros(n)
+        self.dof = np.zeros(n, dtype=np.int64)
+        self.command = np.zeros((n, n_s))
+        self.currents = np.zeros((n, n_s))
+        self.reference = np.zeros((n, 3))
+        self.level = np.empty(n, dtype=object)
+        self.frozen = np.zeros((n, n_y // 3), dtype=bool)
+        self.readings = np.full((n, n_y), np.nan)
+        self.messages: list[str] = []
+        self.controller = None  # the LQR, whose set-point is logged (NaN with the PD)
+
+    def __call__(self, s) -> None:
+        k = self.done
+        self.done += 1
+        self.t[k] = s.t
+        self.x[k] = s.state
+        self.currents[k] = s.currents
+        self.readings[k] = s.reading
+        self.command[k] = s.command
+        self.level[k] = s.level
+        self.reference[k] = np.nan if self.controller is None else self.controller.reference
+        if s.estimate is not None:
+            self.estimate[k] = s.estimate
+            self.std[k] = s.std
+            self.nis[k] = s.nis
+            self.dof[k] = s.dof
+            self.frozen[k] = s.frozen
+            if s.frozen.any():
+                names = ', '.join(self.estimator.status().frozen_names())
+                if not self.messages or not self.messages[-1].startswith(
+                    f'estimator: frozen {names}'
+                ):
+                    self.messages.append(f'estimator: frozen {names} at t = {s.t:.4f} s')
+        if s.level != 'OK' and (s.level == 'ERROR' or k > 0):
+            text = f'controller {s.level}: {s.message}'
+            if not self.messages or self.messages[-1] != text:
+                self.messages.append(text)
+
+    def result(self, z_eq: float, crashed: bool, reason: str, wall: float) -> LoopResult:
+        n = self.done
         return LoopResult(
-            t=t_arr[:done],
-            x=xs[:done],
-            estimate=est_arr[:done],
-            std=std_arr[:done],
-            nis=nis[:done],
-            dof=dof[:done],
-            command=cmd_arr[:done],
-            currents=cur_arr[:done],
-            reference=ref_arr[:done],
-            level=level[:done],
-            frozen=frozen[:done],
-            z_eq=self.z_eq,
-            crashed=sim.crashed,
+            t=self.t[:n],
+            x=self.x[:n],
+            estimate=self.estimate[:n],
+            std=self.std[:n],
+            nis=self.nis[:n],
+            dof=self.dof[:n],
+            command=self.command[:n],
+            currents=self.currents[:n],
+            reference=self.reference[:n],
+            level=self.level[:n],
+            frozen=self.frozen[:n],
+            z_eq=z_eq,
+            crashed=crashed,
             reason=reason,
-            messages=tuple(messages),
+            messages=tuple(self.messages),
             wall_time=wall,
-            readings=readings[:done],
+            readings=self.readings[:n],
         )
 
 

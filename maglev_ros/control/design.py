@@ -167,7 +167,8 @@ def design_lqr(linear, config: ControllerConfig, tau: float = 0.0) -> LqrDesign:
     Q = np.diag(q)
     R = np.eye(m) * c.current_scale**-2
     try:
-        K, _, poles = control.dlqr(A2, B2, Q, R)
+        # scipy's solver: slycot's (used when installed) refuses this scaling as inaccurate
+        K, _, poles = control.dlqr(A2, B2, Q, R, method='scipy')
     except Exception as exc:  # noqa: BLE001 - slycot/scipy raise various types
         raise ValueError(f'LQR design failed: {exc}') from None
     K = np.asarray(K, dtype=float)
