@@ -26,6 +26,7 @@ import numpy as np
 from numba import njit
 
 from ..physics import kernels as phys
+from .kernels import _mm
 
 __all__ = [
     'base_reading',
@@ -193,8 +194,8 @@ def series_transition(A, dt):  # pragma: no cover - jitted
     """
     r = A.shape[0]
     Z = A * dt
-    Z2 = Z @ Z
-    Z3 = Z2 @ Z
+    Z2 = _mm(Z, Z)  # plain loops: a BLAS call costs more than a 10x10 product
+    Z3 = _mm(Z2, Z)
     F = np.eye(r) + Z + 0.5 * Z2 + Z3 / 6.0
     M = (np.eye(r) + 0.5 * Z + Z2 / 6.0 + Z3 / 24.0) * dt
     return F, M

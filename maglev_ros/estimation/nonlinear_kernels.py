@@ -61,15 +61,14 @@ def _rates(x12, u, src, coil, rim, par, work, reduced):  # pragma: no cover - ji
 
 @njit(cache=True)
 def _wrench(x12, u, src, coil, rim, par, work):  # pragma: no cover - jitted
-    """Return the magnetic force and torque of ``fast_dynamics`` (its cost)."""
+    """Return the magnetic force and torque of ``fast_dynamics`` (its cost), and R."""
     r = phys.rotation_matrix(x12[3], x12[4], x12[5])
-    return phys.rim_force_torque(x12, u, src, coil, rim, par, work, r)
+    return phys.rim_force_torque(x12, u, src, coil, rim, par, work, r), r
 
 
 @njit(cache=True)
-def _rates_with(x12, wrench, par, reduced):  # pragma: no cover - jitted
-    """Reduced rates of ``fast_dynamics`` from a known wrench (the same operations)."""
-    r = phys.rotation_matrix(x12[3], x12[4], x12[5])
+def _rates_with(x12, wrench, r, par, reduced):  # pragma: no cover - jitted
+    """Reduced rates of ``fast_dynamics`` from a known wrench and rotation (same operations)."""
     f = phys.rigid_body_rates(
         x12,
         wrench,
@@ -168,8 +167,8 @@ def ekf_predict_fast(
     n_r = reduced.shape[0]
     n = dx.shape[0]
     x12 = embed(dx, x_eq, reduced)
-    w0 = _wrench(x12, u, src, coil, rim, par, work)
-    f0 = _rates_with(x12, w0, par, reduced)
+    w0, r0 = _wrench(x12, u, src, coil, rim, par, work)
+    f0 = _rates_with(x12, w0, r0, par, reduced)
     first, last = cursor[0], cursor[0] + 1
     if cursor[0] < 0:
         first, last = 0, n_r
@@ -177,7 +176,7 @@ def ekf_predict_fast(
         xp = x12.copy()
         xp[reduced[j]] += step
         if reduced[j] >= 6:  # a velocity or a rate: the same pose, the same wrench
-            fp = _rates_with(xp, w0, par, reduced)
+            fp = _rates_with(xp, w0, r0, par, reduced)
         else:
             fp = _rates(xp, u, src, coil, rim, par, work, reduced)
         for i in range(n_r):
@@ -487,12 +486,12 @@ def ukf_predict(
     out = sig.copy()
     if fast:
         rates = np.empty((p, n_r))
-        w0 = _wrench(embed(sig[0], x_eq, reduced), u, src, coil, rim, par, work)
+        w0, r0 = _wrench(embed(sig[0], x_eq, reduced), u, src, coil, rim, par, work)
         for i in range(p):
             if i > 0 and _same_reduced(sig[i], sig[0], n_r):
                 rates[i] = rates[0]
             elif _same_pose(sig[i], sig[0], reduced):  # the centre's wrench
-                rates[i] = _rates_with(embed(sig[i], x_eq, reduced), w0, par, reduced)
+                rates[i] = _rates_with(embed(sig[i], x_eq, reduced), w0, r0, par, reduced)
             else:
                 rates[i] = _rates(
                     embed(sig[i], x_eq, reduced), u, src, coil, rim, par, work, reduced
