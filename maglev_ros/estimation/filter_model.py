@@ -22,10 +22,13 @@ length ``dt`` with the currents held (ZOH):
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit
 
 from ..physics import kernels as phys
+from ..physics.loop import AGM_ITERATIONS, MU0
 from .kernels import _mm
 
 __all__ = [
@@ -68,7 +71,43 @@ def embed(dx, x_eq, reduced):  # pragma: no cover - jitted
     return x
 
 
-@njit(cache=True)
+@njit(cache=True, error_model='numpy')
+def _loop_point(dx, dy, z, a, current):  # pragma: no cover - jitted
+    """Field (Bx, By, Bz) of a loop at the origin (axis z) at one point, T.
+
+    ``physics.loop.loop_batch`` for a single pair, without its work arrays
+    (the same formulas and AGM sweeps, so the same numbers to round-off).
+    """
+    r = math.sqrt(dx * dx + dy * dy)
+    iv = 1.0 / ((a + r) * (a + r) + z * z)
+    dd = (a - r) * (a - r) + z * z
+    m = 4.0 * a * r * iv
+    b = math.sqrt(dd * iv)
+    an = 0.5 * (1.0 + b)
+    bn = math.sqrt(b)
+    dn = 1.0 / (2.0 * (1.0 + b))
+    u_sum = dn * dn
+    weight = 1.0
+    sweeps = 0
+    while an - bn > 1e-14 * an and sweeps < AGM_ITERATIONS:
+        weight *= 2.0
+        a_next = 0.5 * (an + bn)
+        bn = math.sqrt(an * bn)
+        an = a_next
+        dn = m * dn * dn / (4.0 * a_next)
+        u_sum += weight * dn * dn
+        sweeps += 1
+    k = math.pi / (an + bn)
+    k_minus_e = k * m * (0.5 + m * u_sum)
+    e = k - k_minus_e
+    pref = MU0 / (2.0 * math.pi) * current * math.sqrt(iv)
+    inv_d = 1.0 / dd
+    brho_over_rho = -pref * z * 8.0 * a * a * k * ((2.0 - m) * u_sum - 0.5) * iv * inv_d
+    bz = pref * (k_minus_e + 2.0 * a * (a - r) * e * inv_d)
+    return brho_over_rho * dx, brho_over_rho * dy, bz
+
+
+@njit(cache=True, error_model='numpy')
 def magnet_reading(x12, u, y0, G, sens, mag, own_src, own_coil, work):  # pragma: no cover
     """h(x, u): readings of the base (``y0 + G u``) plus the levitating magnet's field, T.
 
@@ -87,34 +126,32 @@ def magnet_reading(x12, u, y0, G, sens, mag, own_src, own_coil, work):  # pragma
     own_coil : ndarray of int64, shape (1,)
         -1 (no coil feeds it).
     work : ndarray
-        Scratch space of the model.
+        Scratch space of the model (unused: the magnet's loop is evaluated point by
+        point, :func:`_loop_point`).
     """
     r = phys.rotation_matrix(x12[3], x12[4], x12[5])
     k = sens.shape[0]
-    local = np.empty((3, k))
-    for s in range(k):
-        wx = sens[s, 0] - x12[0]
-        wy = sens[s, 1] - x12[1]
-        wz = sens[s, 2] - x12[2]
-        for a in range(3):
-            local[a, s] = r[0, a] * wx + r[1, a] * wy + r[2, a] * wz
-    own = np.empty((3, k))
-    phys.base_field_points(local[0], local[1], local[2], u, own_src, own_coil, work, own)
-    y = y0.copy()
     m = u.shape[0]
+    y = y0.copy()
     for i in range(y.shape[0]):
         acc = 0.0
         for j in range(m):
             acc += G[i, j] * u[j]
         y[i] += acc
-    total = np.empty(3)
+    radius, current = own_src[0, 3], own_src[0, 4]
     for s in range(k):
+        wx = sens[s, 0] - x12[0]
+        wy = sens[s, 1] - x12[1]
+        wz = sens[s, 2] - x12[2]
+        lx = r[0, 0] * wx + r[1, 0] * wy + r[2, 0] * wz
+        ly = r[0, 1] * wx + r[1, 1] * wy + r[2, 1] * wz
+        lz = r[0, 2] * wx + r[1, 2] * wy + r[2, 2] * wz
+        bx, by, bz = _loop_point(lx, ly, lz, radius, current)
+        t0 = r[0, 0] * bx + r[0, 1] * by + r[0, 2] * bz
+        t1 = r[1, 0] * bx + r[1, 1] * by + r[1, 2] * bz
+        t2 = r[2, 0] * bx + r[2, 1] * by + r[2, 2] * bz
         for a in range(3):
-            total[a] = r[a, 0] * own[0, s] + r[a, 1] * own[1, s] + r[a, 2] * own[2, s]
-        for a in range(3):
-            reading = (
-                sens[s, 3 + a] * total[0] + sens[s, 6 + a] * total[1] + sens[s, 9 + a] * total[2]
-            )
+            reading = sens[s, 3 + a] * t0 + sens[s, 6 + a] * t1 + sens[s, 9 + a] * t2
             y[3 * s + a] += sens[s, 12 + a] * reading
     return y
 
