@@ -1,14 +1,15 @@
 """State estimation of the levitating magnet (ROS-free).
 
-A linear KF about the equilibrium (compiled, the default), an EKF on the
-nonlinear model and a UKF through filterpy, with the same sample handling:
+A linear KF about the equilibrium (compiled, the default), an EKF and a UKF
+on the nonlinear model (compiled, filterpy's equations), with the same
+sample handling:
 one sample of sensor delay, the coils' direct field, chi-square gating per
 sensor, frozen-sensor detection and predict-only steps. ``make_estimator``
 chooses by :attr:`EstimatorConfig.filter`.
 """
 
 from .base import Estimator, EstimatorStatus, nis_band
-from .config import FILTERS, EstimatorConfig, EstimatorConfigError
+from .config import FILTERS, PREDICTIONS, EstimatorConfig, EstimatorConfigError
 from .extended import ExtendedEstimator
 from .freeze import FreezeDetector
 from .linear import KalmanEstimator
@@ -16,6 +17,7 @@ from .unscented import UnscentedEstimator
 
 __all__ = [
     'FILTERS',
+    'PREDICTIONS',
     'EstimatorConfig',
     'EstimatorConfigError',
     'Estimator',

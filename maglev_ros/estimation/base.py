@@ -284,6 +284,20 @@ class Estimator:
         self._record(currents, accepted, nis_sensor, nis, dof)
         return self._out_x
 
+    def _checked_sample(self, y, currents) -> tuple[np.ndarray, np.ndarray]:
+        """Return ``y`` (3 k,) and ``currents`` (n_s,) as C arrays; ValueError if not.
+
+        C-contiguous always: one compiled signature (a strided row, e.g. of a
+        burst's array, would compile a kernel again: seconds in a real-time loop).
+        """
+        y = np.ascontiguousarray(y, dtype=float)
+        currents = np.ascontiguousarray(currents, dtype=float)
+        if y.shape != (self.n_outputs,):
+            raise ValueError(f'y must have {self.n_outputs} readings, got shape {y.shape}')
+        if currents.shape != (self.n_inputs,) or not math.isfinite(currents.sum()):
+            raise ValueError(f'currents must be {self.n_inputs} finite numbers, got {currents!r}')
+        return y, currents
+
     def step_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:
         """Process n complete samples in order, as n calls of :meth:`step`.
 

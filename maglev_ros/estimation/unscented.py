@@ -1,30 +1,32 @@
-"""Unscented Kalman filter through filterpy's ``UnscentedKalmanFilter``."""
+"""Unscented Kalman filter: filterpy's ``UnscentedKalmanFilter`` equations, compiled."""
 
 from __future__ import annotations
 
 import numpy as np
-from filterpy.kalman import MerweScaledSigmaPoints, UnscentedKalmanFilter, unscented_transform
+from filterpy.kalman import MerweScaledSigmaPoints
 
-from ..physics import kernels as phys
 from .base import Estimator
-from .kernels import embed_state
-from .nonlinear import compiled_arguments, require_fast_field
+from .nonlinear import FilterModel, require_fast_field
+from .nonlinear_kernels import sigma_points, ukf_predict, ukf_step, ukf_update
 
 __all__ = ['UnscentedEstimator']
 
 
 class UnscentedEstimator(Estimator):
-    """UKF on the reduced deviation ``dx``: filterpy's predict and update, our f and h.
+    """UKF on the reduced deviation ``dx``, filterpy's equations in compiled kernels.
 
     Sigma points: Merwe's scaled set with alpha = 1, beta = 2, kappa = 0 (all
-    weights of the mean non-negative, points at sqrt(n) standard deviations).
-    f: one compiled RK4 step of the fast model with the measured currents held;
-    h: the compiled sensor model (coils' direct field included) plus the bias
-    states if any. The chi-square gate per sensor uses the unscented
-    transform of the prior sigma points through h (filterpy's
-    ``unscented_transform``); the accepted sensors' rows then go to filterpy's
-    ``update``. P is symmetrised after each update (filterpy's UKF update is
-    ``P - K S K'``, not Joseph). Fast field model only.
+    weights of the mean non-negative, points at sqrt(n) standard deviations;
+    filterpy's ``MerweScaledSigmaPoints`` gives the weights). f: the
+    prediction :attr:`EstimatorConfig.prediction` names, per sigma point
+    (``fast``: one exponential-Euler step, the Jacobian from the sigma points'
+    statistical linearisation; ``full``: one RK4 step); h: the sensor model
+    (coils' direct field included) plus the bias states if any. The
+    chi-square gate per sensor uses the unscented transform of the predicted
+    sigma points through h; the accepted sensors' rows then update as
+    filterpy's ``update`` does (``P - K S K'``, not Joseph: the UKF has no H),
+    P symmetrised after. A whole sample is one compiled call
+    (:func:`nonlinear_kernels.ukf_step`). Fast field model only.
 
     Parameters
     ----------
@@ -34,75 +36,124 @@ class UnscentedEstimator(Estimator):
 
     def __init__(self, model, config=None, linear=None):
         require_fast_field(model, 'UKF')
-        self.ukf = None
+        self._x = None
         super().__init__(model, config, linear)
 
     def _set_state(self, dx, P) -> None:
-        if self.ukf is None:
-            self._f_args, self._h_args = compiled_arguments(self.model)
+        if self._x is None:
+            self.filter_model = FilterModel(self.model)
             self._x_eq = np.ascontiguousarray(self.x_eq)
-            self._electrical = np.ones(3)
-            points = MerweScaledSigmaPoints(self.n_states, alpha=1.0, beta=2.0, kappa=0.0)
-            self.ukf = UnscentedKalmanFilter(
-                dim_x=self.n_states,
-                dim_z=self.n_outputs,
-                dt=self.dt,
-                hx=self._hx,
-                fx=self._fx,
-                points=points,
-            )
-            self.ukf.Q = self.discrete_process_noise()
-            self.ukf.R = np.diag(self.r_diag)
-        self.ukf.x = np.array(dx, dtype=float)
-        self.ukf.P = np.array(P, dtype=float)
-        self.ukf.sigmas_f = self.ukf.points_fn.sigma_points(self.ukf.x, self.ukf.P)
-
-    def _fx(self, s, dt, u):
-        nr = self.n_reduced
-        x12 = embed_state(np.ascontiguousarray(s[:nr]), self._x_eq, self.reduced)
-        new = phys.rk4_sample(x12, u, dt, 1, phys.COIL_IDEAL, self._electrical, *self._f_args)
-        out = s.copy()
-        out[:nr] = (new - self._x_eq)[self.reduced]
-        return out
-
-    def _hx(self, s, u, rows=None):
-        nr = self.n_reduced
-        x12 = embed_state(np.ascontiguousarray(s[:nr]), self._x_eq, self.reduced)
-        y = phys.fast_measurement(x12, u, *self._h_args)
-        if s.shape[0] > nr:
-            y = y + s[nr:]
-        return y if rows is None else y[rows]
+            self.points = MerweScaledSigmaPoints(self.n_states, alpha=1.0, beta=2.0, kappa=0.0)
+            self.Wm = np.ascontiguousarray(self.points.Wm, dtype=float)
+            self.Wc = np.ascontiguousarray(self.points.Wc, dtype=float)
+            self._lambda = float(self.points.alpha**2 * (self.n_states + self.points.kappa))
+            self._lambda -= self.n_states
+            self.Q = np.ascontiguousarray(self.discrete_process_noise())
+            self._fast = self.config.prediction == 'fast'
+            fm = self.filter_model
+            self._f_args = fm.fast_f_args if self._fast else fm.f_args
+            self._no_currents = np.full(self.n_inputs, np.nan)
+        self._x = np.ascontiguousarray(dx, dtype=float)
+        self._P = np.ascontiguousarray(P, dtype=float)
+        self._sigmas, _ = sigma_points(self._x, self._P, self._lambda)
 
     @property
     def deviation(self) -> np.ndarray:
         """Filter state: reduced deviation (+ biases), shape (n,)."""
-        return self.ukf.x.copy()
+        return self._x.copy()
 
     @property
     def covariance(self) -> np.ndarray:
         """Filter covariance, shape (n, n)."""
-        return self.ukf.P.copy()
+        return self._P.copy()
 
     def _update(self, y, currents, available):
-        u = np.ascontiguousarray(currents, dtype=float)
-        ukf = self.ukf
-        sigmas_h = np.array([self._hx(s, u) for s in ukf.sigmas_f])
-        zp, S = unscented_transform(sigmas_h, ukf.Wm, ukf.Wc, ukf.R)
-        nu = y - zp
-        accepted = np.zeros(self.n_sensors, dtype=bool)
-        nis_sensor = np.full(self.n_sensors, np.nan)
-        for k in np.flatnonzero(available):
-            block = slice(3 * k, 3 * k + 3)
-            value = float(nu[block] @ np.linalg.solve(S[block, block], nu[block]))
-            nis_sensor[k] = value
-            accepted[k] = value <= self.gate
-        if not accepted.any():
-            return accepted, nis_sensor, 0.0, 0
-        rows = np.flatnonzero(np.repeat(accepted, 3))
-        nis = float(nu[rows] @ np.linalg.solve(S[np.ix_(rows, rows)], nu[rows]))
-        ukf.update(y[rows], R=ukf.R[np.ix_(rows, rows)], u=u, rows=rows)
-        ukf.P = 0.5 * (ukf.P + ukf.P.T)
-        return accepted, nis_sensor, nis, rows.size
+        x, P, accepted, nis_sensor, nis, dof = ukf_update(
+            self._x,
+            self._P,
+            self._sigmas,
+            np.ascontiguousarray(y, dtype=float),
+            np.ascontiguousarray(currents, dtype=float),
+            available,
+            self.r_diag,
+            self.gate,
+            self.Wm,
+            self.Wc,
+            self._x_eq,
+            self.reduced,
+            *self.filter_model.h_args,
+        )
+        self._x, self._P = x, P
+        return accepted, nis_sensor, nis, dof
 
     def _predict(self, currents) -> None:
-        self.ukf.predict(u=np.ascontiguousarray(currents, dtype=float))
+        self._x, self._P, self._sigmas = ukf_predict(
+            self._x,
+            self._P,
+            np.ascontiguousarray(currents, dtype=float),
+            self.Q,
+            self.Wm,
+            self.Wc,
+            self._lambda,
+            self._fast,
+            self._x_eq,
+            self.reduced,
+            self.dt,
+            *self._f_args,
+        )
+
+    def step(self, y, currents) -> np.ndarray:
+        """Process one complete sample and return the state estimate.
+
+        As :meth:`Estimator.step`, in one compiled call
+        (:func:`nonlinear_kernels.ukf_step`: the same operations, so the same
+        numbers).
+
+        Parameters
+        ----------
+        y : array_like, shape (3 k,)
+            The sample's sensor readings, T (NaN for a missing sensor).
+        currents : array_like, shape (n_s,)
+            The sample's measured coil currents, A.
+
+        Returns
+        -------
+        ndarray, shape (12,)
+            Estimated state at this sample (gamma and wz are 0: unobservable).
+        """
+        y, currents = self._checked_sample(y, currents)
+        prev = self._no_currents if self._prev_currents is None else self._prev_currents
+        f = self.freeze
+        out_x = np.empty(12)
+        (self._x, self._P, self._sigmas, self._out_p, accepted, nis_sensor, nis, dof) = ukf_step(
+            y,
+            currents,
+            prev,
+            self.config.sensor_delay == 1,
+            self._fast,
+            self._x,
+            self._P,
+            self._sigmas,
+            self.Q,
+            self.Wm,
+            self.Wc,
+            self._lambda,
+            self.r_diag,
+            self.gate,
+            f._last,
+            f.runs,
+            f.run,
+            f.frozen,
+            f.events,
+            self.missing,
+            self.rejected,
+            self._x_eq,
+            self.reduced,
+            self.dt,
+            *self._f_args,
+            *self.filter_model.h_args[:-1],
+            out_x,
+        )
+        self._out_x = out_x
+        self._record(currents, accepted, nis_sensor, nis, dof)
+        return self._out_x
