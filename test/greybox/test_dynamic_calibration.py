@@ -40,7 +40,12 @@ def test_recovers_mass_and_polarization():
 
 
 def test_calibrated_set_controls_at_least_as_well():
-    """Same mismatched plant, same initial offset: RMS position error over 10 s."""
+    """Same mismatched plant, same initial offset: RMS position error over 10 s.
+
+    The calibrated set must hold the magnet. The nominal one (its magnet 3-4 %
+    off, a KF without bias states) is marginal: whether it loses the magnet
+    depends on the noise's last bits, and a lost magnet counts as infinitely worse.
+    """
     cal = calibration()
     plant = plant_parameters()
     rms = {}
@@ -49,8 +54,9 @@ def test_calibrated_set_controls_at_least_as_well():
         x0 = loop.simulator.model.hover_state(loop.z_eq)
         x0[0] += 3e-4  # 0.3 mm off in x
         result = loop.run(10.0, x0=x0)
-        assert not result.crashed, (label, result.reason)
-        rms[label] = float(np.sqrt(np.mean(result.position_error() ** 2)))
+        assert label == 'nominal' or not result.crashed, (label, result.reason)
+        error = result.position_error()
+        rms[label] = np.inf if result.crashed else float(np.sqrt(np.mean(error**2)))
     assert rms['calibrated'] <= rms['nominal'], rms
 
 
