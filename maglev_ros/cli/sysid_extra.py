@@ -31,7 +31,13 @@ __all__ = ['add_arguments', 'check_arguments', 'extend_single', 'run_several', '
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
-    """Add the NARX, confidence, reduction and several-file options to ``p``."""
+    """Add the NARX, confidence, reduction and several-file options to ``p``.
+
+    Parameters
+    ----------
+    p : argparse.ArgumentParser
+        The ``maglev-sysid`` parser; the options go into a new argument group.
+    """
     g = p.add_argument_group('nonlinear models, confidence, reduction, several data files')
     g.add_argument(
         '--narx',
@@ -114,7 +120,14 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 
 
 def check_arguments(args: argparse.Namespace) -> None:
-    """Refuse bad values of the added options (UsageError, one line)."""
+    """Refuse bad values of the added options (UsageError, one line).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments, with the options of :func:`add_arguments` and ``args.data``
+        the list of data files.
+    """
     for na, nb, nk, degree in args.narx or []:
         if na < 1 or nb < 0 or nk < 0 or not 1 <= degree <= 4:
             raise UsageError(
@@ -206,8 +219,27 @@ def extend_single(
 ) -> tuple[list[str], list[Path], int]:
     """NARX rows, confidence plots and reductions for one data file.
 
-    Returns the text blocks to print, the PNGs written and the exit status
-    of the added rows (0 all usable, 1 some failed or unstable).
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments (``--narx``, ``--confidence``, ``--reduce``, ``--plot``,
+        ``--horizon``, ``--ic``, ...).
+    est : IdData
+        Estimation data the NARX models are fitted on.
+    val : IdData
+        Validation data of the fits, residual tests, bands and reductions.
+    result : Identification
+        The linear identification of the same data (its ``rows`` give the
+        models whose confidence bands and reductions are made).
+    summary : dict
+        The JSON summary; NARX rows are appended to ``summary['models']`` and
+        reductions added to the linear models' entries, in place.
+
+    Returns
+    -------
+    tuple of (list of str, list of Path, int)
+        The text blocks to print, the PNGs written and the exit status of the
+        added rows (0 all usable, 1 some failed or unstable).
     """
     from maglev_ros import sysid
 
@@ -485,8 +517,19 @@ SINDY_TOLERANCE = 0.10  # relative eigenvalue error accepted by the physics chec
 def run_sindy(args: argparse.Namespace, plain: Any) -> int:
     """SINDy on the states of one or several bags, with the physics check.
 
-    Returns 0 when the unstable and oscillatory eigenvalues are within 10 % of
-    the physics linearisation's, 1 otherwise (everything is still printed).
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments (``args.data`` the bag directories, ``--state-topic``,
+        ``--params``, ``--sindy-degree``, ``--sindy-threshold``, ``--json``).
+    plain : callable
+        JSON-safe conversion (arrays to lists, NaN/inf to None) for ``--json``.
+
+    Returns
+    -------
+    int
+        0 when the unstable and oscillatory eigenvalues are within 10 % of the
+        physics linearisation's, 1 otherwise (everything is still printed).
     """
     import json
     import warnings

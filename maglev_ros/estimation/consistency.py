@@ -101,7 +101,15 @@ class ConsistencyResult:
 
     @staticmethod
     def verdict(value: float, band: tuple) -> str:
-        """Return ``'ok'``, ``'overconfident'`` (above the band) or ``'conservative'``."""
+        """Return ``'ok'``, ``'overconfident'`` (above the band) or ``'conservative'``.
+
+        Parameters
+        ----------
+        value : float
+            Average NEES or NIS.
+        band : tuple of float
+            Its 95 % band ``(low, high)``.
+        """
         if value > band[1]:
             return 'overconfident'
         return 'conservative' if value < band[0] else 'ok'

@@ -64,7 +64,17 @@ def base_reading(model) -> tuple[np.ndarray, np.ndarray]:
 
 @njit(cache=True)
 def embed(dx, x_eq, reduced):  # pragma: no cover - jitted
-    """Full 12-state from a reduced deviation ``dx`` (its first ``len(reduced)`` entries)."""
+    """Full 12-state from a reduced deviation ``dx`` (its first ``len(reduced)`` entries).
+
+    Parameters
+    ----------
+    dx : ndarray, shape (n,)
+        Reduced deviation (entries beyond ``len(reduced)``, such as biases, are ignored).
+    x_eq : ndarray, shape (12,)
+        Equilibrium.
+    reduced : ndarray of int, shape (10,)
+        Indices of the reduced states in the 12-state.
+    """
     x = x_eq.copy()
     for i in range(reduced.shape[0]):
         x[reduced[i]] += dx[i]

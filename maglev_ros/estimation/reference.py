@@ -82,7 +82,17 @@ class FilterpyReference:
 
     # the full model
     def fx(self, s, dt, u):
-        """Return the filter state ``s`` (reduced + biases) one RK4 step on, currents ``u``."""
+        """Return the filter state ``s`` (reduced + biases) one RK4 step on, currents ``u``.
+
+        Parameters
+        ----------
+        s : ndarray, shape (n,)
+            Filter state: reduced deviation from the equilibrium, then the biases.
+        dt : float
+            Step, s.
+        u : ndarray, shape (n_s,)
+            Coil currents held over the step, A.
+        """
         nr = self._reduced.shape[0]
         x12 = embed_state(np.ascontiguousarray(s[:nr]), self._x_eq, self._reduced)
         new = phys.rk4_sample(x12, u, dt, 1, phys.COIL_IDEAL, np.ones(3), *self._f_args)
@@ -91,7 +101,16 @@ class FilterpyReference:
         return out
 
     def hx(self, s, u):
-        """Return the readings of the filter state ``s`` with currents ``u`` (+ biases), T."""
+        """Return the readings of the filter state ``s`` with currents ``u`` (+ biases), T.
+
+        Parameters
+        ----------
+        s : ndarray, shape (n,)
+            Filter state: reduced deviation from the equilibrium, then (optionally)
+            one bias per reading, T.
+        u : ndarray, shape (n_s,)
+            Coil currents, A.
+        """
         nr = self._reduced.shape[0]
         x12 = embed_state(np.ascontiguousarray(s[:nr]), self._x_eq, self._reduced)
         y = phys.fast_measurement(x12, u, *self._h_args)

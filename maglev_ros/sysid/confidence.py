@@ -66,12 +66,27 @@ class Band:
         return self.value + self.sigma * self.std
 
     def contains(self, truth: np.ndarray) -> np.ndarray:
-        """Boolean array: is ``truth`` within the band."""
+        """Boolean array: is ``truth`` within the band.
+
+        Parameters
+        ----------
+        truth : ndarray
+            True response, the shape of ``value`` (or broadcastable to it).
+        """
         return (truth >= self.lower) & (truth <= self.upper)
 
 
 def with_theta(model: PolyModel, theta: np.ndarray) -> PolyModel:
-    """Return the same model structure with other parameters (no report, no covariance)."""
+    """Return the same model structure with other parameters (no report, no covariance).
+
+    Parameters
+    ----------
+    model : PolyModel
+        The model whose structure, orders, sample time, noise variance, names
+        and units are kept.
+    theta : ndarray, shape (n_theta,)
+        The new parameter vector, ordered as ``model.theta``.
+    """
     return PolyModel(
         model.structure,
         model.orders,

@@ -98,7 +98,19 @@ def bode_band_plot(
     labels: Sequence[str] | None = None,
     sigma: float = DEFAULT_SIGMA,
 ) -> Path:
-    """Write :func:`bode_band_figure` to a PNG file and return its path."""
+    """Write :func:`bode_band_figure` to a PNG file and return its path.
+
+    Parameters
+    ----------
+    models : sequence of PolyModel
+        Models with parameter covariances.
+    path : str or Path
+        PNG file to write (its directory is created).
+    labels : sequence of str, optional
+        Legend names.
+    sigma : float
+        Standard deviations of the band.
+    """
     return _save(bode_band_figure(models, labels, sigma), path)
 
 

@@ -202,7 +202,23 @@ def by_experiment(
 ) -> FoldTable:
     """Estimate on each experiment alone, validate on all the others.
 
-    Parameters are as :func:`kfold`.
+    Parameters
+    ----------
+    data : sequence of IdData
+        At least two experiments.
+    estimator : callable
+        ``estimator(experiments) -> model`` (e.g. ``lambda d: arx(d, 7, 9, 1)``).
+    labels : sequence of str, optional
+        Experiment names for the table.
+    horizon : int or None
+        Validation by k-step prediction instead of simulation.
+    ic : {'estimate', 'zero'}
+        Initial conditions of the validation.
+
+    Returns
+    -------
+    FoldTable
+        One row per experiment (estimated on it, validated on the others).
     """
     experiments = as_experiments(data)
     n = len(experiments)

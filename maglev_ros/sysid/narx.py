@@ -87,13 +87,33 @@ class NarxStructure:
     def variable_name(
         self, v: int, output_names: Sequence[str], input_names: Sequence[str]
     ) -> str:
-        """Text of variable ``v``, e.g. ``y1(t-2)``."""
+        """Text of variable ``v``, e.g. ``y1(t-2)``.
+
+        Parameters
+        ----------
+        v : int
+            Index into ``variables`` (the lagged outputs, then the lagged inputs).
+        output_names : sequence of str
+            Names of the outputs, indexed by channel.
+        input_names : sequence of str
+            Names of the inputs, indexed by channel.
+        """
         kind, j, lag = self.variables[v]
         name = (output_names if kind == 0 else input_names)[j]
         return f'{name}(t-{lag})' if lag else f'{name}(t)'
 
     def term_name(self, term: int, output_names: Sequence[str], input_names: Sequence[str]) -> str:
-        """Text of candidate monomial ``term``, e.g. ``y1(t-1)*u1(t-1)`` or ``1``."""
+        """Text of candidate monomial ``term``, e.g. ``y1(t-1)*u1(t-1)`` or ``1``.
+
+        Parameters
+        ----------
+        term : int
+            Index into ``monomials`` (0 the constant).
+        output_names : sequence of str
+            Names of the outputs, indexed by channel.
+        input_names : sequence of str
+            Names of the inputs, indexed by channel.
+        """
         parts = self.monomials[term]
         if not parts:
             return '1'
@@ -135,9 +155,18 @@ class NarxStructure:
     def term_arrays(self, terms: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
         """Flat arrays for the compiled simulator.
 
-        Returns ``(kind, channel, lag)`` of the variables, ``factors`` (n_terms,
-        degree) variable indices padded with -1, and ``owner`` (n_terms,) the
-        output of each term.
+        Parameters
+        ----------
+        terms : sequence of ndarray of int
+            Selected candidate monomials (indices into ``monomials``), one array
+            per output.
+
+        Returns
+        -------
+        kind, channel, lag, factors, owner : ndarray of int
+            ``(kind, channel, lag)`` of the variables, shapes (n_variables,);
+            ``factors`` (n_terms, degree) variable indices padded with -1, and
+            ``owner`` (n_terms,) the output of each term.
         """
         kinds = np.array([v[0] for v in self.variables], dtype=np.int64)
         chans = np.array([v[1] for v in self.variables], dtype=np.int64)
@@ -277,7 +306,13 @@ class NarxModel:
         return tuple(np.sqrt(np.clip(np.diag(c), 0.0, None)) for c in self.covariance)
 
     def term_names(self, output: int) -> list[str]:
-        """Text of the selected terms of one output, in selection order."""
+        """Text of the selected terms of one output, in selection order.
+
+        Parameters
+        ----------
+        output : int
+            Output index, ``0..ny-1``.
+        """
         return [
             self.structure.term_name(int(t), self.output_names, self.input_names)
             for t in self.terms[output]
@@ -328,6 +363,15 @@ class NarxModel:
 
         The first ``max_lag + k - 1`` samples (no prediction possible) are the
         measured outputs with ``ic='estimate'``, zeros with ``ic='zero'``.
+
+        Parameters
+        ----------
+        data : IdData
+            Measured outputs and inputs, ``ny`` and ``nu`` as the model.
+        k : int
+            Prediction horizon in samples (>= 1).
+        ic : {'estimate', 'zero'}
+            The first samples: the measured outputs, or zeros.
         """
         if int(k) < 1:
             raise ValueError(f'prediction horizon k must be >= 1, got {k!r}')
@@ -345,6 +389,13 @@ class NarxModel:
 
         ``ic`` is accepted as by :meth:`PolyModel.residuals`; the predictor
         always starts from the measured outputs.
+
+        Parameters
+        ----------
+        data : IdData
+            Measured outputs and inputs, ``ny`` and ``nu`` as the model.
+        ic : {'estimate', 'zero'}
+            Accepted for compatibility; has no effect.
         """
         return data.y - self.predict(data, 1, ic='estimate')
 

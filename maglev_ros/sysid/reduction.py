@@ -92,7 +92,13 @@ class StateSpaceModel:
         return np.linalg.eigvals(self.A)
 
     def freqresp(self, f: np.ndarray) -> np.ndarray:
-        """Frequency response at ``f`` Hz, shape (nf, ny, nu), complex."""
+        """Frequency response at ``f`` Hz, shape (nf, ny, nu), complex.
+
+        Parameters
+        ----------
+        f : array_like, shape (nf,)
+            Frequencies in Hz (a scalar is one frequency).
+        """
         f = np.atleast_1d(np.asarray(f, dtype=float))
         z = np.exp(2j * np.pi * f * self.Ts)
         eye = np.eye(self.order)
@@ -101,7 +107,15 @@ class StateSpaceModel:
         ).reshape(len(f), self.ny, self.nu)
 
     def simulate(self, data: IdData | np.ndarray, ic: str = 'zero') -> np.ndarray:
-        """Simulate the outputs, shape (N, ny); ``ic='estimate'`` fits ``x0`` to ``data.y``."""
+        """Simulate the outputs, shape (N, ny); ``ic='estimate'`` fits ``x0`` to ``data.y``.
+
+        Parameters
+        ----------
+        data : IdData or ndarray, shape (N, nu)
+            Inputs (IdData with measured outputs for ``ic='estimate'``).
+        ic : {'zero', 'estimate'}
+            Initial state: zero, or the least-squares fit to the measured outputs.
+        """
         u = data.u if isinstance(data, IdData) else np.asarray(data, dtype=float)
         u = np.ascontiguousarray(u.reshape(u.shape[0], -1))
         if self.order == 0:
@@ -211,7 +225,15 @@ class Reduction:
         return self.reduced.order
 
     def fit_loss(self, data: IdData, ic: str = 'estimate') -> tuple[np.ndarray, np.ndarray]:
-        """Return the simulation fits (percent, per output) of the full and the reduced model."""
+        """Return the simulation fits (percent, per output) of the full and the reduced model.
+
+        Parameters
+        ----------
+        data : IdData
+            Validation data (measured inputs and outputs).
+        ic : {'estimate', 'zero'}
+            Initial state of the simulations, as :meth:`StateSpaceModel.simulate`.
+        """
         return (
             fit_percent(data.y, self.full.simulate(data, ic)),
             fit_percent(data.y, self.reduced.simulate(data, ic)),

@@ -69,5 +69,13 @@ def reduction_figure(reduction: Reduction, n_points: int = 300) -> Figure:
 
 
 def reduction_plot(reduction: Reduction, path: str | Path) -> Path:
-    """Write :func:`reduction_figure` to a PNG file and return its path."""
+    """Write :func:`reduction_figure` to a PNG file and return its path.
+
+    Parameters
+    ----------
+    reduction : Reduction
+        Result of :func:`~maglev_ros.sysid.reduction.balanced_truncation`.
+    path : str or Path
+        PNG file to write (its directory is created).
+    """
     return _save(reduction_figure(reduction), path)

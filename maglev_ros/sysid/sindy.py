@@ -70,14 +70,26 @@ class SindyModel:
         return list(self.model.get_feature_names())
 
     def equations(self, precision: int = 4) -> list[str]:
-        """Readable equations ``d(name)/dt = ...``, one per state (zero terms left out)."""
+        """Readable equations ``d(name)/dt = ...``, one per state (zero terms left out).
+
+        Parameters
+        ----------
+        precision : int
+            Decimals of the coefficients (pysindy's ``equations(precision)``).
+        """
         rhs = [
             ' '.join(text.split()).replace('+ -', '- ') for text in self.model.equations(precision)
         ]
         return [f'd({name})/dt = {text}' for name, text in zip(self.state_names, rhs, strict=True)]
 
     def terms(self, state: str) -> dict[str, float]:
-        """Non-zero terms of one state's equation: library function -> coefficient."""
+        """Non-zero terms of one state's equation: library function -> coefficient.
+
+        Parameters
+        ----------
+        state : str
+            Name of the state, one of ``state_names``.
+        """
         row = self.coefficients[self.state_names.index(state)]
         return {name: float(c) for name, c in zip(self.feature_names, row, strict=True) if c}
 
@@ -90,7 +102,20 @@ class SindyModel:
         return '\n'.join([head] + ['  ' + line for line in self.equations()])
 
     def rates(self, x: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """``dx/dt`` in physical units for states ``x`` (N, n) and inputs ``u`` (N, m)."""
+        """``dx/dt`` in physical units for states ``x`` (N, n) and inputs ``u`` (N, m).
+
+        Parameters
+        ----------
+        x : ndarray, shape (N, n) or (n,)
+            States in physical units (not shifted, not scaled).
+        u : ndarray, shape (N, m) or (m,)
+            Inputs in physical units, at the same samples.
+
+        Returns
+        -------
+        ndarray, shape (N, n)
+            State derivatives, physical units per second.
+        """
         x = np.atleast_2d(np.asarray(x, dtype=float))
         u = np.atleast_2d(np.asarray(u, dtype=float))
         xs = (x - self.x_ref) * self.state_scale
@@ -104,6 +129,15 @@ class SindyModel:
 
         Central differences with steps of ``step`` in the scaled variables
         (exact for the polynomial library up to rounding).
+
+        Parameters
+        ----------
+        x0 : ndarray, shape (n,), optional
+            State of the linearisation, physical units (default ``x_ref``).
+        u0 : ndarray, shape (m,), optional
+            Input of the linearisation, physical units (default ``u_ref``).
+        step : float
+            Finite-difference step in the scaled variables.
         """
         x0 = self.x_ref if x0 is None else np.asarray(x0, dtype=float)
         u0 = self.u_ref if u0 is None else np.asarray(u0, dtype=float)
