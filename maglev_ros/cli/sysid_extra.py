@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ..topics import ESTIMATE_TOPIC, TRUE_STATE_TOPIC
 from .usage import UsageError
 
 __all__ = ['add_arguments', 'check_arguments', 'extend_single', 'run_several', 'run_sindy']
@@ -96,9 +97,9 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     )
     g.add_argument(
         '--state-topic',
-        default='maglev/state/true',
-        help='--sindy: Odometry topic of the states (default maglev/state/true; '
-        'maglev/state/estimate for an estimator)',
+        default=TRUE_STATE_TOPIC,
+        help=f'--sindy: Odometry topic of the states (default {TRUE_STATE_TOPIC}; '
+        f'{ESTIMATE_TOPIC} for an estimator)',
     )
     g.add_argument('--sindy-degree', type=int, default=2, help='--sindy: library degree')
     g.add_argument(
