@@ -1,4 +1,5 @@
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -279,3 +280,28 @@ def test_negative_exponent_value_and_yaml_position(lab_mat, tmp_path, capsys):
     code, _, err = run([lab_mat, '--rows', '1', '4', '--ts', '1', '--spec', spec], capsys)
     assert code == 2 and err.count('\n') == 1
     assert 'line 4, column' in err
+
+
+@pytest.mark.parametrize(
+    'name, content, match',
+    [
+        ('empty.mat', b'', 'empty.mat is empty'),
+        ('empty.npz', b'', 'empty.npz is empty'),
+        ('empty.csv', b'', 'empty.csv is empty'),
+        ('header.csv', b'y,u\n', 'header line but no rows'),
+        ('junk.npz', b'not a zip archive at all', 'not a readable .npz archive'),
+        ('junk.mat', b'\x01\x02' * 100, 'not a readable MATLAB file'),
+    ],
+)
+def test_empty_or_broken_data_file_is_one_line_and_no_warning(
+    tmp_path, capsys, name, content, match
+):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        code, out, err = run([path, '--ts', '1e-3', '--arx', 2, 2, 1], capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('maglev-sysid: error:')
+    assert match in lines[0]
