@@ -472,8 +472,8 @@ def run(args: argparse.Namespace) -> int:
     from maglev_ros.cli.progress import progress_bar
     from maglev_ros.sysid.workflow import ModelSpec, check_channels, identify, offset_hints
 
-    if args.ts is not None and not args.ts > 0:
-        raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
+    if args.ts is not None and not 0 < args.ts < float('inf'):
+        raise UsageError(f'--ts must be a positive finite sample time in seconds, got {args.ts}')
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
     from .sysid_extra import check_arguments, extend_single, run_several, run_sindy

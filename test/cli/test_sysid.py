@@ -140,6 +140,11 @@ def test_select_and_csv(tmp_path, capsys):
         (['{mat}', '--rows', '1', '4', '--ts', '0', '--arx', 1, 1, 1], '--ts must be a positive'),
         (['{mat}', '--rows', '1', '4', '--ts', '-2', '--arx', 1, 1, 1], '--ts must be a positive'),
         (
+            ['{mat}', '--rows', '1', '4', '--ts', 'inf', '--arx', 1, 1, 1],
+            '--ts must be a positive finite sample time in seconds, got inf',
+        ),
+        (['{mat}', '--rows', '1', '4', '--ts', 'nan', '--arx', 1, 1, 1], 'got nan'),
+        (
             ['{mat}', '--matrix', 'X', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1],
             "no variable 'X'",
         ),
