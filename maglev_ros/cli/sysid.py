@@ -205,13 +205,38 @@ def _spec_models(path: str) -> list[Any]:
     return out
 
 
+# orders of which at least one must be > 0 for a model to have a parameter to estimate
+# (OE and BJ without B are no input model: their F is then undetermined)
+_ESTIMATED = {
+    'arx': ('na', 'nb'),
+    'iv': ('na', 'nb'),
+    'armax': ('na', 'nb', 'nc'),
+    'oe': ('nb',),
+    'bj': ('nb',),
+}
+
+
+def _check_something_to_estimate(structure: str, orders: dict[str, int]) -> None:
+    """Refuse orders that leave a model with no parameter to estimate (UsageError)."""
+    names = _ESTIMATED[structure]
+    if all(orders[name] == 0 for name in names):
+        given = ' '.join(str(v) for v in orders.values())
+        zero = ' and '.join(name for name in names)
+        raise UsageError(
+            f'--{structure} {given}: {zero} {"are" if len(names) > 1 else "is"} 0, so the '
+            f'model has nothing to estimate: give {" or ".join(n.upper() for n in names)} >= 1'
+        )
+
+
 def _requested(args: argparse.Namespace) -> list[Any]:
     from maglev_ros.sysid.workflow import ORDER_NAMES, ModelSpec
 
     out = []
     for structure, keys in ORDER_NAMES.items():
         for values in getattr(args, structure) or []:
-            out.append(ModelSpec(structure, dict(zip(keys, values, strict=True))))
+            orders = dict(zip(keys, values, strict=True))
+            _check_something_to_estimate(structure, orders)
+            out.append(ModelSpec(structure, orders))
     if args.spec:
         out += _spec_models(args.spec)
     return out

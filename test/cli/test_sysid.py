@@ -164,6 +164,11 @@ def test_select_and_csv(tmp_path, capsys):
         ),
         (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--oe', 2, 2, 1], 'single-input'),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 0, 0, 1], '--arx 0 0 1: na and nb'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--iv', 0, 0, 2], '--iv 0 0 2: na and nb'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--armax', 0, 0, 0, 1], 'nothing to estimate'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--oe', 0, 2, 1], '--oe 0 2 1: nb is 0'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--bj', 0, 1, 1, 1, 1], '--bj 0 1 1 1 1: nb'),
     ],
 )
 def test_bad_input_exits_2_with_one_line(lab_mat, tmp_path, capsys, args, match):
