@@ -102,7 +102,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs=2,
         type=float,
         metavar=('LOW', 'HIGH'),
-        help='Butterworth pass band in Hz (LOW 0: low-pass), like idfilt',
+        help='Butterworth pass band in Hz, up to Nyquist (LOW 0: low-pass, HIGH inf: '
+        'high-pass), like idfilt',
     )
     p.add_argument('--filter-order', type=int, default=5, help='filter order (default 5)')
     p.add_argument('--zero-phase', action='store_true', help='filter forwards and backwards')
@@ -501,7 +502,7 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f'--ts must be a positive finite sample time in seconds, got {args.ts}')
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
-    from .sysid_extra import check_arguments, extend_single, run_several, run_sindy
+    from .sysid_extra import check_arguments, extend_single, filtered, run_several, run_sindy
 
     check_arguments(args)
     if args.sindy:
@@ -531,8 +532,7 @@ def run(args: argparse.Namespace) -> int:
     hints = (*notes, *(() if args.detrend else offset_hints(raw)))
     if args.detrend:
         data = data.detrend(args.detrend)
-    if args.filter:
-        data = data.filter(tuple(args.filter), args.filter_order, args.zero_phase)
+    data = filtered(args, data)
     if args.decimate != 1:
         data = data.decimate(args.decimate)
     est, val = data.split(split)

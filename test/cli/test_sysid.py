@@ -165,6 +165,33 @@ def test_select_and_csv(tmp_path, capsys):
         (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--oe', 2, 2, 1], 'single-input'),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 0, 0, 1], '--arx 0 0 1: na and nb'),
+        (
+            ['{mat}', '--rows', '1', '4', '--ts', '1e-3', '--filter', 0, 800, '--arx', 1, 1, 1],
+            '--filter 0 800: the band is above the Nyquist frequency 500 Hz',
+        ),
+        (
+            [
+                '{mat}',
+                '--rows',
+                '1',
+                '4',
+                '--ts',
+                '1e-3',
+                '--filter',
+                600,
+                'inf',
+                '--arx',
+                1,
+                1,
+                1,
+            ],
+            '--filter 600 inf: the band is above the Nyquist frequency 500 Hz',
+        ),
+        (
+            ['{mat}', '{mat}', '--rows', '1', '4', '--ts', '1e-3', '--filter', 0, 501]
+            + ['--arx', 1, 1, 1],
+            '--filter 0 501: the band is above the Nyquist frequency 500 Hz',
+        ),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--iv', 0, 0, 2], '--iv 0 0 2: na and nb'),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--armax', 0, 0, 0, 1], 'nothing to estimate'),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--oe', 0, 2, 1], '--oe 0 2 1: nb is 0'),
