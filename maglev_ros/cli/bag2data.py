@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..topics import current_channel, field_channel
-from .usage import Parser, UsageError, positive_float, run_command
+from .usage import Parser, UsageError, check_output_file, positive_float, run_command
 
 __all__ = ['add_channel_arguments', 'build_parser', 'dataset_from_args', 'main', 'split_point']
 
@@ -212,7 +212,9 @@ def _run(args: argparse.Namespace) -> int:
     if args.topics:
         return _topics(args.bag, args.json)
     if args.out:
-        split_paths(args.out)  # an unknown suffix fails before the bag is read
+        check_output_file('--out', args.out, create_parents=False)
+        for path in split_paths(args.out):  # an unknown suffix fails here too
+            check_output_file('--out', path, create_parents=False)
     ds = dataset_from_args(args.bag, args)
     summary = ds.summary(args.split)
     if args.out:

@@ -28,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from ..topics import EXCITATION_TOPIC
-from .usage import Parser, UsageError, limit_blas_threads, run_command
+from .usage import Parser, UsageError, check_output_dir, limit_blas_threads, run_command
 
 __all__ = ['build_parser', 'main', 'run']
 
@@ -502,6 +502,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(f'--ts must be a positive finite sample time in seconds, got {args.ts}')
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
+    for option, directory in (('--plot', args.plot), ('--save', args.save)):
+        if directory:
+            check_output_dir(option, directory)
     from .sysid_extra import check_arguments, extend_single, filtered, run_several, run_sindy
 
     check_arguments(args)

@@ -119,6 +119,17 @@ def test_bad_input_exits_2_with_one_line(bag, capsys, argv, message):
     assert re.search(message, _error(capsys))
 
 
+def test_an_unwritable_output_fails_before_the_bag_is_read(bag, tmp_path, capsys):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a directory\n')
+    assert main([bag, *OUT, '--out', str(afile / 'data.mat')]) == 2
+    assert f"--out {afile}/data.mat: '{afile}' is a file, not a directory" in _error(capsys)
+    assert main([bag, *OUT, '--out', str(tmp_path / 'nodir' / 'data.mat')]) == 2
+    assert f"directory '{tmp_path / 'nodir'}' does not exist: create it first" in _error(capsys)
+    assert main([bag, *OUT, '--out', str(tmp_path)]) == 2
+    assert 'is a directory: name a file' in _error(capsys)
+
+
 def test_bad_bags_exit_2(tmp_path, capsys):
     assert main([str(tmp_path / 'none'), *OUT]) == 2
     assert 'does not exist' in _error(capsys)

@@ -342,3 +342,19 @@ def test_empty_or_broken_data_file_is_one_line_and_no_warning(
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith('maglev-sysid: error:')
     assert match in lines[0]
+
+
+@pytest.mark.parametrize('option', ['--plot', '--save'])
+def test_an_output_directory_that_is_a_file_fails_before_the_work(
+    lab_mat, tmp_path, capsys, option
+):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a directory\n')
+    argv = [lab_mat, '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1]
+    code, out, err = run([*argv, option, afile / 'sub'], capsys)
+    assert code == 2 and 'Summary' not in out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert f"{option} {afile}/sub: '{afile}' is a file, not a directory" in lines[0]
+    code, out, err = run([*argv, option, afile], capsys)
+    assert code == 2 and f'{option} {afile}: is a file, not a directory' in err
