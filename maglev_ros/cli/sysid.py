@@ -499,7 +499,9 @@ def run(args: argparse.Namespace) -> int:
     from maglev_ros.sysid.workflow import ModelSpec, check_channels, identify, offset_hints
 
     if args.ts is not None and not 0 < args.ts < float('inf'):
-        raise UsageError(f'--ts must be a positive finite sample time in seconds, got {args.ts}')
+        raise UsageError(
+            f'--ts must be a positive sample time in seconds, a finite number, got {args.ts}'
+        )
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
     for option, directory in (('--plot', args.plot), ('--save', args.save)):

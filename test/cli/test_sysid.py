@@ -141,7 +141,7 @@ def test_select_and_csv(tmp_path, capsys):
         (['{mat}', '--rows', '1', '4', '--ts', '-2', '--arx', 1, 1, 1], '--ts must be a positive'),
         (
             ['{mat}', '--rows', '1', '4', '--ts', 'inf', '--arx', 1, 1, 1],
-            '--ts must be a positive finite sample time in seconds, got inf',
+            '--ts must be a positive sample time in seconds, a finite number, got inf',
         ),
         (['{mat}', '--rows', '1', '4', '--ts', 'nan', '--arx', 1, 1, 1], 'got nan'),
         (
