@@ -20,6 +20,7 @@ written), 2 on bad input (one line on stderr).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -377,7 +378,13 @@ def _file_with_instruments(args: argparse.Namespace, load: Any) -> tuple[Any, in
                 f'--instruments with --rows takes rows of {args.matrix} counted from 1, '
                 f'got {specs}'
             ) from None
-        return load(rows=(args.rows[0], list(args.rows[1]) + rows)), len(rows)
+        data = load(rows=(args.rows[0], list(args.rows[1]) + rows))
+        keep = data.nu - len(rows)
+        names = list(data.input_names)
+        for k, row in enumerate(rows):  # an unnamed matrix: the row, not a made-up input name
+            if names[keep + k] == f'u{keep + k + 1}':
+                names[keep + k] = f'{args.matrix} row {row}'
+        return dataclasses.replace(data, input_names=tuple(names)), len(rows)
     if path.suffix.lower() == '.csv':
         inputs = args.inputs.split(',') if args.inputs else None
         if inputs is None:
