@@ -168,6 +168,12 @@ def build_parser() -> argparse.ArgumentParser:
         'or by a power loss) from its .mcap or .db3 file, keeping every complete message; '
         'the original file stays beside it as .damaged; then exit',
     )
+    p.add_argument(
+        '--force',
+        action='store_true',
+        help='with --reindex: rebuild a bag that has metadata.yaml but whose storage file '
+        'is truncated (its run metadata is kept)',
+    )
     return p
 
 
@@ -207,8 +213,10 @@ def _run(args: argparse.Namespace) -> int:
     if args.reindex:
         from maglev_ros.bags import reindex
 
-        print(reindex(args.bag).describe())
+        print(reindex(args.bag, force=args.force).describe())
         return 0
+    if args.force:
+        raise UsageError('--force goes with --reindex: maglev-bag2data BAG --reindex --force')
     if args.topics:
         return _topics(args.bag, args.json)
     if args.out:

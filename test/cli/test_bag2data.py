@@ -170,3 +170,33 @@ def test_sysid_wiring(bag, run, tmp_path):
     np.testing.assert_array_equal(data.y, y)
     np.testing.assert_array_equal(data.u, u)
     assert args.outputs is None
+
+
+def test_a_truncated_finished_bag_is_rebuilt_with_force(tmp_path, run, capsys):
+    bag = write_lockstep_bag(tmp_path / 'cut', run, 'mcap')
+    storage = next(bag.glob('*.mcap'))
+    storage.write_bytes(storage.read_bytes()[:-200])  # the summary at the end is lost
+    assert main([str(bag), *OUT]) == 2
+    assert 'truncated or corrupt (' in _error(capsys)
+    assert main([str(bag), '--reindex']) == 2
+    assert f'rebuild it anyway with maglev-bag2data --reindex --force {bag}' in _error(capsys)
+    assert main([str(bag), *OUT, '--force']) == 2
+    assert '--force goes with --reindex' in _error(capsys)
+    assert main([str(bag), '--reindex', '--force']) == 0
+    assert f'{bag}: rebuilt from {storage.name}.damaged (mcap): 1200 messages' in (
+        capsys.readouterr().out
+    )
+    assert (bag / 'metadata.yaml.damaged').is_file()
+    assert main([str(bag), *OUT, '--topics']) == 0
+    listing = capsys.readouterr().out
+    assert 'metadata  seed: 42' in listing and 'metadata  reindexed_from:' in listing
+
+
+def test_a_plain_directory_is_not_called_a_bag(tmp_path, capsys):
+    plain = tmp_path / 'plain'
+    plain.mkdir()
+    (plain / 'notes.txt').write_text('hello\n')
+    assert main([str(plain), *OUT]) == 2
+    assert f"'{plain}' is not a bag: it has neither metadata.yaml nor a .mcap" in _error(capsys)
+    assert main([str(plain), '--reindex']) == 2
+    assert f"'{plain}' is not a bag: it holds no .mcap or .db3 storage file" in _error(capsys)
