@@ -150,9 +150,14 @@ def _corrupt(path: Path, exc: BaseException) -> BagError:
         return BagError(f'cannot read bag {str(path)!r}: its storage file is missing ({detail})')
     if detail.startswith(_METADATA_ERRORS):
         return BagError(f'cannot read bag {str(path)!r}: its metadata.yaml is invalid ({detail})')
+    rebuild = (
+        f': rebuild it from its complete messages with maglev-bag2data --reindex --force {path}'
+        if path.is_dir()
+        else ''
+    )
     return BagError(
         f'cannot read bag {str(path)!r}: storage file {", ".join(files)} is '
-        f'truncated or corrupt ({detail})'
+        f'truncated or corrupt ({detail}){rebuild}'
     )
 
 
@@ -180,8 +185,14 @@ class BagReader:
             files = [p for p in path.iterdir() if not p.name.startswith('.')]
             if not files:
                 raise BagError(f'bag directory {str(path)!r} is empty')
+            names = sorted(p.name for p in files)
+            has_storage = any(suffix in p.name for p in files for suffix in _STORAGE_SUFFIXES)
+            if not (path / 'metadata.yaml').is_file() and not has_storage:
+                raise BagError(
+                    f'{str(path)!r} is not a bag: it has neither metadata.yaml nor a .mcap or '
+                    f'.db3 storage file (files: {names})'
+                )
             if not (path / 'metadata.yaml').is_file():
-                names = sorted(p.name for p in files)
                 raise BagError(
                     f'bag directory {str(path)!r} has no metadata.yaml (files: '
                     f'{names}); an unfinished recording (a killed recorder) is rebuilt '

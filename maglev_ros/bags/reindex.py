@@ -215,13 +215,31 @@ def salvage_sqlite3(path: str | Path) -> Salvage:
     return Salvage(topics, messages, size, size)
 
 
-def reindex(path: str | Path) -> ReindexReport:
+def _run_metadata(metadata: Path) -> dict[str, object]:
+    """Read the run metadata (``custom_data``) of a ``metadata.yaml``; empty if unreadable."""
+    import yaml
+
+    try:
+        info = yaml.safe_load(metadata.read_text(encoding='utf-8'))
+        custom = info['rosbag2_bagfile_information'].get('custom_data') or {}
+        values = {str(k): yaml.safe_load(str(v)) for k, v in custom.items()}
+    except (OSError, yaml.YAMLError, KeyError, TypeError, AttributeError):
+        return {}
+    return {k: v for k, v in values.items() if isinstance(v, (str, int, float, bool))}
+
+
+def reindex(path: str | Path, force: bool = False) -> ReindexReport:
     """Rebuild an unfinished bag in place (see the module docstring).
 
     Parameters
     ----------
     path : str or Path
         A bag directory without ``metadata.yaml``.
+    force : bool
+        Rebuild a bag that has a ``metadata.yaml`` too (a finished bag whose
+        storage file was cut afterwards, by a full disk or a copy): its run
+        metadata is kept, the old file stays beside it as
+        ``metadata.yaml.damaged``.
 
     Returns
     -------
@@ -236,9 +254,20 @@ def reindex(path: str | Path) -> ReindexReport:
     bag = Path(path)
     if not bag.is_dir():
         raise BagError(f'bag {str(bag)!r} is not a directory')
-    if (bag / 'metadata.yaml').is_file():
-        raise BagError(f'bag {str(bag)!r} is finished (it has metadata.yaml): nothing to rebuild')
+    metadata = bag / 'metadata.yaml'
+    if metadata.is_file() and not force:
+        raise BagError(
+            f'bag {str(bag)!r} is finished (it has metadata.yaml): nothing to rebuild; if its '
+            f'storage file is truncated, rebuild it anyway with maglev-bag2data --reindex '
+            f'--force {bag}'
+        )
     files = sorted([*bag.glob('*.mcap'), *bag.glob('*.db3')])
+    if not files:
+        names = sorted(p.name for p in bag.iterdir())
+        raise BagError(
+            f'{str(bag)!r} is not a bag: it holds no .mcap or .db3 storage file to rebuild '
+            f'(files: {names})'
+        )
     if len(files) != 1:
         raise BagError(
             f'bag {str(bag)!r} must hold one .mcap or .db3 file to rebuild, found '
@@ -259,7 +288,11 @@ def reindex(path: str | Path) -> ReindexReport:
     work = Path(tempfile.mkdtemp(prefix='.reindex-', dir=bag.parent))
     try:
         rebuilt = work / bag.name
-        meta = {'reindexed_from': source.name, 'reindex_lost_bytes': lost}
+        meta: dict[str, object] = {
+            **(_run_metadata(metadata) if metadata.is_file() else {}),
+            'reindexed_from': source.name,
+            'reindex_lost_bytes': lost,
+        }
         counts = dict.fromkeys(kept, 0)
         with BagWriter(rebuilt, storage, metadata=meta) as writer:
             handles = {topic: writer.add_topic(topic, msgtype) for topic, msgtype in kept.items()}
@@ -269,6 +302,8 @@ def reindex(path: str | Path) -> ReindexReport:
                     counts[topic] += 1
         damaged = source.with_name(source.name + '.damaged')
         source.rename(damaged)
+        if metadata.is_file():
+            metadata.rename(metadata.with_name(metadata.name + '.damaged'))
         for journal in bag.glob(source.name + '-*'):  # sqlite3 -wal / -shm / -journal
             journal.rename(journal.with_name(journal.name + '.damaged'))
         for item in rebuilt.iterdir():

@@ -23,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..topics import current_channel, field_channel
-from .usage import Parser, UsageError, positive_float, run_command
+from .usage import Parser, UsageError, check_output_file, positive_float, run_command
 
 __all__ = ['add_channel_arguments', 'build_parser', 'dataset_from_args', 'main', 'split_point']
 
@@ -168,6 +168,12 @@ def build_parser() -> argparse.ArgumentParser:
         'or by a power loss) from its .mcap or .db3 file, keeping every complete message; '
         'the original file stays beside it as .damaged; then exit',
     )
+    p.add_argument(
+        '--force',
+        action='store_true',
+        help='with --reindex: rebuild a bag that has metadata.yaml but whose storage file '
+        'is truncated (its run metadata is kept)',
+    )
     return p
 
 
@@ -207,12 +213,16 @@ def _run(args: argparse.Namespace) -> int:
     if args.reindex:
         from maglev_ros.bags import reindex
 
-        print(reindex(args.bag).describe())
+        print(reindex(args.bag, force=args.force).describe())
         return 0
+    if args.force:
+        raise UsageError('--force goes with --reindex: maglev-bag2data BAG --reindex --force')
     if args.topics:
         return _topics(args.bag, args.json)
     if args.out:
-        split_paths(args.out)  # an unknown suffix fails before the bag is read
+        check_output_file('--out', args.out, create_parents=False)
+        for path in split_paths(args.out):  # an unknown suffix fails here too
+            check_output_file('--out', path, create_parents=False)
     ds = dataset_from_args(args.bag, args)
     summary = ds.summary(args.split)
     if args.out:

@@ -46,7 +46,14 @@ import numpy as np
 from maglev_ros.topics import current_channel, field_channel, field_topic
 
 from .bag2data import add_channel_arguments
-from .usage import Parser, UsageError, limit_blas_threads, positive_float, run_command
+from .usage import (
+    Parser,
+    UsageError,
+    check_output_file,
+    limit_blas_threads,
+    positive_float,
+    run_command,
+)
 
 __all__ = ['build_parser', 'main', 'default_channels', 'parse_bounds']
 
@@ -441,6 +448,11 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
     if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
         raise UsageError(f'--out must name a .yaml file, got {args.out!r}')
+    if args.out:
+        check_output_file('--out', args.out)
+    plot_path = args.plot or (str(Path(args.out).with_suffix('.png')) if args.out else None)
+    if plot_path:
+        check_output_file('--plot', plot_path)
     if (
         args.out
         and Path(args.params).is_file()

@@ -20,6 +20,7 @@ written), 2 on bad input (one line on stderr).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 from pathlib import Path
@@ -28,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from ..topics import EXCITATION_TOPIC
-from .usage import Parser, UsageError, limit_blas_threads, run_command
+from .usage import Parser, UsageError, check_output_dir, limit_blas_threads, run_command
 
 __all__ = ['build_parser', 'main', 'run']
 
@@ -102,7 +103,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs=2,
         type=float,
         metavar=('LOW', 'HIGH'),
-        help='Butterworth pass band in Hz (LOW 0: low-pass), like idfilt',
+        help='Butterworth pass band in Hz, up to Nyquist (LOW 0: low-pass, HIGH inf: '
+        'high-pass), like idfilt',
     )
     p.add_argument('--filter-order', type=int, default=5, help='filter order (default 5)')
     p.add_argument('--zero-phase', action='store_true', help='filter forwards and backwards')
@@ -205,13 +207,38 @@ def _spec_models(path: str) -> list[Any]:
     return out
 
 
+# orders of which at least one must be > 0 for a model to have a parameter to estimate
+# (OE and BJ without B are no input model: their F is then undetermined)
+_ESTIMATED = {
+    'arx': ('na', 'nb'),
+    'iv': ('na', 'nb'),
+    'armax': ('na', 'nb', 'nc'),
+    'oe': ('nb',),
+    'bj': ('nb',),
+}
+
+
+def _check_something_to_estimate(structure: str, orders: dict[str, int]) -> None:
+    """Refuse orders that leave a model with no parameter to estimate (UsageError)."""
+    names = _ESTIMATED[structure]
+    if all(orders[name] == 0 for name in names):
+        given = ' '.join(str(v) for v in orders.values())
+        zero = ' and '.join(name for name in names)
+        raise UsageError(
+            f'--{structure} {given}: {zero} {"are" if len(names) > 1 else "is"} 0, so the '
+            f'model has nothing to estimate: give {" or ".join(n.upper() for n in names)} >= 1'
+        )
+
+
 def _requested(args: argparse.Namespace) -> list[Any]:
     from maglev_ros.sysid.workflow import ORDER_NAMES, ModelSpec
 
     out = []
     for structure, keys in ORDER_NAMES.items():
         for values in getattr(args, structure) or []:
-            out.append(ModelSpec(structure, dict(zip(keys, values, strict=True))))
+            orders = dict(zip(keys, values, strict=True))
+            _check_something_to_estimate(structure, orders)
+            out.append(ModelSpec(structure, orders))
     if args.spec:
         out += _spec_models(args.spec)
     return out
@@ -351,7 +378,13 @@ def _file_with_instruments(args: argparse.Namespace, load: Any) -> tuple[Any, in
                 f'--instruments with --rows takes rows of {args.matrix} counted from 1, '
                 f'got {specs}'
             ) from None
-        return load(rows=(args.rows[0], list(args.rows[1]) + rows)), len(rows)
+        data = load(rows=(args.rows[0], list(args.rows[1]) + rows))
+        keep = data.nu - len(rows)
+        names = list(data.input_names)
+        for k, row in enumerate(rows):  # an unnamed matrix: the row, not a made-up input name
+            if names[keep + k] == f'u{keep + k + 1}':
+                names[keep + k] = f'{args.matrix} row {row}'
+        return dataclasses.replace(data, input_names=tuple(names)), len(rows)
     if path.suffix.lower() == '.csv':
         inputs = args.inputs.split(',') if args.inputs else None
         if inputs is None:
@@ -472,11 +505,16 @@ def run(args: argparse.Namespace) -> int:
     from maglev_ros.cli.progress import progress_bar
     from maglev_ros.sysid.workflow import ModelSpec, check_channels, identify, offset_hints
 
-    if args.ts is not None and not args.ts > 0:
-        raise UsageError(f'--ts must be a positive sample time in seconds, got {args.ts}')
+    if args.ts is not None and not 0 < args.ts < float('inf'):
+        raise UsageError(
+            f'--ts must be a positive sample time in seconds, a finite number, got {args.ts}'
+        )
     if args.max_iter is not None and args.max_iter < 1:
         raise UsageError(f'--max-iter must be >= 1, got {args.max_iter}')
-    from .sysid_extra import check_arguments, extend_single, run_several, run_sindy
+    for option, directory in (('--plot', args.plot), ('--save', args.save)):
+        if directory:
+            check_output_dir(option, directory)
+    from .sysid_extra import check_arguments, extend_single, filtered, run_several, run_sindy
 
     check_arguments(args)
     if args.sindy:
@@ -506,8 +544,7 @@ def run(args: argparse.Namespace) -> int:
     hints = (*notes, *(() if args.detrend else offset_hints(raw)))
     if args.detrend:
         data = data.detrend(args.detrend)
-    if args.filter:
-        data = data.filter(tuple(args.filter), args.filter_order, args.zero_phase)
+    data = filtered(args, data)
     if args.decimate != 1:
         data = data.decimate(args.decimate)
     est, val = data.split(split)

@@ -28,7 +28,14 @@ import numpy as np
 from ..topics import ESTIMATE_TOPIC, TRUE_STATE_TOPIC
 from .usage import UsageError
 
-__all__ = ['add_arguments', 'check_arguments', 'extend_single', 'run_several', 'run_sindy']
+__all__ = [
+    'add_arguments',
+    'check_arguments',
+    'extend_single',
+    'filtered',
+    'run_several',
+    'run_sindy',
+]
 
 
 def add_arguments(p: argparse.ArgumentParser) -> None:
@@ -369,11 +376,44 @@ def _reductions(
 
 
 # ---------------------------------------------------------- several data files
+def filtered(args: argparse.Namespace, data: Any) -> Any:
+    """Apply ``--filter LOW HIGH`` to ``data``, refusing a band above its Nyquist frequency.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        Parsed arguments (``filter``, ``filter_order``, ``zero_phase``).
+    data : IdData
+        The data set, sampled at ``data.Ts`` seconds.
+
+    Returns
+    -------
+    IdData
+        The filtered data (``data`` itself without ``--filter``).
+
+    Raises
+    ------
+    UsageError
+        LOW at or above Nyquist, or a finite HIGH above it (``inf`` asks for a
+        high-pass filter).
+    """
+    if not args.filter:
+        return data
+    low, high = args.filter
+    nyquist = 0.5 / data.Ts
+    if low >= nyquist or (high > nyquist and high != float('inf')):
+        raise UsageError(
+            f'--filter {low:g} {high:g}: the band is above the Nyquist frequency '
+            f'{nyquist:g} Hz of the data (Ts {data.Ts:g} s): give edges up to {nyquist:g} Hz '
+            '(HIGH inf: high-pass)'
+        )
+    return data.filter((low, high), args.filter_order, args.zero_phase)
+
+
 def _prepare(args: argparse.Namespace, data: Any) -> Any:
     if args.detrend:
         data = data.detrend(args.detrend)
-    if args.filter:
-        data = data.filter(tuple(args.filter), args.filter_order, args.zero_phase)
+    data = filtered(args, data)
     if args.decimate != 1:
         data = data.decimate(args.decimate)
     return data

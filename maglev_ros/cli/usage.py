@@ -11,13 +11,17 @@ from __future__ import annotations
 
 import argparse
 import ctypes
+import os
 import re
 import sys
 from collections.abc import Callable, Sequence
+from pathlib import Path
 
 __all__ = [
     'UsageError',
     'Parser',
+    'check_output_dir',
+    'check_output_file',
     'limit_blas_threads',
     'run_command',
     'positive_float',
@@ -92,6 +96,69 @@ def non_negative_float(text: str) -> float:
     if value < 0:
         raise argparse.ArgumentTypeError(f'must be >= 0, got {text!r}')
     return value
+
+
+def _check_writable_place(option: str, path: Path, parent: Path, create_parents: bool) -> None:
+    """Refuse ``path`` unless its directory ``parent`` exists (or can be made) and is writable."""
+    shown = f'{option} {path}'
+    place = parent
+    while not place.exists() and place != place.parent:
+        place = place.parent
+    if not place.is_dir():
+        raise UsageError(
+            f'{shown}: {str(place)!r} is a file, not a directory: choose another path'
+        )
+    if not create_parents and not parent.is_dir():
+        raise UsageError(f'{shown}: directory {str(parent)!r} does not exist: create it first')
+    if not os.access(place, os.W_OK | os.X_OK):
+        raise UsageError(f'{shown}: directory {str(place)!r} is not writable: choose another path')
+
+
+def check_output_file(option: str, path: str | os.PathLike, create_parents: bool = True) -> None:
+    """Check before any work that an output file can be written (:class:`UsageError` if not).
+
+    Parameters
+    ----------
+    option : str
+        The option that names the file (``'--out'``), for the message.
+    path : str or path-like
+        The file to be written.
+    create_parents : bool
+        The writer makes missing directories (else the file's directory must exist).
+
+    Raises
+    ------
+    UsageError
+        The path is a directory, a directory on the way is a file, or the
+        directory that would hold it is not writable.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise UsageError(f'{option} {path}: is a directory: name a file')
+    if path.exists() and not os.access(path, os.W_OK):
+        raise UsageError(f'{option} {path}: the file is not writable: choose another path')
+    _check_writable_place(option, path, path.parent, create_parents)
+
+
+def check_output_dir(option: str, path: str | os.PathLike) -> None:
+    """Check before any work that an output directory can be made and written.
+
+    Parameters
+    ----------
+    option : str
+        The option that names the directory (``'--plot'``), for the message.
+    path : str or path-like
+        The directory (made with its parents if missing).
+
+    Raises
+    ------
+    UsageError
+        The path or a directory on the way is a file, or it is not writable.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise UsageError(f'{option} {path}: is a file, not a directory: choose another path')
+    _check_writable_place(option, path, path, True)
 
 
 def run_command(

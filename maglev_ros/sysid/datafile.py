@@ -28,7 +28,8 @@ Names, units and time travel with the data (``maglev-bag2data`` writes them):
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import zipfile
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -192,7 +193,13 @@ def _name_and_unit(header: str) -> tuple[str, str]:
 
 def _read_csv(path: Path, outputs: Sequence[str] | None, inputs: Sequence[str] | None) -> dict:
     with path.open() as fh:
-        header = [_name_and_unit(h) for h in fh.readline().strip().split(',')]
+        first = fh.readline()
+        has_rows = any(line.strip() for line in fh)
+    if not first.strip():
+        raise DataFileError(f'{path.name} is empty: expected a header line and rows of numbers')
+    if not has_rows:
+        raise DataFileError(f'{path.name} has a header line but no rows of numbers')
+    header = [_name_and_unit(h) for h in first.strip().split(',')]
     try:
         table = np.loadtxt(path, delimiter=',', skiprows=1, ndmin=2)
     except ValueError as exc:
@@ -279,14 +286,33 @@ def load_data(
         raise DataFileError(f'data file {str(path)!r} does not exist')
     suffix = path.suffix.lower()
     if suffix == '.npz':
-        with np.load(path, allow_pickle=False) as npz:
+        if path.stat().st_size == 0:
+            raise DataFileError(f'{path.name} is empty (0 bytes): write the data again')
+        try:
+            npz = np.load(path, allow_pickle=False)
+        except (EOFError, ValueError, zipfile.BadZipFile):
+            raise DataFileError(
+                f'{path.name} is not a readable .npz archive: write it with '
+                'numpy.savez(path, y=..., u=..., Ts=...)'
+            ) from None
+        if not isinstance(npz, Mapping):
+            raise DataFileError(
+                f'{path.name} holds one array, not named variables: save it with '
+                'numpy.savez(path, y=..., u=..., Ts=...)'
+            )
+        with npz:
             variables = {k: npz[k] for k in npz.files}
         found = _from_mapping(variables, path, rows, matrix)
     elif suffix == '.mat':
         from scipy.io import loadmat
+        from scipy.io.matlab import MatReadError
 
+        if path.stat().st_size == 0:
+            raise DataFileError(f'{path.name} is empty (0 bytes): write the data again')
         try:
             variables = loadmat(path)
+        except (MatReadError, TypeError) as exc:  # scipy says TypeError for a bad record
+            raise DataFileError(f'{path.name} is not a readable MATLAB file: {exc}') from None
         except NotImplementedError:
             raise DataFileError(
                 f'{path.name} is a MATLAB v7.3 (HDF5) file; save it in the older format '

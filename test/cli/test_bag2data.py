@@ -119,6 +119,17 @@ def test_bad_input_exits_2_with_one_line(bag, capsys, argv, message):
     assert re.search(message, _error(capsys))
 
 
+def test_an_unwritable_output_fails_before_the_bag_is_read(bag, tmp_path, capsys):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a directory\n')
+    assert main([bag, *OUT, '--out', str(afile / 'data.mat')]) == 2
+    assert f"--out {afile}/data.mat: '{afile}' is a file, not a directory" in _error(capsys)
+    assert main([bag, *OUT, '--out', str(tmp_path / 'nodir' / 'data.mat')]) == 2
+    assert f"directory '{tmp_path / 'nodir'}' does not exist: create it first" in _error(capsys)
+    assert main([bag, *OUT, '--out', str(tmp_path)]) == 2
+    assert 'is a directory: name a file' in _error(capsys)
+
+
 def test_bad_bags_exit_2(tmp_path, capsys):
     assert main([str(tmp_path / 'none'), *OUT]) == 2
     assert 'does not exist' in _error(capsys)
@@ -159,3 +170,33 @@ def test_sysid_wiring(bag, run, tmp_path):
     np.testing.assert_array_equal(data.y, y)
     np.testing.assert_array_equal(data.u, u)
     assert args.outputs is None
+
+
+def test_a_truncated_finished_bag_is_rebuilt_with_force(tmp_path, run, capsys):
+    bag = write_lockstep_bag(tmp_path / 'cut', run, 'mcap')
+    storage = next(bag.glob('*.mcap'))
+    storage.write_bytes(storage.read_bytes()[:-200])  # the summary at the end is lost
+    assert main([str(bag), *OUT]) == 2
+    assert 'truncated or corrupt (' in _error(capsys)
+    assert main([str(bag), '--reindex']) == 2
+    assert f'rebuild it anyway with maglev-bag2data --reindex --force {bag}' in _error(capsys)
+    assert main([str(bag), *OUT, '--force']) == 2
+    assert '--force goes with --reindex' in _error(capsys)
+    assert main([str(bag), '--reindex', '--force']) == 0
+    assert f'{bag}: rebuilt from {storage.name}.damaged (mcap): 1200 messages' in (
+        capsys.readouterr().out
+    )
+    assert (bag / 'metadata.yaml.damaged').is_file()
+    assert main([str(bag), *OUT, '--topics']) == 0
+    listing = capsys.readouterr().out
+    assert 'metadata  seed: 42' in listing and 'metadata  reindexed_from:' in listing
+
+
+def test_a_plain_directory_is_not_called_a_bag(tmp_path, capsys):
+    plain = tmp_path / 'plain'
+    plain.mkdir()
+    (plain / 'notes.txt').write_text('hello\n')
+    assert main([str(plain), *OUT]) == 2
+    assert f"'{plain}' is not a bag: it has neither metadata.yaml nor a .mcap" in _error(capsys)
+    assert main([str(plain), '--reindex']) == 2
+    assert f"'{plain}' is not a bag: it holds no .mcap or .db3 storage file" in _error(capsys)

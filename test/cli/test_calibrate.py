@@ -173,3 +173,24 @@ def test_dynamic_mode_from_a_levitation_bag(tmp_path, capsys):
     static = write_bag(tmp_path / 'absent', 'absent', 1500)
     assert main([str(bag), str(static), '--free', 'magnet.mass']) == 2
     assert 'separate runs' in _error(capsys)
+
+
+@pytest.mark.parametrize(
+    ('option', 'expected'),
+    [
+        ('--out', "--out {afile}/c.yaml: '{afile}' is a file, not a directory"),
+        ('--plot', "--plot {afile}/c.png: '{afile}' is a file, not a directory"),
+    ],
+)
+def test_an_output_path_that_cannot_be_written_fails_before_the_fit(
+    bags, tmp_path, capsys, option, expected
+):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a directory\n')
+    target = afile / ('c.yaml' if option == '--out' else 'c.png')
+    argv = [str(bags['absent']), '--free', 'coil0.gain', option, str(target)]
+    assert main(argv) == 2
+    captured = capsys.readouterr()
+    assert 'iteration' not in captured.out  # refused before the fit started
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and expected.format(afile=afile) in err[0]

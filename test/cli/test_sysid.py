@@ -1,4 +1,5 @@
 import json
+import warnings
 
 import numpy as np
 import pytest
@@ -139,6 +140,11 @@ def test_select_and_csv(tmp_path, capsys):
         (['{mat}', '--rows', '1', '4', '--ts', '0', '--arx', 1, 1, 1], '--ts must be a positive'),
         (['{mat}', '--rows', '1', '4', '--ts', '-2', '--arx', 1, 1, 1], '--ts must be a positive'),
         (
+            ['{mat}', '--rows', '1', '4', '--ts', 'inf', '--arx', 1, 1, 1],
+            '--ts must be a positive sample time in seconds, a finite number, got inf',
+        ),
+        (['{mat}', '--rows', '1', '4', '--ts', 'nan', '--arx', 1, 1, 1], 'got nan'),
+        (
             ['{mat}', '--matrix', 'X', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1],
             "no variable 'X'",
         ),
@@ -158,6 +164,38 @@ def test_select_and_csv(tmp_path, capsys):
         ),
         (['{mat}', '--rows', '1,2', '4,5', '--ts', '1', '--oe', 2, 2, 1], 'single-input'),
         (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 1, 1], 'expected 3 arguments'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--arx', 0, 0, 1], '--arx 0 0 1: na and nb'),
+        (
+            ['{mat}', '--rows', '1', '4', '--ts', '1e-3', '--filter', 0, 800, '--arx', 1, 1, 1],
+            '--filter 0 800: the band is above the Nyquist frequency 500 Hz',
+        ),
+        (
+            [
+                '{mat}',
+                '--rows',
+                '1',
+                '4',
+                '--ts',
+                '1e-3',
+                '--filter',
+                600,
+                'inf',
+                '--arx',
+                1,
+                1,
+                1,
+            ],
+            '--filter 600 inf: the band is above the Nyquist frequency 500 Hz',
+        ),
+        (
+            ['{mat}', '{mat}', '--rows', '1', '4', '--ts', '1e-3', '--filter', 0, 501]
+            + ['--arx', 1, 1, 1],
+            '--filter 0 501: the band is above the Nyquist frequency 500 Hz',
+        ),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--iv', 0, 0, 2], '--iv 0 0 2: na and nb'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--armax', 0, 0, 0, 1], 'nothing to estimate'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--oe', 0, 2, 1], '--oe 0 2 1: nb is 0'),
+        (['{mat}', '--rows', '1', '4', '--ts', '1', '--bj', 0, 1, 1, 1, 1], '--bj 0 1 1 1 1: nb'),
     ],
 )
 def test_bad_input_exits_2_with_one_line(lab_mat, tmp_path, capsys, args, match):
@@ -279,3 +317,44 @@ def test_negative_exponent_value_and_yaml_position(lab_mat, tmp_path, capsys):
     code, _, err = run([lab_mat, '--rows', '1', '4', '--ts', '1', '--spec', spec], capsys)
     assert code == 2 and err.count('\n') == 1
     assert 'line 4, column' in err
+
+
+@pytest.mark.parametrize(
+    'name, content, match',
+    [
+        ('empty.mat', b'', 'empty.mat is empty'),
+        ('empty.npz', b'', 'empty.npz is empty'),
+        ('empty.csv', b'', 'empty.csv is empty'),
+        ('header.csv', b'y,u\n', 'header line but no rows'),
+        ('junk.npz', b'not a zip archive at all', 'not a readable .npz archive'),
+        ('junk.mat', b'\x01\x02' * 100, 'not a readable MATLAB file'),
+    ],
+)
+def test_empty_or_broken_data_file_is_one_line_and_no_warning(
+    tmp_path, capsys, name, content, match
+):
+    path = tmp_path / name
+    path.write_bytes(content)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        code, out, err = run([path, '--ts', '1e-3', '--arx', 2, 2, 1], capsys)
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith('maglev-sysid: error:')
+    assert match in lines[0]
+
+
+@pytest.mark.parametrize('option', ['--plot', '--save'])
+def test_an_output_directory_that_is_a_file_fails_before_the_work(
+    lab_mat, tmp_path, capsys, option
+):
+    afile = tmp_path / 'afile'
+    afile.write_text('not a directory\n')
+    argv = [lab_mat, '--rows', '1', '4', '--ts', '1', '--arx', 1, 1, 1]
+    code, out, err = run([*argv, option, afile / 'sub'], capsys)
+    assert code == 2 and 'Summary' not in out
+    lines = err.strip().splitlines()
+    assert len(lines) == 1
+    assert f"{option} {afile}/sub: '{afile}' is a file, not a directory" in lines[0]
+    code, out, err = run([*argv, option, afile], capsys)
+    assert code == 2 and f'{option} {afile}: is a file, not a directory' in err

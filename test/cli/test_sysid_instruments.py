@@ -81,3 +81,18 @@ def test_rows_instruments_must_be_rows(loop, tmp_path, capsys):
     argv = [str(mat), '--rows', '1', '2', '--ts', '1', '--iv', '2', '2', '1', '--instruments', 'r']
     assert main(argv) == 2
     assert 'takes rows of DATA counted from 1' in capsys.readouterr().err
+
+
+def test_row_instruments_are_named_by_their_channel(loop, tmp_path, capsys):
+    data, r = loop
+    channels = np.vstack([data.y.T, data.u.T, r[None, :]])
+    argv = ['--rows', '1', '2', '--ts', 1, '--iv', 2, 2, 1, '--instruments', '3']
+    plain, named = tmp_path / 'plain.mat', tmp_path / 'named.mat'
+    savemat(plain, {'DATA': channels})
+    names = np.array(['x', 'i', 'reference'], dtype=object)
+    savemat(named, {'DATA': channels, 'names': names, 'ny': 1, 'nu': 1})
+    main([str(a) for a in [plain, *argv]])
+    out = capsys.readouterr().out
+    assert 'Instruments of --iv: DATA row 3\n' in out and 'u2' not in out
+    main([str(a) for a in [named, *argv]])
+    assert 'Instruments of --iv: reference\n' in capsys.readouterr().out
