@@ -68,11 +68,12 @@ def test_streams_take_every_message_a_sample_at_a_time(ctx, own_thread):
             assert not streams._thread.is_alive()
     for name in ('f0', 'f1', 'c'):  # each topic in order, none lost
         assert [k for n, k in got if n == name] == list(range(300))
-    if own_thread:  # round robin: a sample's currents come after its fields
+    if own_thread:  # every message taken, several a wake-up when they wait
         assert streams.taken == 900 and streams.wake_ups <= 900
-        for i, (name, k) in enumerate(got):
-            if name == 'c':
-                assert ('f0', k) in got[:i] and ('f1', k) in got[:i]
+        # Across topics there is no order to assert: each topic is delivered on its
+        # own, and on a loaded machine a sample's currents can arrive before its
+        # fields (seen in CI: the currents of sample 75 first). The estimator's
+        # sample assembly pairs the parts by stamp, whatever their order.
     node.destroy_node()
     source.destroy_node()
 
