@@ -262,13 +262,15 @@ def test_separate_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2,
     assert len(estimate['pose']['covariance']) == 36
     a_command(commands)
     run_until(up)
-    stop_like_terminal(launch, tolerate=CRASH)
+    output = stop_like_terminal(launch, tolerate=CRASH)
+    # a magnet lost early stops the simulator's samples, possibly before the
+    # recorder matched its publishers: then only the estimates and commands are sure
+    simulated = [] if CRASH.search(output) else ['/maglev/currents', '/maglev/state/true']
     assert_bag_complete(
         bag,
-        ['/maglev/currents', '/maglev/currents/command', '/maglev/state/estimate',
-         '/maglev/state/true'],
+        ['/maglev/currents/command', '/maglev/state/estimate', *simulated],
         'maglev_simulator',
-    )  # fmt: skip
+    )
 
 
 def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp_path):
