@@ -146,6 +146,53 @@ def kf_predict(x, P, F, B, u, Q):  # pragma: no cover - jitted
 
 
 @njit(cache=True)
+def gate_sensors(S, nu, available, gate):  # pragma: no cover - jitted
+    """Chi-square gate per 3-axis sensor: which readings an update takes.
+
+    Parameters
+    ----------
+    S : ndarray, shape (3 k, 3 k)
+        Innovation covariance, T^2.
+    nu : ndarray, shape (3 k,)
+        Innovation, T.
+    available : ndarray of bool, shape (k,)
+        Sensors with a reading this sample.
+    gate : float
+        NIS threshold per sensor (chi-square, 3 dof).
+
+    Returns
+    -------
+    accepted : ndarray of bool, shape (k,)
+    nis_sensor : ndarray, shape (k,)
+        Each available sensor's NIS against its own 3x3 block of S (NaN if missing).
+    index : ndarray of int, shape (3 accepted,)
+        Rows of the accepted readings.
+    """
+    k = available.shape[0]
+    accepted = np.zeros(k, dtype=np.bool_)
+    nis_sensor = np.full(k, np.nan)
+    rows = 0
+    for s in range(k):
+        if not available[s]:
+            continue
+        block = S[3 * s : 3 * s + 3, 3 * s : 3 * s + 3].copy()
+        v = nu[3 * s : 3 * s + 3].copy()
+        value = v @ _mv(spd_inverse(block), v)
+        nis_sensor[s] = value
+        if value <= gate:
+            accepted[s] = True
+            rows += 3
+    index = np.empty(rows, dtype=np.int64)
+    j = 0
+    for s in range(k):
+        if accepted[s]:
+            for a in range(3):
+                index[j] = 3 * s + a
+                j += 1
+    return accepted, nis_sensor, index
+
+
+@njit(cache=True)
 def gated_update(x, P, H, r_diag, nu, available, gate):  # pragma: no cover - jitted
     """Kalman update with a chi-square gate per 3-axis sensor (Joseph form).
 
@@ -179,33 +226,14 @@ def gated_update(x, P, H, r_diag, nu, available, gate):  # pragma: no cover - ji
         Rows used (3 per accepted sensor).
     """
     n = x.shape[0]
-    k = available.shape[0]
     PHT = _mmt(P, H)
     S = _mm(H, PHT)
     for i in range(S.shape[0]):
         S[i, i] += r_diag[i]
-    accepted = np.zeros(k, dtype=np.bool_)
-    nis_sensor = np.full(k, np.nan)
-    rows = 0
-    for s in range(k):
-        if not available[s]:
-            continue
-        block = S[3 * s : 3 * s + 3, 3 * s : 3 * s + 3].copy()
-        v = nu[3 * s : 3 * s + 3].copy()
-        value = v @ _mv(spd_inverse(block), v)
-        nis_sensor[s] = value
-        if value <= gate:
-            accepted[s] = True
-            rows += 3
+    accepted, nis_sensor, index = gate_sensors(S, nu, available, gate)
+    rows = index.shape[0]
     if rows == 0:
         return x.copy(), P.copy(), accepted, nis_sensor, 0.0, 0
-    index = np.empty(rows, dtype=np.int64)
-    j = 0
-    for s in range(k):
-        if accepted[s]:
-            for a in range(3):
-                index[j] = 3 * s + a
-                j += 1
     Hs = np.empty((rows, n))
     Ss = np.empty((rows, rows))
     PHTs = np.empty((n, rows))

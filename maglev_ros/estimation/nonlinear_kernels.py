@@ -35,7 +35,16 @@ from numba import njit
 
 from ..physics import kernels as phys
 from .filter_model import embed, filter_measurement, measurement_jacobian, series_transition
-from .kernels import _mm, _mmt, _mv, _symmetrise, freeze_check, gated_update, spd_inverse
+from .kernels import (
+    _mm,
+    _mmt,
+    _mv,
+    _symmetrise,
+    freeze_check,
+    gate_sensors,
+    gated_update,
+    spd_inverse,
+)
 
 __all__ = [
     'ekf_predict_full',
@@ -580,7 +589,6 @@ def ukf_update(
     n_r = reduced.shape[0]
     p, n = sigmas_f.shape
     m = y.shape[0]
-    k = available.shape[0]
     sh = np.empty((p, m))
     for i in range(p):
         if i > 0 and _same_pose(sigmas_f[i], sigmas_f[0], reduced):
@@ -596,28 +604,10 @@ def ukf_update(
     for a in range(m):
         S[a, a] += r_diag[a]
     nu = y - zp
-    accepted = np.zeros(k, dtype=np.bool_)
-    nis_sensor = np.full(k, np.nan)
-    rows = 0
-    for s in range(k):
-        if not available[s]:
-            continue
-        block = S[3 * s : 3 * s + 3, 3 * s : 3 * s + 3].copy()
-        v = nu[3 * s : 3 * s + 3].copy()
-        value = v @ _mv(spd_inverse(block), v)
-        nis_sensor[s] = value
-        if value <= gate:
-            accepted[s] = True
-            rows += 3
+    accepted, nis_sensor, index = gate_sensors(S, nu, available, gate)
+    rows = index.shape[0]
     if rows == 0:
         return x.copy(), P.copy(), accepted, nis_sensor, 0.0, 0
-    index = np.empty(rows, dtype=np.int64)
-    j = 0
-    for s in range(k):
-        if accepted[s]:
-            for a in range(3):
-                index[j] = 3 * s + a
-                j += 1
     Ss = np.empty((rows, rows))
     vs = np.empty(rows)
     for a in range(rows):
