@@ -275,16 +275,25 @@ class ParameterTable(Mapping[str, Param]):
         failures are raised as it.
     params : mapping
         ``name -> Param``.
+    removed : mapping, optional
+        ``name -> what replaced it``: parameters the node no longer has. A
+        value given for one is refused (:meth:`validate`, :meth:`declare`) in
+        one line that says what replaced it, never silently ignored.
     """
 
     def __init__(
-        self, node_name: str, error: type[NodeParameterError], params: Mapping[str, Param]
+        self,
+        node_name: str,
+        error: type[NodeParameterError],
+        params: Mapping[str, Param],
+        removed: Mapping[str, str] | None = None,
     ) -> None:
         if not issubclass(error, NodeParameterError):
             raise TypeError(f'{error.__name__} must subclass NodeParameterError')
         self.node_name = node_name
         self.error = error
         self._params = dict(params)
+        self.removed = dict(removed or {})
         for name, param in self._params.items():
             kind = param.type_kind
             if kind not in KINDS:
@@ -350,12 +359,31 @@ class ParameterTable(Mapping[str, Param]):
         Raises
         ------
         NodeParameterError
-            As the table's error class, naming the first invalid parameter.
+            As the table's error class, naming the first invalid parameter
+            (or a removed one that was given).
         """
+        for name in values:
+            if name in self.removed:
+                self.refuse_removed(name)
         return {
             name: self.check_value(name, values.get(name, param.default))
             for name, param in self._params.items()
         }
+
+    def refuse_removed(self, name: str) -> None:
+        """Raise the table's error for the removed parameter ``name``.
+
+        Parameters
+        ----------
+        name : str
+            A key of :attr:`removed`.
+
+        Raises
+        ------
+        NodeParameterError
+            As the table's error class: ``NAME was removed: REPLACEMENT``.
+        """
+        raise self.error(f'{name} was removed: {self.removed[name]}')
 
     # -- ROS -------------------------------------------------------------------------
     def declare(self, node) -> dict[str, object]:
@@ -371,9 +399,22 @@ class ParameterTable(Mapping[str, Param]):
         dict
             ``name -> value`` as rclpy holds it (to :meth:`validate`, or the
             node's ``build_config``).
+
+        Raises
+        ------
+        NodeParameterError
+            If a removed parameter was given a value.
         """
         from rcl_interfaces.msg import ParameterDescriptor
 
+        for name in self.removed:
+            # declared untyped to see whether an override names it, then undeclared
+            given = node.declare_parameter(
+                name, None, ParameterDescriptor(dynamic_typing=True)
+            ).value
+            node.undeclare_parameter(name)
+            if given is not None:
+                self.refuse_removed(name)
         values = {}
         for name, param in self._params.items():
             # Ranges go into the text, not the descriptor's range fields: rclpy
