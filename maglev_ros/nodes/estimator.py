@@ -7,7 +7,7 @@ parameters) on the samples of the simulator or the board driver.
 Sample completeness: a sample (one stamp) is its ``maglev/currents`` and
 the field ``maglev/sensor_<k>/field`` of every sensor of the parameter set.
 The messages of one sample may be handled in any order (distinct topics);
-a :class:`~maglev_ros.nodes.sample_assembly.SampleAssembler` collects them
+a :class:`~maglev_ros.loop.sample_assembly.SampleAssembler` collects them
 and the estimator steps once per sample, in stamp order, once it is complete
 -- or once a sensor is known lost: that sensor's field of a later stamp
 arrived, a later sample is complete, or samples more than ``sample_wait``
@@ -58,13 +58,13 @@ from sensor_msgs.msg import JointState, MagneticField
 from maglev_ros.cdr import CURRENT_VALUES, FIELD_VALUES
 from maglev_ros.cdr.reader import RawFieldReader
 from maglev_ros.estimation import FILTERS, EstimatorConfig, EstimatorConfigError, make_estimator
+from maglev_ros.loop.sample_assembly import ReleasedSample, SampleAssembler
 from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.messages import diagnostic_array
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, number
 from maglev_ros.nodes.params import integer as integer_rule
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
-from maglev_ros.nodes.sample_assembly import ReleasedSample, SampleAssembler
 from maglev_ros.nodes.sample_streams import Stream, open_streams
 from maglev_ros.nodes.state_messages import EstimateEncoder
 from maglev_ros.topics import CURRENTS_TOPIC, DIAGNOSTICS_TOPIC, ESTIMATE_TOPIC, field_topic

@@ -16,7 +16,7 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import JointState
 from waiting import wait_for
 
 from maglev_ros import topics
@@ -98,9 +98,9 @@ class _Peer:
             SENSOR_QOS,
         )
         n.create_subscription(
-            Float64MultiArray,
+            JointState,
             topics.COMMAND_TOPIC,
-            lambda m: self.commands.append(list(m.data)),
+            lambda m: self.commands.append(list(m.effort)),
             LOCKSTEP_COMMAND_QOS,
         )
         n.create_subscription(
