@@ -260,12 +260,15 @@ def unit_of(channel: Channel) -> str:
     str
         SI unit (``'T'``, ``'A'``, ``'m'`` ...) shared by all terms, else ``''``.
     """
+    from .command_fields import command_alias  # (it builds on this module)
+
     units = set()
     for _, ref in channel.terms:
-        path = format_field_path(ref.path)
+        paths = [format_field_path(r.path) for r in (ref, command_alias(ref)) if r is not None]
         unit = next(
             (
                 u
+                for path in paths
                 for pattern, prefix, u in CHANNEL_UNITS
                 if re.fullmatch(pattern, ref.topic) and path.startswith(prefix)
             ),

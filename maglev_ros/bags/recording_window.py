@@ -19,12 +19,14 @@ runs on. Two kinds of topic:
   - **end**: the converter holds an input for one of its own periods after its
     last message, so a window ending long after its last command would be
     trimmed. When the window has an end, the held message in force at the
-    newest sample kept is logged once more at that sample's time (at the
-    topic's first message after ``end``, or when the recording closes).
+    newest sample kept is logged once more at that sample's time: once both
+    the held topic and a sample topic have delivered a message after ``end``,
+    or when the recording closes.
 
-Each rule looks at one topic's own messages only: a middleware delivers the
-messages of one topic in order, but not those of different topics, so no rule
-depends on the order across topics. The window may be moved at any time
+A middleware delivers the messages of one topic in order, but not those of
+different topics: a topic's first message after a bound says that all its
+messages before it are in, so the rules wait for those and depend on no order
+across topics. The window may be moved at any time
 (:meth:`RecordingWindow.set`): a lab starts with an empty one and sets it once
 the settling is over; the newest held message seen stays the candidate for the
 new window's start.
@@ -78,6 +80,7 @@ class RecordingWindow:
     def __init__(self, start_ns: int = 0, end_ns: int | None = None) -> None:
         # per held topic: the newest message offered, (log time, message, kept)
         self._in_force: dict[Hashable, tuple[int, object, bool]] = {}
+        self._after: dict[Hashable, tuple[int, object, bool]] = {}  # newest after the end
         self.set(start_ns, end_ns)
 
     @property
@@ -117,11 +120,15 @@ class RecordingWindow:
             raise BagError(
                 f'the window must end at or after its start {start_ns} ns, got {int(end_ns)} ns'
             )
+        self._in_force.update(self._after)  # the newest seen of each topic
+        self._after = {}
         self._start = start_ns
         self._end = None if end_ns is None else int(end_ns)
         self._newest: int | None = None
         self._started: set[Hashable] = set()  # held topics with a message inside
         self._finished: set[Hashable] = set()  # held topics whose end rule ran
+        self._ended: set[Hashable] = set()  # held topics with a message after the end
+        self._samples_ended = False  # a sample after the end came
 
     def offer(
         self, topic: Hashable, log_time: int, message: object, held: bool = False
@@ -147,7 +154,10 @@ class RecordingWindow:
             window's end.
         """
         if not held:
-            if log_time < self._start or (self._end is not None and log_time > self._end):
+            if self._end is not None and log_time > self._end:
+                self._samples_ended = True  # this topic's samples of the window are all in
+                return [k for topic in list(self._ended) for k in self._finish(topic)]
+            if log_time < self._start:
                 return []
             if self._newest is None or log_time > self._newest:
                 self._newest = log_time
@@ -156,9 +166,9 @@ class RecordingWindow:
             self._in_force[topic] = (log_time, message, False)
             return []
         if self._end is not None and log_time > self._end:
-            kept = self._finish(topic)
-            self._in_force[topic] = (log_time, message, False)
-            return kept
+            self._ended.add(topic)  # this topic's messages of the window are all in
+            self._after[topic] = (log_time, message, False)  # a later window's candidate
+            return self._finish(topic) if self._samples_ended else []
         kept = []
         if topic not in self._started:
             self._started.add(topic)
@@ -170,7 +180,7 @@ class RecordingWindow:
         return kept
 
     def _finish(self, topic: Hashable) -> list[Kept]:
-        """The end rule of one held topic (once per window)."""
+        """Apply the end rule to one held topic (once per window)."""
         if topic in self._finished or self._newest is None:
             return []
         self._finished.add(topic)
