@@ -317,8 +317,8 @@ class StampAligner:
         group = self._pending.setdefault(stamp_ns, {})
         group[topic] = message
         if len(group) < len(self.stamped):
-            while len(self._pending) > self.depth:
-                del self._pending[min(self._pending)]
+            while len(self._pending) > self.depth:  # the oldest first (stamps come in order)
+                del self._pending[next(iter(self._pending))]
                 self.dropped += 1
             return released
         for old in [s for s in self._pending if s <= stamp_ns]:
