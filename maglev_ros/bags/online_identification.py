@@ -12,12 +12,18 @@ converter's syntax (``TOPIC:PATH`` and linear combinations, see
 * **sample completeness**: a sample is complete when every *sample* topic the
   channels read (messages with a header: fields, currents, states) has
   delivered its message of one stamp (:class:`~maglev_ros.bags.live.StampAligner`),
-  then evaluated with the trigger topic last. *Held* topics (the commands and
-  the excitation, stamped or not, and header-less topics) are held at their
-  latest value (zero-order hold), as the bag converter holds an input; if the
-  trigger is held, every trigger message completes a sample.
-  ``complete_on_next`` holds a completed sample until the next stamp's first
-  message, so a command that answers it (a real-time burst's) is its input;
+  then evaluated with the trigger topic last. The commands and the excitation
+  are inputs held at their latest value (zero-order hold), as the bag
+  converter holds them. Stamped (``sensor_msgs/JointState``, stamped with the
+  sample they answer), a sample waits until each has a message stamped at or
+  after it, and its input is the newest stamped at or before it: the
+  converter's pairing, exact whatever the order of arrival across topics; a
+  trigger naming a command topic then gives way to the sample's own topics.
+  Header-less (``std_msgs/Float64MultiArray`` of older publishers), they are
+  taken as they arrive; if the trigger is one, every trigger message completes
+  a sample, and ``complete_on_next`` holds a completed sample until the next
+  stamp's first message, so a command that answers it (a real-time burst's)
+  is its input;
 * **window**: samples whose stamp is before ``identify_from`` or after
   ``identify_until`` are counted and left out, their values still held;
 * **report**: the coefficients, the prediction error and fit, and the
@@ -37,6 +43,7 @@ from .channels import parse_channel
 from .command_fields import COMMAND_TOPICS, resolve_channel
 from .errors import BagError
 from .live import ChannelIdentifier, StampAligner
+from .names import normalize_topic
 from .typestore import jazzy_typestore
 
 __all__ = [
@@ -203,23 +210,28 @@ class OnlineIdentification:
             [resolve_channel(parse_channel(s), message_type_of) for s in specs]
             for specs in (config.outputs, config.inputs)
         )
+        #: topic -> message type, every topic the channels read
+        self.types = {t: message_type_of(t) for c in outputs + inputs for t in c.topics}
+        headers = {t for t, kind in self.types.items() if _has_header(kind)}
+        self.stamped = frozenset(headers - COMMAND_TOPICS)  # the topics of a sample
+        held_stamped = headers & COMMAND_TOPICS  # commands stamped with their sample
+        trigger = normalize_topic(config.trigger) if config.trigger else None
+        first = (inputs or outputs)[0].topics[0]
+        if (trigger or first) in held_stamped and self.stamped:
+            # a sample is paired with its command by stamp: its own set completes it
+            trigger = [t for t in self.types if t in self.stamped][-1]
         self.identifier = ident = ChannelIdentifier(
             outputs,
             inputs,
             _shaped('na', config.na, ny, ny),
             _shaped('nb', config.nb, ny, nu),
             _shaped('nk', config.nk, ny, nu),
-            trigger=config.trigger or None,
+            trigger=trigger,
             forgetting=config.forgetting,
             initial_covariance=config.initial_covariance,
             window=config.window or None,
             fit_window=config.fit_window,
             wait_for_history=config.wait_for_history,
-        )
-        #: topic -> message type, every topic the channels read
-        self.types = {topic: message_type_of(topic) for topic in ident.topics}
-        self.stamped = frozenset(
-            t for t, kind in self.types.items() if _has_header(kind) and t not in COMMAND_TOPICS
         )
         self.aligner = StampAligner(
             ident.topics,
@@ -227,6 +239,7 @@ class OnlineIdentification:
             ident.sampler.trigger,
             depth=depth,
             complete_on_next=config.complete_on_next,
+            held_stamped=held_stamped,
         )
         self.set_window(*config.window_ns)
         self.rejected = 0  # samples the ARX refused (non-finite values)
@@ -267,7 +280,7 @@ class OnlineIdentification:
             Samples given to the ARX.
         """
         stamp = None
-        if topic in self.stamped:
+        if topic in self.stamped or topic in self.aligner.held_stamped:
             stamp = message.header.stamp.sec * 1_000_000_000 + message.header.stamp.nanosec
         samples = []
         for name, (released_stamp, item) in self.aligner.add(topic, stamp, (stamp, message)):

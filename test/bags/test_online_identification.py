@@ -163,3 +163,49 @@ def test_bad_channels_and_orders_are_refused():
     with pytest.raises(BagError, match="trigger topic '/maglev/currents/command' is not read"):
         OnlineIdentification(config(trigger=COMMAND))
     assert message_type_of('maglev/sensor_7/field') == 'sensor_msgs/msg/MagneticField'
+
+
+def _shuffled_across_topics(messages, seed):
+    """The messages with each topic's order kept and the order across topics random."""
+    rng = np.random.default_rng(seed)
+    queues = {}
+    for topic, message in messages:
+        queues.setdefault(topic, []).append((topic, message))
+    out = []
+    while any(queues.values()):
+        topic = rng.choice(sorted(t for t, q in queues.items() if q))
+        out.append(queues[topic].pop(0))
+    return out
+
+
+@pytest.mark.parametrize('burst', [1, 5], ids=['lockstep', 'bursts'])
+def test_stamped_commands_pair_by_stamp_whatever_the_arrival_order(monkeypatch, burst):
+    """JointState commands: sample k's input is the newest command stamped <= k.
+
+    The default trigger (the first input's topic, the command's) gives way to the
+    sample's own topics; no ``complete_on_next`` is needed, and no sample waits for
+    a later stamp than its command's.
+    """
+    monkeypatch.setitem(topics.MESSAGE_TYPES, topics.COMMAND_TOPIC, 'sensor_msgs/msg/JointState')
+    n = 60
+    rng = np.random.default_rng(12)
+    y = rng.standard_normal(n)
+    c = {k: rng.standard_normal() for k in range(burst - 1, n, burst)}  # answers k
+    messages = []
+    for k in range(n):
+        messages += [(FIELD, field(k, y[k])), (CURRENTS, joint_state(k, [0, 0, 0, 0]))]
+        if k in c:
+            messages.append((COMMAND, command(k, c[k])))
+    expected_u = [c[max(j for j in c if j <= k)] for k in range(burst - 1, n)]
+    expected = reference_theta(zip(y[burst - 1 :], expected_u, strict=True))
+    for seed in range(5):
+        core = OnlineIdentification(
+            config(inputs=(topics.command_channel(0),), outputs=(topics.field_channel(0, 'x'),))
+        )
+        assert core.identifier.sampler.trigger == FIELD  # the sample's own topic
+        assert core.aligner.held_stamped == (COMMAND,)
+        for topic, message in _shuffled_across_topics(messages, seed):
+            core.add(topic, message)
+        # samples before the first command have no input yet: counted as waiting
+        assert core.samples == n - (burst - 1) and core.aligner.dropped == 0
+        np.testing.assert_allclose(core.identifier.arx.theta, expected, rtol=1e-9)
