@@ -18,40 +18,15 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from ..topics import COMMAND_TOPIC, EXCITATION_TOPIC
-from .channels import Channel, FieldRef
-from .names import normalize_topic
+from .channels import COMMAND_TOPICS, Channel, FieldRef, command_alias
 
 __all__ = ['COMMAND_ARRAYS', 'COMMAND_TOPICS', 'command_alias', 'resolve_channel', 'resolve_ref']
 
-#: The topics the rule applies to (absolute names).
-COMMAND_TOPICS = frozenset(normalize_topic(t) for t in (COMMAND_TOPIC, EXCITATION_TOPIC))
 #: The array field holding the currents, per message type of a command.
 COMMAND_ARRAYS = {
     'sensor_msgs/msg/JointState': 'effort',
     'std_msgs/msg/Float64MultiArray': 'data',
 }
-
-
-def command_alias(ref: FieldRef) -> FieldRef | None:
-    """Return the other spelling of a command current (``data[i]`` <-> ``effort[i]``).
-
-    Parameters
-    ----------
-    ref : FieldRef
-        A field reference.
-
-    Returns
-    -------
-    FieldRef or None
-        The reference in the other message type, or None if ``ref`` is not
-        ``data[i]`` / ``effort[i]`` of a command topic.
-    """
-    path = ref.path
-    if ref.topic not in COMMAND_TOPICS or len(path) != 2 or not isinstance(path[1], int):
-        return None
-    other = {'data': 'effort', 'effort': 'data'}.get(path[0])
-    return None if other is None else FieldRef(ref.topic, (other, path[1]))
 
 
 def resolve_ref(ref: FieldRef, msgtype: str) -> FieldRef:

@@ -31,7 +31,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from importlib import metadata as importlib_metadata
 
-from ..topics import CLOCK_TOPIC, COMMAND_TOPIC, EXCITATION_TOPIC
+from ..topics import CLOCK_TOPIC
+from .channels import COMMAND_TOPICS
 from .errors import BagError
 from .names import normalize_topic
 from .recording_window import Kept, RecordingWindow
@@ -50,7 +51,7 @@ __all__ = [
 #: Log clocks a recording understands (see the module docstring).
 LOG_CLOCKS = ('ros', 'topic', 'stamp')
 #: Topics of inputs that the plant holds until the next message (absolute names).
-HELD_TOPICS = frozenset(normalize_topic(t) for t in (COMMAND_TOPIC, EXCITATION_TOPIC))
+HELD_TOPICS = COMMAND_TOPICS
 # the header's stamp (a Clock's time) right after the 4-byte CDR encapsulation header
 _STAMP = struct.Struct('<iI')
 

@@ -147,7 +147,12 @@ PARAMETERS = ParameterTable(
 
 
 def build_config(values: dict) -> IdentifierConfig:
-    """Validate raw parameter values (a missing name takes its default).
+    """Validate raw parameter values.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name to value (a missing name takes its default).
 
     Raises
     ------
@@ -164,7 +169,13 @@ def build_config(values: dict) -> IdentifierConfig:
 
 
 def build_identifier(cfg: IdentifierConfig) -> OnlineIdentification:
-    """Build the ROS-free core of a configuration (channel or order errors as parameter errors)."""
+    """Build the ROS-free core of a configuration (channel or order errors as parameter errors).
+
+    Parameters
+    ----------
+    cfg : IdentifierConfig
+        Validated parameters.
+    """
     try:
         return OnlineIdentification(cfg)
     except (BagError, ValueError) as err:
@@ -172,7 +183,13 @@ def build_identifier(cfg: IdentifierConfig) -> OnlineIdentification:
 
 
 def message_type_of(topic: str) -> str:
-    """Message type (``pkg/msg/Type``) of a contract topic (parameter error if unknown)."""
+    """Message type (``pkg/msg/Type``) of a contract topic (parameter error if unknown).
+
+    Parameters
+    ----------
+    topic : str
+        Topic name, with or without the leading ``/``.
+    """
     try:
         return _message_type_of(topic)
     except BagError as err:
@@ -208,9 +225,9 @@ class IdentifierNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         refuse_removed(self, REMOVED, IdentifierParameterError)
-        self._config = build_config(PARAMETERS.declare(self))
-        self.core = core = build_identifier(self._config)
-        self.add_on_set_parameters_callback(PARAMETERS.on_set(self, build_config))
+        self.config = build_config(PARAMETERS.declare(self))
+        self.core = core = build_identifier(self.config)
+        self.add_on_set_parameters_callback(PARAMETERS.on_set(self, self._rebuild))
         load_kernels()  # now, not with the first sample
         for topic, kind in core.types.items():
             self.create_subscription(
@@ -226,18 +243,14 @@ class IdentifierNode(Node):
         self._fit_pub = self.create_publisher(Float64MultiArray, IDENTIFIER_FIT_TOPIC, 10)
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
         self.create_service(Trigger, IDENTIFIER_RESET_SERVICE, self._on_reset)
-        self.create_timer(1.0 / self._config.publish_rate, self.publish)
+        self.create_timer(1.0 / self.config.publish_rate, self.publish)
         self.get_logger().info(core.describe())
 
-    @property
-    def config(self) -> IdentifierConfig:
-        """The validated parameters (the window may be set at run time)."""
-        return self._config
-
-    @config.setter
-    def config(self, config: IdentifierConfig) -> None:
-        self._config = config
+    def _rebuild(self, values: dict) -> IdentifierConfig:
+        """Check the parameters with a change (the window), move the core's window to it."""
+        config = build_config(values)
         self.core.set_window(*config.window_ns)
+        return config  # stored as self.config by the parameter table
 
     samples = property(lambda self: self.core.samples, doc='Samples given to the ARX.')
     outside = property(lambda self: self.core.outside, doc='Samples left out by the window.')
@@ -268,7 +281,13 @@ class IdentifierNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the identifier until SIGINT or SIGTERM (exit status 2 for invalid parameters)."""
+    """Run the identifier until SIGINT or SIGTERM.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS ones included); exit status 2 for bad parameters.
+    """
     return run_nodes([IdentifierNode], args, NODE_NAME, (IdentifierParameterError,), PARAMETERS)
 
 

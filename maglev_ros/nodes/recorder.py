@@ -162,7 +162,13 @@ def build_config(values: dict) -> RecorderConfig:
 
 
 def message_class(msgtype: str):
-    """Return the rclpy message class of ``pkg/msg/Type``."""
+    """Return the rclpy message class of a message type.
+
+    Parameters
+    ----------
+    msgtype : str
+        ``pkg/msg/Type``.
+    """
     package, kind, name = msgtype.split('/')
     return getattr(importlib.import_module(f'{package}.{kind}'), name)
 
@@ -184,7 +190,7 @@ class RecorderNode(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         refuse_removed(self, REMOVED, RecorderParameterError)
-        self._config = cfg = build_config(PARAMETERS.declare(self))
+        self.config = cfg = build_config(PARAMETERS.declare(self))
         self.add_on_set_parameters_callback(PARAMETERS.on_set(self, self._with_window))
         try:
             self.writer = BagWriter(cfg.path, cfg.storage, metadata=cfg.metadata()).open()
@@ -203,21 +209,13 @@ class RecorderNode(Node):
             f'recording {len(cfg.topics)} topic(s) to {cfg.path} ({cfg.storage})'
         )
 
-    @property
-    def config(self) -> RecorderConfig:
-        """The validated parameters (``record_from``, ``record_until``: settable at run time)."""
-        return self._config
-
-    @config.setter
-    def config(self, config: RecorderConfig) -> None:
-        self._config = config
-        self.recording.set_window(*config.window_ns)
-
     def _with_window(self, values: dict) -> RecorderConfig:
-        """Return the configuration with a new window (the only settable parameters)."""
+        """Check a new window (the only settable parameters), move the recording's to it."""
         v = PARAMETERS.validate(values)
         _check_window(v)
-        return replace(self.config, record_from=v['record_from'], record_until=v['record_until'])
+        config = replace(self.config, record_from=v['record_from'], record_until=v['record_until'])
+        self.recording.set_window(*config.window_ns)
+        return config  # stored as self.config by the parameter table
 
     @property
     def subscribed(self) -> list[str]:
@@ -283,7 +281,13 @@ class RecorderNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Record until SIGINT, SIGTERM or SIGHUP; the bag is finalised either way."""
+    """Record until SIGINT, SIGTERM or SIGHUP; the bag is finalised either way.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS ones included); exit status 2 for bad parameters.
+    """
     return run_nodes([RecorderNode], args, NODE_NAME, (RecorderParameterError,), PARAMETERS)
 
 
