@@ -271,9 +271,10 @@ class Recording:
         return self._write(self.window.offer(topic, log_time, data, held))
 
     def _write(self, kept: list[Kept]) -> int:
-        for item in kept:
-            self.writer.write(self._topics[item.topic][0], item.log_time, item.message)
-            self.counts[item.topic] += 1
+        write, topics, counts = self.writer.write, self._topics, self.counts
+        for topic, log_time, message in kept:
+            write(topics[topic][0], log_time, message)
+            counts[topic] += 1
         return len(kept)
 
     @property

@@ -35,15 +35,14 @@ new window's start.
 from __future__ import annotations
 
 from collections.abc import Hashable
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from .errors import BagError
 
 __all__ = ['Kept', 'RecordingWindow']
 
 
-@dataclass(frozen=True)
-class Kept:
+class Kept(NamedTuple):
     """One message to write.
 
     Attributes
