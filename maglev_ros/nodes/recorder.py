@@ -196,9 +196,7 @@ class RecorderNode(Node):
             self.writer = BagWriter(cfg.path, cfg.storage, metadata=cfg.metadata()).open()
         except BagError as err:
             raise RecorderParameterError(f'path {cfg.path!r}: {err}') from err
-        clock = self.get_clock()  # wall time as clock.now() gives it, without its Time object
-        now = (lambda: clock.now().nanoseconds) if clock.ros_time_is_active else time.time_ns
-        self.recording = Recording(self.writer, cfg.log_clock, now, *cfg.window_ns)
+        self.recording = Recording(self.writer, cfg.log_clock, self._now, *cfg.window_ns)
         self.counts = self.recording.counts
         self._handled: set[str] = set()  # topics subscribed (or refused by the bag)
         self.metadata = RemoteParameters(self, cfg.metadata_node, self._store_metadata)
@@ -208,6 +206,11 @@ class RecorderNode(Node):
         self.get_logger().info(
             f'recording {len(cfg.topics)} topic(s) to {cfg.path} ({cfg.storage})'
         )
+
+    def _now(self) -> int:
+        """Return the node's time, ns (use_sim_time: /clock; else wall time, no Time object)."""
+        clock = self.get_clock()
+        return clock.now().nanoseconds if clock.ros_time_is_active else time.time_ns()
 
     def _with_window(self, values: dict) -> RecorderConfig:
         """Check a new window (the only settable parameters), move the recording's to it."""
