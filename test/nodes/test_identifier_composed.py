@@ -132,3 +132,51 @@ def test_the_removed_parameter_ends_the_executable_with_status_2(domain):
     assert proc.returncode == 2, proc.stdout + proc.stderr
     lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
     assert len(lines) == 1 and 'intra_process was removed' in lines[0], lines
+
+
+def test_stamped_commands_of_an_old_config_pair_with_their_samples(ctx, monkeypatch):
+    """The contract's JointState commands read by an old config's ``data[0]``.
+
+    A peer publishes each sample's field, then a command stamped with it
+    (lockstep), on two topics: the middleware may deliver them in any order
+    across the topics, and the pairing is by stamp: the estimate is that of
+    ``(y[k], c[k])``.
+    """
+    monkeypatch.setitem(topics.MESSAGE_TYPES, topics.COMMAND_TOPIC, 'sensor_msgs/msg/JointState')
+    n = 40
+    rng = np.random.default_rng(8)
+    y, c = rng.standard_normal(n), rng.standard_normal(n)
+    ident = IdentifierNode(
+        context=ctx,
+        parameter_overrides=params(
+            outputs=[topics.field_channel(0, 'x')],
+            inputs=[f'{topics.COMMAND_TOPIC}:data[0]'],  # the spelling of older configs
+            initial_covariance=P0,
+            **ORDERS,
+        ),
+    )
+    peer = rclpy.create_node('identifier_command_peer', context=ctx)
+    field_pub = peer.create_publisher(MagneticField, topics.field_topic(0), SENSOR_QOS)
+    command_pub = peer.create_publisher(JointState, topics.COMMAND_TOPIC, SENSOR_QOS)
+    spinner = Spinner(ctx, [ident, peer])
+    try:
+        wait_for(
+            lambda: (
+                field_pub.get_subscription_count() >= 1
+                and command_pub.get_subscription_count() >= 1
+                and all(s.get_publisher_count() >= 1 for s in ident.subscriptions)
+            ),
+            what='discovery',
+        )
+        for k in range(n):
+            msg = field(k, y[k])
+            field_pub.publish(msg)
+            command_pub.publish(JointState(header=msg.header, effort=[float(c[k]), 0.0, 0, 0]))
+        wait_for(lambda: ident.samples >= n, what=f'{n} samples')
+    finally:
+        spinner.close()
+        for node in (ident, peer):
+            node.destroy_node()
+    assert ident.samples == n and ident.aligner.dropped == 0
+    expected = reference_theta(zip(y, c, strict=True))
+    np.testing.assert_allclose(ident.identifier.arx.theta, expected, rtol=1e-9)
