@@ -197,7 +197,8 @@ class RecorderNode(Node):
         except BagError as err:
             raise RecorderParameterError(f'path {cfg.path!r}: {err}') from err
         self.recording = Recording(self.writer, cfg.log_clock, self._now, *cfg.window_ns)
-        self.counts = self.recording.counts
+        self.counts = self.recording.counts  # messages written per topic, 0 until it appears
+        self.counts.update(dict.fromkeys(cfg.topics, 0))
         self._handled: set[str] = set()  # topics subscribed (or refused by the bag)
         self.metadata = RemoteParameters(self, cfg.metadata_node, self._store_metadata)
         self.metadata.done = not cfg.metadata_node
