@@ -41,7 +41,6 @@ from maglev_ros.bags.online_identification import message_type_of as _message_ty
 from maglev_ros.nodes.messages import diagnostic_array
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer, number
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
-from maglev_ros.nodes.removed_parameters import refuse_removed
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.sysid.online import load_kernels
 from maglev_ros.topics import (
@@ -143,6 +142,7 @@ PARAMETERS = ParameterTable(
             mutable=True,
         ),
     },
+    removed=REMOVED,
 )
 
 
@@ -224,7 +224,6 @@ class IdentifierNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        refuse_removed(self, REMOVED, IdentifierParameterError)
         self.config = build_config(PARAMETERS.declare(self))
         self.core = core = build_identifier(self.config)
         self.add_on_set_parameters_callback(PARAMETERS.on_set(self, self._rebuild))

@@ -38,7 +38,6 @@ from maglev_ros.nodes.params import (
     number,
 )
 from maglev_ros.nodes.remote_parameters import RemoteParameters
-from maglev_ros.nodes.removed_parameters import refuse_removed
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.topics import (
     CLOCK_TOPIC,
@@ -120,6 +119,7 @@ PARAMETERS = ParameterTable(
             mutable=True,
         ),
     },
+    removed=REMOVED,
 )
 _PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 
@@ -189,7 +189,6 @@ class RecorderNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        refuse_removed(self, REMOVED, RecorderParameterError)
         self.config = cfg = build_config(PARAMETERS.declare(self))
         self.add_on_set_parameters_callback(PARAMETERS.on_set(self, self._with_window))
         try:
