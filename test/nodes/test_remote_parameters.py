@@ -8,7 +8,7 @@ from maglev_ros.nodes.remote_parameters import RemoteParameters
 from maglev_ros.nodes.runtime import Spinner
 
 
-def test_every_parameter_arrives_and_an_unset_one_is_skipped(ctx):
+def test_every_parameter_arrives_past_an_unset_one(ctx):
     other = rclpy.create_node(
         'remote_other',
         context=ctx,
