@@ -16,9 +16,12 @@ Pairing.  The default trigger is the topic of the first input channel (else
 the first output's).  In a lockstep simulation with a controller, the
 controller's ``maglev/currents/command`` for sample ``t`` is the last message
 of that sample, so triggering on it pairs ``y[t]`` with ``u[t]`` exactly as the
-bag converter does (the command is logged at the sample's time): the online
-and batch estimates are of the same samples.  Messages are any objects with
-the fields (rclpy messages or rosbags dataclasses); nothing here imports rclpy.
+bag converter does: the online and batch estimates are of the same samples.
+:class:`StampAligner` completes samples by their stamps first, and pairs
+stamped commands by theirs whatever the order of arrival
+(:mod:`~maglev_ros.bags.online_identification` puts them together).  Messages
+are any objects with the fields (rclpy messages or rosbags dataclasses);
+nothing here imports rclpy.
 """
 
 from __future__ import annotations
