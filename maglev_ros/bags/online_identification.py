@@ -37,8 +37,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..parameters import NodeParameterError, check_settings, integer, number, setting
 from ..sysid.online import CoefficientLayout, IdentifierStatus
-from ..topics import FIELD_MESSAGE_TYPE, MESSAGE_TYPES, field_topic
+from ..topics import (
+    FIELD_MESSAGE_TYPE,
+    MESSAGE_TYPES,
+    current_channel,
+    field_channel,
+    field_topic,
+)
 from .channels import parse_channel
 from .command_fields import COMMAND_TOPICS, resolve_channel
 from .errors import BagError
@@ -47,6 +54,7 @@ from .names import normalize_topic
 from .typestore import jazzy_typestore
 
 __all__ = [
+    'IdentificationConfigError',
     'IdentificationReport',
     'OnlineIdentification',
     'OnlineIdentificationConfig',
@@ -55,6 +63,29 @@ __all__ = [
 
 _FIELD_TOPIC = re.compile('^' + re.escape(field_topic(0)).replace('0', r'\d+') + '$')
 OK, ERROR = 0, 2  # diagnostic levels (diagnostic_msgs/DiagnosticStatus)
+
+
+class IdentificationConfigError(BagError, ValueError):
+    """A setting of :class:`OnlineIdentificationConfig` is invalid."""
+
+
+def _channels(name: str, specs: tuple[str, ...]) -> tuple[str, ...]:
+    if not specs or any(not s.strip() for s in specs):
+        raise NodeParameterError(
+            f'{name} must be a non-empty list of channel specs TOPIC:FIELD, got {list(specs)}'
+        )
+    return specs
+
+
+def _orders(name: str, values: tuple[int, ...]) -> tuple[int, ...]:
+    if not values or any(v < 0 for v in values):
+        raise NodeParameterError(
+            f'{name} must be a non-empty list of integers >= 0, got {list(values)}'
+        )
+    return values
+
+
+_INPUT_UX = f'ux=0.5*{current_channel(0)}-0.5*{current_channel(1)}'
 
 
 @dataclass(frozen=True)
@@ -91,21 +122,58 @@ class OnlineIdentificationConfig:
         Sample stamp after which samples do not reach the ARX, s (0: no end).
     """
 
-    outputs: tuple[str, ...]
-    inputs: tuple[str, ...]
-    na: tuple[int, ...]
-    nb: tuple[int, ...]
-    nk: tuple[int, ...]
-    forgetting: float
-    initial_covariance: float
-    window: int
-    fit_window: int
-    wait_for_history: bool
-    trigger: str
-    publish_rate: float
-    complete_on_next: bool = False
-    identify_from: float = 0.0
-    identify_until: float = 0.0
+    outputs: tuple[str, ...] = setting(
+        (field_channel(0, 'x'),), 'output channels (bag converter syntax)', _channels
+    )
+    inputs: tuple[str, ...] = setting(
+        (_INPUT_UX,), 'input channels (bag converter syntax)', _channels
+    )
+    na: tuple[int, ...] = setting((2,), 'orders of A: one for all, or ny*ny row by row', _orders)
+    nb: tuple[int, ...] = setting(
+        (2,), 'numbers of B coefficients: one, or ny*nu row by row', _orders
+    )
+    nk: tuple[int, ...] = setting((1,), 'input delays, samples: one, or ny*nu row by row', _orders)
+    forgetting: float = setting(
+        1.0, 'forgetting factor (1: none, as MATLAB recursiveARX)', number(0, above=True, high=1)
+    )
+    initial_covariance: float = setting(
+        1e4, 'P0 = initial_covariance * I (as MATLAB)', number(0, above=True)
+    )
+    window: int = setting(0, 'sliding window of the estimate, samples (0: none)', integer(0))
+    fit_window: int = setting(1000, 'samples of the prediction-fit window', integer(2))
+    wait_for_history: bool = setting(
+        True, 'update once the regressor is complete (as batch arx); false: zeros before'
+    )
+    trigger: str = setting('', "topic completing a sample ('': the first input's topic)")
+    publish_rate: float = setting(
+        10.0, 'model, error, fit and diagnostics per second, Hz', number(0, above=True)
+    )
+    complete_on_next: bool = setting(
+        False,
+        "release a stamp's sample at the next stamp's first message, so the header-less "
+        'commands in between are its input (stamped trigger; real-time bursts)',
+    )
+    identify_from: float = setting(
+        0.0,
+        'sample stamp from which samples are given to the ARX, s (0: all; earlier '
+        'samples still set the held values)',
+        number(0),
+        mutable=True,
+    )
+    identify_until: float = setting(
+        0.0,
+        'sample stamp after which samples are not given to the ARX, s (0: no end)',
+        number(0),
+        mutable=True,
+    )
+
+    def __post_init__(self) -> None:
+        check_settings(self, IdentificationConfigError)
+        if self.identify_until and self.identify_until < self.identify_from:
+            raise IdentificationConfigError(
+                f'identify_until must be 0 (no end) or >= identify_from {self.identify_from:g}, '
+                f'got {self.identify_until:g}'
+            )
 
     @property
     def window_ns(self) -> tuple[int, int | None]:

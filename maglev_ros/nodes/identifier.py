@@ -34,12 +34,13 @@ from std_srvs.srv import Trigger
 
 from maglev_ros.bags.errors import BagError
 from maglev_ros.bags.online_identification import (
+    IdentificationConfigError,
     OnlineIdentification,
     OnlineIdentificationConfig,
 )
 from maglev_ros.bags.online_identification import message_type_of as _message_type_of
 from maglev_ros.nodes.messages import diagnostic_array
-from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer, number
+from maglev_ros.nodes.params import NodeParameterError, ParameterTable, config_params
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.sysid.online import load_kernels
@@ -49,8 +50,6 @@ from maglev_ros.topics import (
     IDENTIFIER_MODEL_TOPIC,
     IDENTIFIER_PREDICTION_ERROR_TOPIC,
     IDENTIFIER_RESET_SERVICE,
-    current_channel,
-    field_channel,
 )
 
 __all__ = [
@@ -78,71 +77,8 @@ class IdentifierParameterError(NodeParameterError):
     """An identifier parameter has an invalid value."""
 
 
-def _channels(name: str, specs: tuple[str, ...]) -> tuple[str, ...]:
-    if not specs or any(not s.strip() for s in specs):
-        raise IdentifierParameterError(
-            f'{name} must be a non-empty list of channel specs TOPIC:FIELD, got {list(specs)}'
-        )
-    return specs
-
-
-def _orders(name: str, values: tuple[int, ...]) -> tuple[int, ...]:
-    if not values or any(v < 0 for v in values):
-        raise IdentifierParameterError(
-            f'{name} must be a non-empty list of integers >= 0, got {list(values)}'
-        )
-    return values
-
-
-_INPUT_UX = f'ux=0.5*{current_channel(0)}-0.5*{current_channel(1)}'
 PARAMETERS = ParameterTable(
-    NODE_NAME,
-    IdentifierParameterError,
-    {
-        'outputs': Param(
-            [field_channel(0, 'x')], 'output channels (bag converter syntax)', check=_channels
-        ),
-        'inputs': Param([_INPUT_UX], 'input channels (bag converter syntax)', check=_channels),
-        'na': Param([2], 'orders of A: one for all, or ny*ny row by row', check=_orders),
-        'nb': Param([2], 'numbers of B coefficients: one, or ny*nu row by row', check=_orders),
-        'nk': Param([1], 'input delays, samples: one, or ny*nu row by row', check=_orders),
-        'forgetting': Param(
-            1.0,
-            'forgetting factor (1: none, as MATLAB recursiveARX)',
-            check=number(0, above=True, high=1),
-        ),
-        'initial_covariance': Param(
-            1e4, 'P0 = initial_covariance * I (as MATLAB)', check=number(0, above=True)
-        ),
-        'window': Param(0, 'sliding window of the estimate, samples (0: none)', check=integer(0)),
-        'fit_window': Param(1000, 'samples of the prediction-fit window', check=integer(2)),
-        'wait_for_history': Param(
-            True, 'update once the regressor is complete (as batch arx); false: zeros before'
-        ),
-        'trigger': Param('', "topic completing a sample ('': the first input's topic)"),
-        'publish_rate': Param(
-            10.0, 'model, error, fit and diagnostics per second, Hz', check=number(0, above=True)
-        ),
-        'complete_on_next': Param(
-            False,
-            "release a stamp's sample at the next stamp's first message, so the commands "
-            'in between are its input (stamped trigger; real-time bursts)',
-        ),
-        'identify_from': Param(
-            0.0,
-            'sample stamp from which samples are given to the ARX, s (0: all; earlier '
-            'samples still set the held values)',
-            check=number(0),
-            mutable=True,
-        ),
-        'identify_until': Param(
-            0.0,
-            'sample stamp after which samples are not given to the ARX, s (0: no end)',
-            check=number(0),
-            mutable=True,
-        ),
-    },
-    removed=REMOVED,
+    NODE_NAME, IdentifierParameterError, config_params(IdentifierConfig), removed=REMOVED
 )
 
 
@@ -159,13 +95,10 @@ def build_config(values: dict) -> IdentifierConfig:
     IdentifierParameterError
         Naming the first invalid parameter and its value.
     """
-    v = PARAMETERS.validate(values)
-    if v['identify_until'] and v['identify_until'] < v['identify_from']:
-        raise IdentifierParameterError(
-            f'identify_until must be 0 (no end) or >= identify_from {v["identify_from"]:g}, '
-            f'got {v["identify_until"]:g}'
-        )
-    return IdentifierConfig(**v)
+    try:
+        return IdentifierConfig(**PARAMETERS.validate(values))
+    except IdentificationConfigError as err:
+        raise IdentifierParameterError(str(err)) from err
 
 
 def build_identifier(cfg: IdentifierConfig) -> OnlineIdentification:
