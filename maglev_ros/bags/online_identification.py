@@ -282,7 +282,8 @@ class OnlineIdentification:
         self.types = {t: message_type_of(t) for c in outputs + inputs for t in c.topics}
         headers = {t for t, kind in self.types.items() if _has_header(kind)}
         self.stamped = frozenset(headers - COMMAND_TOPICS)  # the topics of a sample
-        held_stamped = headers & COMMAND_TOPICS  # commands stamped with their sample
+        # commands stamped with their sample, paired by stamp with the samples (if any)
+        held_stamped = headers & COMMAND_TOPICS if self.stamped else frozenset()
         trigger = normalize_topic(config.trigger) if config.trigger else None
         first = (inputs or outputs)[0].topics[0]
         if (trigger or first) in held_stamped and self.stamped:

@@ -209,3 +209,15 @@ def test_stamped_commands_pair_by_stamp_whatever_the_arrival_order(monkeypatch, 
         # samples before the first command have no input yet: counted as waiting
         assert core.samples == n - (burst - 1) and core.aligner.dropped == 0
         np.testing.assert_allclose(core.identifier.arx.theta, expected, rtol=1e-9)
+
+
+def test_channels_of_commands_alone_take_every_command_as_a_sample(monkeypatch):
+    """No sample topic to pair with: each command (the trigger) is a sample, none waits."""
+    monkeypatch.setitem(topics.MESSAGE_TYPES, topics.COMMAND_TOPIC, 'sensor_msgs/msg/JointState')
+    core = OnlineIdentification(
+        config(outputs=(topics.command_channel(1),), inputs=(topics.command_channel(0),))
+    )
+    assert core.stamped == frozenset() and core.aligner.held_stamped == ()
+    for k in range(10):
+        core.add(COMMAND, joint_state(k, [k, 2 * k, 0, 0]))
+    assert core.samples == 10
