@@ -1,8 +1,9 @@
 """``maglev-lab``: the lab session as one command (pip-only friendly).
 
 Closed loop (the magnet ``free``, the default; :mod:`maglev_ros.cli.closed_loop_lab`):
-the simulator (lockstep), estimator, controller with its excitation, the
-online identifier and the recorder run in this process; the magnet levitates
+the lab session (:func:`maglev_ros.loop.run_session`) runs the control loop
+(simulator in lockstep, estimator, controller with its excitation) with the
+online identifier and the bag writer as its observers; the magnet levitates
 and settles, exactly ``--samples`` samples are recorded and the seed's models
 (x, y and MIMO: ARX, IV on the excitation, ARMAX) are identified, checked
 against the physics and compared with the online identifier::
@@ -31,8 +32,8 @@ default ARX delay is 0 (a record's field and PWM are simultaneous)::
 The closed loop against a board (``--board PATH --magnet free``, or
 ``--virtual-board --magnet free``: its physics plant with the magnet free,
 ``--noise``, ``--quantization``, ``--delay``, ``--seed``):
-:mod:`maglev_ros.nodes.board_lab`, the driver in place of the simulator, all
-composed in this process; exactly ``--samples`` board records are recorded
+the same session with a :class:`~maglev_ros.loop.BoardPlant` in place of the
+simulator, in this process; exactly ``--samples`` board records are recorded
 after the settling::
 
     maglev-lab --virtual-board --magnet free --out lab_board/

@@ -139,6 +139,10 @@ class BagRecorder:
         self.counts = dict.fromkeys(types, 0)
         self._pending: list[WindowSample] = []
         self._closed = False
+        # the compiled kernels load now (up to 1 s holding the GIL), not in a real-time run
+        self._samples.serialise(np.zeros(1, np.int64), np.zeros((1, self._samples.n_values)))
+        self._commands.serialise(np.zeros(1, np.int64), np.zeros((1, 4)))
+        odometry_values(np.zeros(12))
 
     def __call__(self, item: WindowSample) -> None:
         """Take one recorded sample (written with the next batch)."""

@@ -42,6 +42,8 @@ __all__ = ['BOARD_SAMPLE_RATE', 'BoardPlant']
 
 BOARD_SAMPLE_RATE = 5000.0  # Hz, the V2x firmware's sample rate
 STALL_S = 5.0  # s without a sample from an open link before the session is ended
+#: s for the first sample after the port opens (a virtual board's physics compiles first)
+FIRST_SAMPLE_S = 60.0
 
 
 class BoardPlant:
@@ -185,6 +187,9 @@ class BoardPlant:
         if not serial.is_open:
             serial.open()
             self.stream.connect()
+            # no catch-up hold: the loop answers samples as they come (a held backlog
+            # leaves the magnet uncontrolled); the board clock's fit corrects the stamps
+            self.stream.catching_up = False
             self.link.state = 'connected'
             self.link.send_zero(self.guard.zero)
         return self
@@ -201,8 +206,9 @@ class BoardPlant:
                 data = self.link.serial.read()
                 now = time.monotonic()
                 if not data:
-                    if now - last > STALL_S:
-                        return self._failed(f'no sample from the board for {STALL_S:g} s')
+                    wait = STALL_S if self._first_ns is not None else FIRST_SAMPLE_S
+                    if now - last > wait:
+                        return self._failed(f'no sample from the board for {wait:g} s')
                     self._check_timeout()
                     continue
                 out = self.stream.feed(data, self.clock())

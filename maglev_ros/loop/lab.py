@@ -12,7 +12,9 @@ on one of three plants:
   (:class:`~maglev_ros.loop.PacedSimulatedPlant`), one estimate and command
   per burst of ``sample_rate / control_rate`` samples; the LQR at the control
   rate, designed for one period of latency (a command drives the coils from
-  the next burst);
+  the next burst); a loop that falls behind the clock gets one burst a read
+  all the same (the simulation slows down, the overruns are counted), so a
+  recording has one command every burst;
 * **a board** (:class:`~maglev_ros.loop.BoardPlant`, the plant given): the
   board's stream paces the loop at the control rate; the LQR designed for
   :data:`BOARD_COMMAND_DELAY` periods (the period, the read and the link).
@@ -240,8 +242,8 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
             seed=s.seed,
             magnet='free',
         )
-        if s.realtime:
-            plant = PacedSimulatedPlant(simulator, s.burst)
+        if s.realtime:  # behind the clock it slows down, one burst a command: no gaps
+            plant = PacedSimulatedPlant(simulator, s.burst, max_burst=s.burst)
         else:
             plant = SimulatedPlant(simulator)
     elif getattr(plant, 'n_sensors', None) not in (None, model.n_outputs // 3):
@@ -278,9 +280,21 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
         linear=linear,
     )
     loop = ControlLoop(plant, controller, estimator, command_delay=1 if lockstep else 0)
-    if not lockstep:
+    if board:  # the kernels load now, not in the first control period
+        _warm_up(loop, Simulator(model, s.sample_rate).reset())
+    elif not lockstep:
         loop.warm_up()
     return loop
+
+
+def _warm_up(loop: ControlLoop, reading: np.ndarray) -> None:
+    """Call the estimator and the controller once on ``reading``, then reset the loop."""
+    from ..physics.kernels import odometry_round_trip
+
+    zero = np.zeros(loop.plant.n_inputs)
+    x_hat = loop.estimator.step(reading, zero)
+    loop.controller.command(0.0, odometry_round_trip(x_hat), zero)
+    loop.reset()
 
 
 def simulator_metadata(s: LabSettings, prefix: str = 'maglev_simulator') -> dict[str, object]:

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..sysid.online import OnlineArx
+from ..sysid.online import OnlineArx, load_kernels
 from .session import WindowSample
 
 __all__ = ['PAIR_INPUTS', 'OnlineEstimate', 'OnlineIdentifier']
@@ -105,6 +105,8 @@ class OnlineIdentifier:
             forgetting=forgetting,
             initial_covariance=initial_covariance,
         )
+        # the compiled update loads now (0.3-1.5 s holding the GIL), not in a real-time run
+        load_kernels()
         self._held = np.zeros(self.inputs.shape[1])
         self._y: list[np.ndarray] = []
         self._u: list[np.ndarray] = []

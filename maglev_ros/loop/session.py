@@ -37,7 +37,7 @@ from .control_loop import ControlLoop, LoopSample
 
 __all__ = ['SessionPlan', 'SessionResult', 'WindowSample', 'run_session']
 
-CHUNK = 250  # samples per loop.run call between progress reports and stop polls
+REPORT_EVERY = 250  # samples between progress reports
 
 
 class WindowSample(NamedTuple):
@@ -128,8 +128,8 @@ class SessionResult:
     run_wall_s : float
         Wall time of the whole session, s.
     positions : ndarray, shape (n, 3)
-        The checked position over the recording, m (an estimate may be
-        missing where the readings were).
+        The checked position (not its error) over the recording, m (an
+        estimate may be missing where the readings were).
     commands : int
         Commands written over the recording.
     stopped : bool
@@ -235,12 +235,13 @@ class _Tracker:
 
     def _position(self, s: LoopSample) -> np.ndarray | None:
         x = s.state if self.plan.position == 'state' else s.estimate
-        return None if x is None else x[:3] - self.plan.set_point
+        return None if x is None else x[:3]
 
     def settle_rms(self) -> np.ndarray:
         if not self._settling:
             return np.full(3, np.nan)
-        return np.sqrt(np.mean(np.square(self._settling), axis=0))
+        error = np.array(self._settling) - self.plan.set_point
+        return np.sqrt(np.mean(np.square(error), axis=0))
 
 
 def run_session(
@@ -281,15 +282,18 @@ def run_session(
     started = time.monotonic()
     stopped = False
     settle_total = plan.settle_samples + 1
+    reported = 0
     try:
         while tracker.n < plan.total and not loop.stopped:
-            chunk = min(CHUNK, plan.total - tracker.n)
-            loop.run(chunk, stop=asked)
-            if tracker.n < settle_total:
-                report('settling', tracker.n, settle_total)
-            else:
-                report('settling', settle_total, settle_total)
-                report('recording', tracker.recorded, plan.samples)
+            # a read's samples beyond the session's last are dropped, none before
+            loop.step(limit=plan.total - tracker.n)
+            if tracker.n - reported >= REPORT_EVERY or tracker.n >= plan.total:
+                reported = tracker.n
+                if tracker.n < settle_total:
+                    report('settling', tracker.n, settle_total)
+                else:
+                    report('settling', settle_total, settle_total)
+                    report('recording', tracker.recorded, plan.samples)
             if asked():
                 stopped = tracker.n < plan.total
                 break
