@@ -14,6 +14,7 @@ from .control_loop import MAX_COMMAND_DELAY, ControlLoop, LoopSample
 from .lab import LabSettings, build_lab_loop, lab_plan
 from .observers import Observer, ObserverSet, ObserverThread
 from .online_identifier import OnlineEstimate, OnlineIdentifier
+from .open_loop import OpenLoop
 from .paced import PacedSimulatedPlant
 from .plant import Plant, SampleBlock
 from .session import SessionPlan, SessionResult, WindowSample, run_session
@@ -32,6 +33,7 @@ __all__ = [
     'ObserverThread',
     'OnlineEstimate',
     'OnlineIdentifier',
+    'OpenLoop',
     'PacedSimulatedPlant',
     'Plant',
     'SampleBlock',
