@@ -68,6 +68,9 @@ class BoardPlant:
     confirm_records : bool
         Hold each read's newest record until the next confirms it (False: the
         lowest latency, what a closed loop wants).
+    read_interval : float
+        Shortest time between reads of the port, s (0: as data arrive; an
+        open-loop recording reads every 2 ms for less CPU).
     baudrate : int
         Baud rate (ignored by USB CDC).
     serial : SerialLink, optional
@@ -98,6 +101,7 @@ class BoardPlant:
         coil_resistance: float = BOARD_COIL_RESISTANCE,
         counts_per_ampere: float = 0.0,
         confirm_records: bool = False,
+        read_interval: float = 0.0,
         baudrate: int = 9600,
         serial: SerialLink | None = None,
         clock: Callable[[], int] = time.time_ns,
@@ -115,7 +119,14 @@ class BoardPlant:
         self.guard = CommandGuard(
             scaling, current_limit or scaling.max_current, command_timeout, enabled=True
         )
-        self.stream = BoardStream('v2x', self.n_sensors, scaling, confirm_records=confirm_records)
+        self.read_interval = float(read_interval)
+        self.stream = BoardStream(
+            'v2x',
+            self.n_sensors,
+            scaling,
+            confirm_records=confirm_records,
+            read_interval=self.read_interval,
+        )
         self.stream.warm_up()  # the decoder's kernels load now, not in the first read
         log = logging.getLogger('maglev_ros.board')
         self.link = BoardLink(
@@ -125,6 +136,7 @@ class BoardPlant:
         self._n_fields = 3 * self.n_sensors
         self._index = 0
         self._first_ns: int | None = None
+        self._read_at = 0.0
         self._closed = False
 
     @property
@@ -166,6 +178,7 @@ class BoardPlant:
                 ('command_timeout', self.guard.command_timeout),
                 ('start_enabled', True),
                 ('confirm_records', self.stream.confirm_records),
+                ('read_interval', self.read_interval),
                 ('control_burst', self.burst),
             )
         }
@@ -203,6 +216,11 @@ class BoardPlant:
         try:
             self.open()
             while got < self.burst:
+                if self.read_interval:  # let bursts collect: one read for several
+                    wait = self._read_at + self.read_interval - time.monotonic()
+                    if wait > 0:
+                        time.sleep(wait)
+                    self._read_at = time.monotonic()
                 data = self.link.serial.read()
                 now = time.monotonic()
                 if not data:
