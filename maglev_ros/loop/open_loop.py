@@ -34,10 +34,26 @@ class OpenLoop:
         """Nothing to reset."""
 
     def set_reference(self, position=None) -> None:
-        """Ignored: the open loop has no set-point."""
+        """Ignore a set-point: the open loop has none.
+
+        Parameters
+        ----------
+        position : array_like, shape (3,), optional
+            m (not used).
+        """
 
     def command(self, t: float, reading=None, currents=None) -> np.ndarray:
-        """Return zero currents, shape (n_s,), A."""
+        """Return zero currents, shape (n_s,), A.
+
+        Parameters
+        ----------
+        t : float
+            Sample time, s (not used).
+        reading : ndarray, shape (3 k,), optional
+            The sample's fields, T (not used).
+        currents : ndarray, shape (n_s,), optional
+            The sample's coil currents, A (not used).
+        """
         return self._zero.copy()
 
     def status(self) -> ControllerStatus:
