@@ -23,15 +23,18 @@ estimate and one command per 1 ms burst of 5 samples), run for ``--seconds``
 Printed per implementation: the real-time factor (simulated s per wall s:
 samples stepped, or the baseline's observed samples, over 5000/s), the hold
 RMS and largest excursion of x, y, z - z_eq, the CPU of its process in % of
-one core; for the loop also the latency from each sample to the command that
-answers it (the command's stamp is the sample's: latency = the wall time the
-command is written minus the wall time the sample was due), median and p99.
-The ratio of the real-time factors (loop over baseline) is measured in the
-same run.
+one core and per simulated second (CPU over the real-time factor: the cost of
+a second of the loop, whatever share of the machine it got); for the loop also
+the latency from each sample to the command that answers it (the command's
+stamp is the sample's: latency = the wall time the command is written minus
+the wall time the sample was due), median and p99.
+The two run in alternating rounds (``--rounds``, default 3) so that both see
+the machine's load alike; the ratio of the median real-time factors (loop over
+baseline) is measured in the same run.
 
 Usage::
 
-    python benchmarks/closed_loop_realtime.py                 # 20 s each
+    python benchmarks/closed_loop_realtime.py                 # 3 rounds of 20 s each
     python benchmarks/closed_loop_realtime.py --seconds 60 --control-rate 1000
     python benchmarks/closed_loop_realtime.py --only loop
 
@@ -150,8 +153,9 @@ def _print(label: str, r: dict) -> None:
     um = ' '.join(f'{1e6 * v:.1f}' for v in r['rms'])
     worst = ' '.join(f'{1e6 * v:.1f}' for v in r['worst'])
     line = (
-        f'{label:<8}: real-time factor {r["rtf"]:.3f}; hold RMS x y z {um} um, largest '
-        f'{worst} um; crashed {r["crashed"]}; CPU {100 * r["cpu"]:.1f} % of a core'
+        f'{label:<10}: real-time factor {r["rtf"]:.3f}; hold RMS x y z {um} um, largest '
+        f'{worst} um; crashed {r["crashed"]}; CPU {100 * r["cpu"]:.1f} % of a core '
+        f'({100 * r["cpu"] / max(r["rtf"], 1e-9):.1f} % per simulated second)'
     )
     if 'latency_median' in r:
         line += (
@@ -169,6 +173,7 @@ def main() -> int:
     ap.add_argument('--control-rate', type=float, default=1000.0, help='Hz (default 1000)')
     ap.add_argument('--only', choices=('loop', 'baseline'), help='one implementation only')
     ap.add_argument('--baseline', type=Path, help=f'a checkout of {BASELINE_COMMIT}')
+    ap.add_argument('--rounds', type=int, default=3, help='alternating rounds (default 3)')
     ap.add_argument('--loop-child', action='store_true', help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.loop_child:
@@ -177,34 +182,43 @@ def main() -> int:
         print(f'closed_loop_realtime: error: --seconds must be > 0, got {args.seconds}')
         return 2
     print(f'load average {os.getloadavg()[0]:.2f}, {os.cpu_count()} CPUs', flush=True)
-    results = {}
-    if args.only in (None, 'loop'):
-        results['loop'] = run_loop(args.seconds, args.control_rate)
-        _print('loop', results['loop'])
-    if args.only in (None, 'baseline'):
-        with tempfile.TemporaryDirectory() as tmp:
-            tree = args.baseline
-            if tree is None:
-                tree = Path(tmp) / 'baseline'
+    rtf: dict[str, list[float]] = {'loop': [], 'baseline': []}
+    per: dict[str, list[float]] = {'loop': [], 'baseline': []}  # CPU per simulated s
+    with tempfile.TemporaryDirectory() as tmp:
+        tree = args.baseline
+        if tree is None and args.only != 'loop':
+            tree = Path(tmp) / 'baseline'
+            subprocess.run(
+                ['git', '-C', str(REPO), 'worktree', 'add', '--detach', str(tree),
+                 BASELINE_COMMIT],
+                check=True, capture_output=True,
+            )  # fmt: skip
+        try:
+            for k in range(args.rounds):  # alternating: both see the machine's load alike
+                for label in ('loop', 'baseline'):
+                    if args.only not in (None, label):
+                        continue
+                    if label == 'loop':
+                        r = run_loop(args.seconds, args.control_rate)
+                    else:
+                        r = run_baseline(tree, args.seconds, args.control_rate)
+                    _print(f'{label} {k + 1}', r)
+                    rtf[label].append(r['rtf'])
+                    per[label].append(r['cpu'] / max(r['rtf'], 1e-9))
+        finally:
+            if args.baseline is None and tree is not None:
                 subprocess.run(
-                    ['git', '-C', str(REPO), 'worktree', 'add', '--detach', str(tree),
-                     BASELINE_COMMIT],
-                    check=True, capture_output=True,
+                    ['git', '-C', str(REPO), 'worktree', 'remove', '--force', str(tree)],
+                    check=False, capture_output=True,
                 )  # fmt: skip
-            try:
-                results['baseline'] = run_baseline(tree, args.seconds, args.control_rate)
-            finally:
-                if args.baseline is None:
-                    subprocess.run(
-                        ['git', '-C', str(REPO), 'worktree', 'remove', '--force', str(tree)],
-                        check=False, capture_output=True,
-                    )  # fmt: skip
-        _print('baseline', results['baseline'])
-    if len(results) == 2 and results['baseline']['rtf'] > 0:
+    print(f'load average {os.getloadavg()[0]:.2f} at the end', flush=True)
+    if rtf['loop'] and rtf['baseline']:
         print(
-            f'real-time factor of the loop over the composed nodes (baseline, same run): '
-            f'{results["loop"]["rtf"] / results["baseline"]["rtf"]:.2f}x; CPU '
-            f'{results["loop"]["cpu"] / max(results["baseline"]["cpu"], 1e-9):.2f}x'
+            f'median real-time factor of the loop over the composed nodes (baseline, same '
+            f'run, {args.rounds} alternating rounds): '
+            f'{np.median(rtf["loop"]) / np.median(rtf["baseline"]):.2f}x '
+            f'({np.median(rtf["loop"]):.3f} / {np.median(rtf["baseline"]):.3f}); CPU per '
+            f'simulated second {np.median(per["loop"]) / np.median(per["baseline"]):.2f}x'
         )
     return 0
 
