@@ -116,8 +116,9 @@ class LabRun:
     wall_s : float
         Wall time of the recording, s.
     timeouts : int
-        Simulation: the controller's input timeouts; board: the command
-        guard's (coils zeroed for want of a command).
+        Command timeouts. Simulation: the controller's (its input went stale,
+        zero current commanded; lockstep: none, every sample is answered);
+        board: the command guard's (coils zeroed for want of a command).
     crashed : bool
     crash_reason : str
     controller : dict
@@ -326,7 +327,7 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
             f'the observers) -> {bag}'
         )
     else:
-        misses = f'{run.timeouts} input timeouts'
+        misses = f'{run.timeouts} command timeouts'
         if settings.realtime:
             misses = f'{run.overruns} overruns, {drops} samples dropped by the observers'
         print(
