@@ -104,6 +104,24 @@ class LabSettings:
     control_rate : float
         Real time and boards: estimates and commands per second, Hz (divides
         ``sample_rate``).
+    mode : str
+        ``lqr`` (with the estimator) or ``pd`` (the firmware's PD on the raw
+        fields, no estimator).
+    bias_states : bool
+        The estimator estimates a field offset per sensor axis (a static
+        field error, such as a magnet other than the believed one, is then
+        not taken for a tilt).
+    plant_polarization, plant_mass : float
+        The simulated magnet's polarisation and mass as factors of the
+        believed set's (1: no model mismatch).
+    command_delay : int or None
+        Control periods a command waits in the loop, and the LQR's design for
+        them (None: the plant's own latency: one sample in lockstep, one
+        period in real time, the board's).
+    skip_ahead : bool
+        Real time: a loop far behind the clock skips ahead (counted as
+        overruns) instead of taking one burst a read (the lab: no gaps in a
+        recording).
     """
 
     params: str = 'maggy_v2'
@@ -126,6 +144,12 @@ class LabSettings:
     initial_covariance: float = 1e10
     realtime: bool = False
     control_rate: float = 1000.0
+    mode: str = 'lqr'
+    bias_states: bool = False
+    plant_polarization: float = 1.0
+    plant_mass: float = 1.0
+    command_delay: int | None = None
+    skip_ahead: bool = False
 
     @property
     def burst(self) -> int:
@@ -195,7 +219,7 @@ def lab_plan(s: LabSettings, board: bool = False) -> SessionPlan:
     )
 
 
-def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
+def build_lab_loop(s: LabSettings, plant=None, observers=(), **timing) -> ControlLoop:
     """Build the lab's loop: estimator, LQR and plant (see the module docstring).
 
     Parameters
@@ -204,6 +228,10 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
     plant : Plant, optional
         A board (:class:`~maglev_ros.loop.BoardPlant`); default the simulator
         of the settings, lockstep or paced (``realtime``).
+    observers : iterable
+        The loop's observers (:class:`~maglev_ros.loop.ControlLoop`).
+    **timing
+        ``clock``, ``sleep`` of a paced simulator (default the wall clock).
 
     Returns
     -------
@@ -231,7 +259,7 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
     model = make_model(s.params)
     linear = linearize(model)
     if plant is None:
-        plant_model = make_model(s.params, field=s.field_model)
+        plant_model = _plant_model(s, model)
         simulator = Simulator(
             plant_model,
             s.sample_rate,
@@ -243,7 +271,9 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
             magnet='free',
         )
         if s.realtime:  # behind the clock it slows down, one burst a command: no gaps
-            plant = PacedSimulatedPlant(simulator, s.burst, max_burst=s.burst)
+            plant = PacedSimulatedPlant(
+                simulator, s.burst, max_burst=None if s.skip_ahead else s.burst, **timing
+            )
         else:
             plant = SimulatedPlant(simulator)
     elif getattr(plant, 'n_sensors', None) not in (None, model.n_outputs // 3):
@@ -265,21 +295,29 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
         control = dict(
             sample_rate=s.control_rate, command_delay=1, input_timeout=REALTIME_INPUT_TIMEOUT_S
         )
+    loop_delay = 1 if lockstep else 0
+    if s.command_delay is not None:  # designed for and applied in the loop
+        control['command_delay'] = loop_delay = s.command_delay
     controller = make_controller(
-        model, ControllerConfig(coil_dynamics=s.coil_dynamics, **control), linear=linear
-    )
-    estimator = make_estimator(
         model,
-        EstimatorConfig(
-            filter=s.filter,
-            sample_rate=s.sample_rate,
-            sensor_delay=s.sensor_delay,
-            sensor_noise=max(s.noise, 1e-6),
-            quantization=s.quantization,
-        ),
+        ControllerConfig(mode=s.mode, coil_dynamics=s.coil_dynamics, **control),
         linear=linear,
     )
-    loop = ControlLoop(plant, controller, estimator, command_delay=1 if lockstep else 0)
+    estimator = None
+    if s.mode == 'lqr':
+        estimator = make_estimator(
+            model,
+            EstimatorConfig(
+                filter=s.filter,
+                sample_rate=s.sample_rate,
+                sensor_delay=s.sensor_delay,
+                sensor_noise=max(s.noise, 1e-6),
+                quantization=s.quantization,
+                bias_states=s.bias_states,
+            ),
+            linear=linear,
+        )
+    loop = ControlLoop(plant, controller, estimator, loop_delay, observers=observers)
     if board:  # the kernels load now, not in the first control period
         _warm_up(loop, Simulator(model, s.sample_rate).reset())
     elif not lockstep:
@@ -287,13 +325,34 @@ def build_lab_loop(s: LabSettings, plant=None) -> ControlLoop:
     return loop
 
 
+def _plant_model(s: LabSettings, model):
+    """Return the simulated plant's model: the believed set, its magnet scaled."""
+    import dataclasses
+
+    from ..physics import make_model
+
+    if s.plant_polarization == 1.0 and s.plant_mass == 1.0:
+        return make_model(s.params, field=s.field_model)
+    p = model.params
+    magnet = dataclasses.replace(
+        p.magnet,
+        polarization=p.magnet.polarization * s.plant_polarization,
+        mass=p.magnet.mass * s.plant_mass,
+    )
+    params = p.replace(magnet=magnet, solenoid_radius_correction=model.correction)
+    return make_model(params, field=s.field_model)
+
+
 def _warm_up(loop: ControlLoop, reading: np.ndarray) -> None:
     """Call the estimator and the controller once on ``reading``, then reset the loop."""
     from ..physics.kernels import odometry_round_trip
 
     zero = np.zeros(loop.plant.n_inputs)
-    x_hat = loop.estimator.step(reading, zero)
-    loop.controller.command(0.0, odometry_round_trip(x_hat), zero)
+    if loop.estimator is None:  # the PD reads the fields
+        loop.controller.command(0.0, reading, zero)
+    else:
+        x_hat = loop.estimator.step(reading, zero)
+        loop.controller.command(0.0, odometry_round_trip(x_hat), zero)
     loop.reset()
 
 
