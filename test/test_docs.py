@@ -1,0 +1,86 @@
+"""The documentation site: it builds strictly, and every runnable block of every page runs.
+
+The marks: see ``doc_blocks``. Each page's blocks run in order in a directory of
+their own, where ``lab/`` is the main job's (README command 1, run once per
+session); the main job's printed output is compared with docs/lab.md's sample
+output within the tolerance the page states.
+"""
+
+import os
+import re
+import subprocess
+import sys
+
+import pytest
+from conftest import next_domain_id
+from doc_blocks import DOCS, ROOT, blocks, environment, mark_problem, pages, run_blocks
+
+RUNS = ('run', 'main-job', 'output')
+
+
+def _page_id(path):
+    return str(path.relative_to(DOCS))
+
+
+def test_every_block_of_every_page_says_whether_it_runs():
+    problems = [p for page in pages() for b in blocks(page, 'docs') if (p := mark_problem(b))]
+    assert not problems, '\n'.join(problems)
+
+
+def test_the_main_jobs_sample_output_is_on_the_lab_page():
+    lab = blocks(DOCS / 'lab.md', 'docs')
+    kinds = [b.kind for b in lab]
+    assert 'main-job' in kinds
+    assert kinds[kinds.index('main-job') + 1 :].count('output') >= 1
+
+
+def test_the_site_builds_strictly(tmp_path):
+    done = subprocess.run(
+        [sys.executable, '-m', 'mkdocs', 'build', '--strict', '--site-dir', str(tmp_path)],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+        check=False,
+        env={**os.environ, 'NO_MKDOCS_2_WARNING': '1'},
+    )
+    assert done.returncode == 0, f'mkdocs build --strict failed:\n{done.stdout}\n{done.stderr}'
+    assert (tmp_path / 'index.html').is_file()
+    # the API pages carry the docstrings
+    api = (tmp_path / 'reference' / 'api' / 'sysid' / 'index.html').read_text()
+    assert 'def arx' in api or 'arx(' in api
+
+
+def test_a_broken_link_fails_the_strict_build(tmp_path):
+    site = tmp_path / 'site'
+    (site / 'docs').mkdir(parents=True)
+    (site / 'docs' / 'index.md').write_text('# home\n\n[gone](missing.md)\n')
+    (site / 'mkdocs.yml').write_text('site_name: t\nnav:\n  - index.md\n')
+    done = subprocess.run(
+        [sys.executable, '-m', 'mkdocs', 'build', '--strict'],
+        cwd=site,
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode != 0
+    assert re.search(r'missing\.md', done.stdout + done.stderr)
+
+
+@pytest.mark.timeout(3600)
+@pytest.mark.parametrize(
+    'page',
+    [p for p in pages() if any(b.kind in RUNS for b in blocks(p, 'docs'))],
+    ids=_page_id,
+)
+def test_page_runs_as_written(page, tmp_path, request):
+    page_blocks = blocks(page, 'docs')
+    needs_main_job = any(b.kind == 'main-job' for b in page_blocks) or any(
+        'lab/' in b.body for b in page_blocks if b.kind == 'run'
+    )
+    main_job = request.getfixturevalue('main_job') if needs_main_job else None
+    if main_job is not None:
+        (tmp_path / 'lab').symlink_to(main_job.directory / 'lab', target_is_directory=True)
+    ran = run_blocks(page_blocks, tmp_path, environment(next_domain_id()), main_job)
+    assert ran >= 1
