@@ -15,7 +15,17 @@ import sys
 
 import pytest
 from conftest import next_domain_id
-from doc_blocks import DOCS, ROOT, blocks, environment, mark_problem, pages, run_blocks
+from doc_blocks import (
+    DOCS,
+    ROOT,
+    Block,
+    blocks,
+    environment,
+    mark_problem,
+    pages,
+    run_blocks,
+    same_output,
+)
 
 RUNS = ('run', 'main-job', 'output')
 
@@ -100,3 +110,38 @@ def test_page_runs_as_written(page, tmp_path, request):
         (tmp_path / 'lab').symlink_to(main_job.directory / 'lab', target_is_directory=True)
     ran = run_blocks(page_blocks, tmp_path, environment(next_domain_id()), main_job)
     assert ran >= 1
+
+
+def _output_block(body, mark='output (within 5 % or 0.05)'):
+    return Block(DOCS / 'lab.md', 1, mark, '', body)
+
+
+def test_sample_output_is_compared_within_the_stated_tolerance():
+    shown = _output_block(
+        'fit 63.54 %, statistic 140.8\nrecorded (5.000 s simulated in 37.5 s, 0.13 x real time)\n'
+    )
+    same_output(
+        'fit  63.60 %, statistic 146.0\n'
+        'recorded (5.000 s simulated in 12.0 s, 0.42 x real time)\n',
+        shown,
+    )
+    with pytest.raises(AssertionError, match=r'160\.0 is not 140\.8 within 5 % or 0\.05'):
+        same_output(
+            'fit 63.54 %, statistic 160.0\nrecorded (5.000 s simulated in 1 s, 5 x real time)\n',
+            shown,
+        )
+    with pytest.raises(AssertionError, match='the text differs'):
+        same_output(
+            'fit 63.54 %, statistics 140.8\nrecorded (5.000 s simulated in 1 s, 5 x real time)\n',
+            shown,
+        )
+    with pytest.raises(AssertionError, match='2 lines shown, the run printed 1'):
+        same_output('fit 63.54 %, statistic 140.8\n', shown)
+
+
+def test_a_block_without_a_mark_or_a_reason_is_named():
+    block = Block(DOCS / 'lab.md', 7, '', 'sh', 'maglev-lab --out lab\n')
+    assert mark_problem(block) == "docs/lab.md line 7: unmarked block 'maglev-lab --out lab\\n'"
+    assert 'skip needs a reason' in mark_problem(Block(DOCS / 'lab.md', 7, 'skip', 'sh', 'x'))
+    assert 'states its tolerance' in mark_problem(_output_block('x', mark='output'))
+    assert mark_problem(Block(DOCS / 'lab.md', 7, 'run (exits 1: why)', 'sh', 'x')) is None
