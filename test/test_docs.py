@@ -145,3 +145,19 @@ def test_a_block_without_a_mark_or_a_reason_is_named():
     assert 'skip needs a reason' in mark_problem(Block(DOCS / 'lab.md', 7, 'skip', 'sh', 'x'))
     assert 'states its tolerance' in mark_problem(_output_block('x', mark='output'))
     assert mark_problem(Block(DOCS / 'lab.md', 7, 'run (exits 1: why)', 'sh', 'x')) is None
+
+
+def test_the_launch_files_and_executables_named_exist():
+    """Every ``ros2 launch maglev_ros FILE`` and ``ros2 run maglev_ros EXE`` of the docs."""
+    setup = (ROOT / 'setup.py').read_text()
+    launch = {p.name for p in (ROOT / 'launch').glob('*.launch.xml')}
+    problems = []
+    for page in [ROOT / 'README.md', *pages()]:
+        text = page.read_text()
+        for name in re.findall(r'ros2 launch maglev_ros ([\w.]+\.launch\.xml)', text):
+            if name not in launch:
+                problems.append(f'{page.name}: no launch file {name}')
+        for exe in re.findall(r'ros2 run maglev_ros (\w+)', text):
+            if f"'{exe}'" not in setup:
+                problems.append(f'{page.name}: no executable {exe}')
+    assert not problems, '\n'.join(sorted(set(problems)))

@@ -119,7 +119,7 @@ def parameter_page(nodes: Sequence[NodeTable]) -> str:
         'NAME:=VALUE`; an integer is accepted where a number is expected. A bad value or',
         'type ends the node with one line naming the parameter, exit status 2. Only the',
         'parameters marked *settable* may change at run time (`ros2 param set`).',
-        '`ros2 run maglev_ros NODE --help` prints the same table.',
+        '`ros2 run maglev_ros <node> --help` prints the same table.',
         '',
         'Nodes: ' + ', '.join(f'[`{n.executable}`](#{n.executable})' for n in nodes) + '.',
     ]
