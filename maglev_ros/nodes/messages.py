@@ -18,6 +18,9 @@ from sensor_msgs.msg import JointState, MagneticField
 from maglev_ros.topics import BASE_FRAME, COIL_NAMES, MAGNET_FRAME, sensor_frame
 
 __all__ = [
+    'CommandMessageError',
+    'command_currents',
+    'command_message',
     'currents_message',
     'diagnostic_array',
     'field_message',
@@ -103,6 +106,59 @@ def currents_message(t_ns: int, currents: Sequence[float]) -> JointState:
     msg = JointState(name=list(COIL_NAMES))
     _set_effort(msg, currents)
     return _stamp(msg, t_ns)
+
+
+class CommandMessageError(ValueError):
+    """A command message does not hold the four coil currents in the contract's order."""
+
+
+def command_message(stamp_ns: int, currents: Sequence[float]) -> JointState:
+    """A coil command: JointState, names x+ x- y+ y-, effort = currents in A.
+
+    ``position`` and ``velocity`` stay empty and ``header.frame_id`` is ``''``
+    (as on ``maglev/currents``).
+
+    Parameters
+    ----------
+    stamp_ns : int
+        Stamp of the sample the command answers (its ``header.stamp``), ns.
+    currents : sequence of float, shape (4,)
+        Coil currents x+ x- y+ y-, A.
+    """
+    return currents_message(stamp_ns, currents)
+
+
+def command_currents(msg: JointState) -> np.ndarray:
+    """The coil currents of a command message, A, order x+ x- y+ y-.
+
+    Parameters
+    ----------
+    msg : JointState
+        A command (:func:`command_message`). Its names, when present, must be
+        x+ x- y+ y- in that order; without names the efforts are taken in
+        that order.
+
+    Returns
+    -------
+    ndarray, shape (4,)
+        The currents (finite or not: the receiver judges the values).
+
+    Raises
+    ------
+    CommandMessageError
+        If the names are not the coils' in order, or there are not 4 efforts.
+    """
+    if len(msg.name) and list(msg.name) != list(COIL_NAMES):
+        raise CommandMessageError(
+            f'command names must be {" ".join(COIL_NAMES)} (or none), got {list(msg.name)}'
+        )
+    currents = np.array(msg.effort, dtype=float)
+    if currents.shape != (len(COIL_NAMES),):
+        raise CommandMessageError(
+            f'a command needs {len(COIL_NAMES)} efforts (A, {" ".join(COIL_NAMES)}), '
+            f'got {currents.tolist()}'
+        )
+    return currents
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:

@@ -51,6 +51,7 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -187,6 +188,8 @@ class SimulationSession:
         self.paused = bool(paused)
         self.started = False
         self.real_time_factor = float('nan')
+        #: samples returned after the one the last stamped command answered (None: none yet)
+        self.command_lag: int | None = None
         self.run_start_ns = 0  # simulated time of the current run's sample 0
         self.last_stamp_ns = -1  # of the last sample returned
         self.waiting_since = 0.0  # lockstep: when the last sample was returned
@@ -301,7 +304,7 @@ class SimulationSession:
 
     # -- commands ---------------------------------------------------------------
 
-    def command(self, values, now: float) -> SampleBatch | None:
+    def command(self, values, now: float, stamp_ns: int | None = None) -> SampleBatch | None:
         """Take a command: 4 coil currents (or drives), A, order x+ x- y+ y-.
 
         Real time: held from the next step on. Lockstep: queued; every queued
@@ -313,6 +316,9 @@ class SimulationSession:
             The command.
         now : float
             Monotonic time, s.
+        stamp_ns : int, optional
+            Stamp of the sample the command answers, ns: its lag behind the
+            newest returned sample becomes :attr:`command_lag` (samples).
 
         Returns
         -------
@@ -331,6 +337,8 @@ class SimulationSession:
                 f'need 4 finite currents (x+, x-, y+, y-), got {values.ravel().tolist()}'
             )
         self.counters['commands'] += 1
+        if stamp_ns is not None:
+            self.command_lag = round((self.last_stamp_ns - stamp_ns) / self.dt_ns)
         if self.mode == 'realtime':
             if self._steps_since_command > 1:
                 self.counters['late_commands'] += 1
@@ -363,6 +371,47 @@ class SimulationSession:
         self.counters['timeouts'] += 1
         self._step(self._command)
         return self._awaiting_from(now)
+
+    def tick(self, now: float, ready: Callable[[], bool]) -> tuple[SampleBatch | None, str]:
+        """Do what is due at ``now``: start, a lockstep timeout, or a real-time burst.
+
+        Call it periodically (real time: every ``pace_period``; lockstep: a
+        fraction of ``command_timeout``). Paused or crashed, nothing is due.
+        Not started, the run starts once ``ready()`` (the caller's peers are
+        there) and, in real time, a first command came. Started, lockstep
+        holds the last command past ``command_timeout`` (:meth:`check_timeout`)
+        and real time steps the samples due (:meth:`pace`).
+
+        Parameters
+        ----------
+        now : float
+            Monotonic time, s.
+        ready : callable
+            Returns whether the peers the run waits for are there; asked
+            only before the start.
+
+        Returns
+        -------
+        batch : SampleBatch or None
+            The samples to publish.
+        note : str
+            A line to log ('' when nothing worth it happened): the start, or
+            a lockstep timeout.
+        """
+        if self.paused or self.sim.crashed:
+            self._pace = None  # real-time pacing restarts on resume
+            return None, ''
+        if not self.started:
+            if (self.mode == 'realtime' and not self.counters['commands']) or not ready():
+                return None, ''
+            return self.start(now), f'started: stepping in {self.mode}'
+        if self.mode == 'realtime':
+            return self.pace(now)[0], ''
+        from .session_health import timeout_line  # it reads sessions: imported on use
+
+        age = now - self.waiting_since
+        batch = self.check_timeout(now)
+        return batch, '' if batch is None else timeout_line(self, age)
 
     def _advance(self, now: float) -> SampleBatch | None:
         """Lockstep: step once per queued command while running."""

@@ -41,6 +41,7 @@ def session_health(session: SimulationSession, magnet: str) -> Health:
         'parameter set': sim.model.params.name,
         'simulated time (s)': f'{sim.time:.6f}',
         'real-time factor': f'{session.real_time_factor:.3f}',
+        'command lag (samples)': '' if session.command_lag is None else session.command_lag,
         'crash reason': sim.reason,
         'crash time (s)': '' if sim.crash_time is None else f'{sim.crash_time:.6f}',
         'crash state': (
