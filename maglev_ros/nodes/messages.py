@@ -113,7 +113,7 @@ class CommandMessageError(ValueError):
 
 
 def command_message(stamp_ns: int, currents: Sequence[float]) -> JointState:
-    """A coil command: JointState, names x+ x- y+ y-, effort = currents in A.
+    """Build a coil command: JointState, names x+ x- y+ y-, effort = currents in A.
 
     ``position`` and ``velocity`` stay empty and ``header.frame_id`` is ``''``
     (as on ``maglev/currents``).
@@ -129,7 +129,7 @@ def command_message(stamp_ns: int, currents: Sequence[float]) -> JointState:
 
 
 def command_currents(msg: JointState) -> np.ndarray:
-    """The coil currents of a command message, A, order x+ x- y+ y-.
+    """Return the coil currents of a command message, A, order x+ x- y+ y-.
 
     Parameters
     ----------
@@ -140,25 +140,21 @@ def command_currents(msg: JointState) -> np.ndarray:
 
     Returns
     -------
-    ndarray, shape (4,)
-        The currents (finite or not: the receiver judges the values).
+    ndarray, shape (n,)
+        The efforts as they came: the core that takes the command judges
+        their number and values (and counts a rejection).
 
     Raises
     ------
     CommandMessageError
-        If the names are not the coils' in order, or there are not 4 efforts.
+        If the names are present and not the coils' in order.
     """
     if len(msg.name) and list(msg.name) != list(COIL_NAMES):
         raise CommandMessageError(
-            f'command names must be {" ".join(COIL_NAMES)} (or none), got {list(msg.name)}'
+            f'command names must be {" ".join(COIL_NAMES)} in this order (or none), '
+            f'got {" ".join(msg.name)}'
         )
-    currents = np.array(msg.effort, dtype=float)
-    if currents.shape != (len(COIL_NAMES),):
-        raise CommandMessageError(
-            f'a command needs {len(COIL_NAMES)} efforts (A, {" ".join(COIL_NAMES)}), '
-            f'got {currents.tolist()}'
-        )
-    return currents
+    return np.array(msg.effort, dtype=float)
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:

@@ -53,6 +53,7 @@ import time
 from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -66,6 +67,7 @@ __all__ = [
     'CommandError',
     'SampleBatch',
     'SimulationSession',
+    'Tick',
 ]
 
 MODES = ('realtime', 'lockstep')
@@ -120,6 +122,24 @@ class SampleBatch:
 
     def __len__(self) -> int:
         return int(self.indices.shape[0])
+
+
+class Tick(NamedTuple):
+    """What :meth:`SimulationSession.tick` did.
+
+    Attributes
+    ----------
+    batch : SampleBatch or None
+        The samples to publish.
+    note : str
+        A line to log ('' when nothing worth it happened).
+    warning : bool
+        The note reports a problem (a lockstep timeout), not progress.
+    """
+
+    batch: SampleBatch | None
+    note: str = ''
+    warning: bool = False
 
 
 class SimulationSession:
@@ -372,7 +392,7 @@ class SimulationSession:
         self._step(self._command)
         return self._awaiting_from(now)
 
-    def tick(self, now: float, ready: Callable[[], bool]) -> tuple[SampleBatch | None, str]:
+    def tick(self, now: float, ready: Callable[[], bool]) -> Tick:
         """Do what is due at ``now``: start, a lockstep timeout, or a real-time burst.
 
         Call it periodically (real time: every ``pace_period``; lockstep: a
@@ -392,26 +412,26 @@ class SimulationSession:
 
         Returns
         -------
-        batch : SampleBatch or None
-            The samples to publish.
-        note : str
-            A line to log ('' when nothing worth it happened): the start, or
-            a lockstep timeout.
+        Tick
+            The samples to publish, and a line to log: the start (info) or a
+            lockstep timeout (a warning).
         """
         if self.paused or self.sim.crashed:
             self._pace = None  # real-time pacing restarts on resume
-            return None, ''
+            return Tick(None)
         if not self.started:
             if (self.mode == 'realtime' and not self.counters['commands']) or not ready():
-                return None, ''
-            return self.start(now), f'started: stepping in {self.mode}'
+                return Tick(None)
+            return Tick(self.start(now), f'started: stepping in {self.mode}')
         if self.mode == 'realtime':
-            return self.pace(now)[0], ''
+            return Tick(self.pace(now)[0])
         from .session_health import timeout_line  # it reads sessions: imported on use
 
         age = now - self.waiting_since
         batch = self.check_timeout(now)
-        return batch, '' if batch is None else timeout_line(self, age)
+        if batch is None:
+            return Tick(None)
+        return Tick(batch, timeout_line(self, age), warning=True)
 
     def _advance(self, now: float) -> SampleBatch | None:
         """Lockstep: step once per queued command while running."""

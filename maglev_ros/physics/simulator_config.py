@@ -96,6 +96,25 @@ class SimulatorConfig:
     diagnostics_period: float
     wait_for_controller: bool = False
 
+    def summary(self, set_name: str, sensors: tuple[int, ...]) -> str:
+        """One line saying what runs (the node logs it at start).
+
+        Parameters
+        ----------
+        set_name : str
+            The parameter set's name.
+        sensors : tuple of int
+            The sensors published (all of the set's when :attr:`sensors` is empty).
+        """
+        return (
+            f'{set_name} ({self.field_model} field), magnet {self.magnet}, {self.mode} at '
+            f'{self.sample_rate:g} Hz, sensors {list(sensors)}, coil dynamics '
+            f'{"on" if self.coil_dynamics else "off"}, sensor delay {self.sensor_delay}, '
+            f'noise {self.sensor_noise:g} T, seed {self.seed}'
+            f'{", paused" if self.start_paused else ""}'
+            f'{", waiting for a first command" if self.wait_for_controller else ""}'
+        )
+
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
     """Build the physics simulator of a configuration.
