@@ -1,23 +1,25 @@
 """Excitation node: ``ros2 run maglev_ros excitation``.
 
 Publishes identification inputs on ``maglev/currents/command``
-(std_msgs/Float64MultiArray, 4 currents in A, x+ x- y+ y-): PRBS, random
-binary, multisine or chirp (:mod:`maglev_ros.excitation`), with amplitude,
-band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
--u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
+(sensor_msgs/JointState, names x+ x- y+ y-, effort = currents in A): PRBS,
+random binary, multisine or chirp (:mod:`maglev_ros.excitation`), with
+amplitude, band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x
+on x+, -u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
 ``x_pair``, ``y_pair``, ``independent``, ``common``), offset and seed.
 
 One period of ``length`` samples is generated at start and repeated
 ``cycles`` times (0: forever); afterwards zero currents plus ``offset`` are
 sent. ``max_commands`` (0: no limit) stops publishing after that many
-commands: a lockstep simulation then takes exactly that many steps. Triggers:
+commands: a lockstep simulation then takes exactly that many steps
+(:class:`~maglev_ros.excitation.CommandSequence`). Triggers:
 
 ``sample`` (default)
     one command per sample received on ``maglev/currents`` (from the
-    simulator or the driver): in lockstep this drives the simulation sample
-    by sample, deterministically.
+    simulator or the driver), stamped with that sample's stamp: in lockstep
+    this drives the simulation sample by sample, deterministically.
 ``timer``
-    one command per 1 / ``sample_rate`` s of wall time.
+    one command per 1 / ``sample_rate`` s of wall time, stamped with the
+    node clock's time (no sample is answered).
 
 QoS: RELIABLE, KEEP_LAST 1000 (matches the simulator's lockstep command
 subscription and the driver's best-effort one).
@@ -31,11 +33,11 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
 from maglev_ros.excitation import (
     PATTERNS,
     SIGNALS,
+    CommandSequence,
     apply_pattern,
     excitation,
     pattern_signals,
@@ -225,11 +227,8 @@ class ExcitationNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.config = cfg = build_config(PARAMETERS.declare(self))
         self.commands = commands_of(cfg)
-        self._rest = [float(v) for v in cfg.offset]
-        self._rows = self.commands.tolist()
-        self.sent = 0
-        self._msg = Float64MultiArray()
-        self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
+        self.sequence = CommandSequence(self.commands, cfg.cycles, cfg.offset, cfg.max_commands)
+        self._pub = self.create_publisher(JointState, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         if cfg.trigger == 'sample':
             self.create_subscription(
                 JointState, CURRENTS_TOPIC, self._on_sample, SENSOR_QOS, raw=True
@@ -243,18 +242,23 @@ class ExcitationNode(Node):
         )
 
     @property
+    def sent(self) -> int:
+        """Commands published so far."""
+        return self.sequence.sent
+
+    @property
     def finished(self) -> bool:
         """True once all cycles were sent (offset only from then on)."""
-        return bool(self.config.cycles) and self.sent >= self.config.cycles * self.config.length
+        return self.sequence.finished
 
     @property
     def exhausted(self) -> bool:
         """True once ``max_commands`` commands were published (nothing more is sent)."""
-        return bool(self.config.max_commands) and self.sent >= self.config.max_commands
+        return self.sequence.exhausted
 
     @property
     def command_subscribers(self) -> int:
-        """Subscriptions matched to this node's ``maglev/command`` publisher.
+        """Subscriptions matched to this node's ``maglev/currents/command`` publisher.
 
         Counts every matched subscription in the graph (the simulator's or
         driver's, a recorder's, ...): wait on it for discovery before the
@@ -263,19 +267,15 @@ class ExcitationNode(Node):
         return self._pub.get_subscription_count()
 
     def publish_next(self) -> None:
-        """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
-        if self.exhausted:
-            return
-        if self.finished:
-            data = self._rest
-        else:
-            data = self._rows[self.sent % self.config.length]
-        self._msg.data = data
-        self._pub.publish(self._msg)
-        self.sent += 1
+        """Publish the next command stamped with the node clock's time (none once exhausted)."""
+        self._publish(self.sequence.message(self.get_clock().now().nanoseconds))
 
-    def _on_sample(self, _raw: bytes) -> None:
-        self.publish_next()
+    def _on_sample(self, raw: bytes) -> None:
+        self._publish(self.sequence.answer(raw))  # stamped with the sample it answers
+
+    def _publish(self, message: bytes | None) -> None:
+        if message is not None:
+            self._pub.publish(message)
 
 
 def main(args: list[str] | None = None) -> int:

@@ -53,3 +53,15 @@ def test_builds_the_configured_simulator():
 def test_errors_name_the_value(changes, message):
     with pytest.raises(SimulatorConfigError, match=message):
         make_simulator(dataclasses.replace(BASE, **changes))
+
+
+def test_summary_says_what_runs():
+    line = dataclasses.replace(BASE, sensor_noise=2e-5, seed=3).summary('maggy_v2', (0, 1, 2))
+    assert line == (
+        'maggy_v2 (fast field), magnet free, lockstep at 5000 Hz, sensors [0, 1, 2], coil '
+        'dynamics on, sensor delay 1, noise 2e-05 T, seed 3'
+    )
+    waiting = dataclasses.replace(
+        BASE, mode='realtime', start_paused=True, wait_for_controller=True
+    )
+    assert waiting.summary('maggy_v2', (0,)).endswith(', paused, waiting for a first command')
