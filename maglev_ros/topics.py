@@ -13,7 +13,8 @@ Topics (relative names resolve in the node's namespace; ``/clock`` and
 
 * ``maglev/sensor_<k>/field`` (MagneticField, T): driver, simulator;
 * ``maglev/currents`` (JointState, A): driver, simulator;
-* ``maglev/currents/command`` (Float64MultiArray, A): controller, excitation;
+* ``maglev/currents/command`` (JointState, effort in A, stamp = the sample
+  answered): controller, excitation;
 * ``maglev/state/true`` (Odometry: m, rad, m/s, rad/s): simulator;
 * ``maglev/markers`` (MarkerArray): simulator;
 * ``maglev/state/estimate`` (Odometry with covariance): estimator;
@@ -130,7 +131,7 @@ def sensor_frame(k: int) -> str:
 #: Message type (``pkg/msg/Type``) of each fixed topic of the contract.
 MESSAGE_TYPES: dict[str, str] = {
     CURRENTS_TOPIC: 'sensor_msgs/msg/JointState',
-    COMMAND_TOPIC: 'std_msgs/msg/Float64MultiArray',
+    COMMAND_TOPIC: 'sensor_msgs/msg/JointState',
     TRUE_STATE_TOPIC: 'nav_msgs/msg/Odometry',
     MARKERS_TOPIC: 'visualization_msgs/msg/MarkerArray',
     ESTIMATE_TOPIC: 'nav_msgs/msg/Odometry',
@@ -180,7 +181,7 @@ def current_channel(coil: int) -> str:
 
 
 def command_channel(coil: int) -> str:
-    """Channel spec of coil ``coil``'s commanded current (A), e.g. ``...command:data[0]``.
+    """Channel spec of coil ``coil``'s commanded current (A), e.g. ``...command:effort[0]``.
 
     Parameters
     ----------
@@ -191,7 +192,7 @@ def command_channel(coil: int) -> str:
     -------
     str
     """
-    return f'{COMMAND_TOPIC}:data[{coil}]'
+    return f'{COMMAND_TOPIC}:effort[{coil}]'
 
 
 def excitation_channel(coil: int) -> str:

@@ -1,15 +1,13 @@
 """Simulator node: ``ros2 run maglev_ros simulator``.
 
 The nonlinear Maggy model (:class:`~maglev_ros.physics.Simulator`) as a plant
-on the shared topics (``docs/topics.md``), as the board driver: per sample,
-stamped with simulated time, ``maglev/sensor_<k>/field``, ``maglev/state/true``
-and ``maglev/currents`` (last: it completes a sample); ``/clock`` (each sample
-in lockstep, each burst in real time); ``maglev/markers``; ``/diagnostics``.
-It takes ``maglev/currents/command`` (JointState: names x+ x- y+ y- or none,
-effort in A, stamp = the sample answered) and the services
-``maglev/simulator/reset`` (Trigger) and ``maglev/simulator/pause`` (SetBool).
-A shell around a ROS-free :class:`~maglev_ros.physics.session.SimulationSession`
-(it states the timing contract; a crash stops it until a reset):
+on the topics of ``docs/topics.md``, as the board driver: per sample (stamped
+with simulated time) each sensor's field, the true state and the currents
+(last: they complete a sample); ``/clock``; markers; ``/diagnostics``. It takes
+JointState commands (names x+ x- y+ y- or none, effort in A, stamp = the sample
+answered) and the reset (Trigger) and pause (SetBool) services. A shell around
+a ROS-free :class:`~maglev_ros.physics.session.SimulationSession` (it states
+the timing contract; a crash stops it until a reset):
 
 ``realtime``
     A steady-clock timer (every ``pace_period``) publishes the samples due; a
@@ -23,8 +21,8 @@ A shell around a ROS-free :class:`~maglev_ros.physics.session.SimulationSession`
 
 from __future__ import annotations
 
-import math
 import time
+from functools import partial
 
 from diagnostic_msgs.msg import DiagnosticArray
 from nav_msgs.msg import Odometry
@@ -43,29 +41,20 @@ from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, i
 from maglev_ros.nodes.params import choice as one_of
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.physics import FIELD_MODELS, KINEMATICS, TORQUE_MODES, Simulator
+from maglev_ros.physics import simulator_config as core
 from maglev_ros.physics.sample_encoder import SampleEncoder
 from maglev_ros.physics.session import MODES, SampleBatch, SimulationSession
 from maglev_ros.physics.session_health import crash_line, session_health
 from maglev_ros.physics.simulation import MAGNET_MODES
-from maglev_ros.physics.simulator_config import SimulatorConfig, SimulatorConfigError
-from maglev_ros.physics.simulator_config import make_simulator as _make_simulator
+from maglev_ros.physics.simulator_config import SimulatorConfig
 from maglev_ros.topics import SIMULATOR_PAUSE_SERVICE, SIMULATOR_RESET_SERVICE
 
-__all__ = [
-    'MODES',
-    'PARAMETERS',
-    'SimulatorConfig',
-    'SimulatorNode',
-    'SimulatorParameterError',
-    'build_config',
-    'main',
-    'make_simulator',
-]
+__all__ = ['MODES', 'PARAMETERS', 'SimulatorConfig', 'SimulatorNode', 'SimulatorParameterError',
+           'build_config', 'main', 'make_simulator']  # fmt: skip
 
 NODE_NAME = 'maglev_simulator'
 STEADY_TIME = ClockType.STEADY_TIME
-#: Fast DDS sends from its own thread: publishing does not wait for the transport
-#: (measured: real-time factor 0.9 -> 1.0 at 5 kHz with a recorder in another process)
+#: Fast DDS sends from its own thread (5 kHz with a recorder: real-time factor 0.9 -> 1.0)
 ASYNC = {'RMW_FASTRTPS_PUBLICATION_MODE': 'ASYNCHRONOUS'}
 
 
@@ -73,30 +62,12 @@ class SimulatorParameterError(NodeParameterError):
     """A simulator parameter has an invalid value."""
 
 
-def _initial_state(name: str, state: tuple[float, ...]) -> tuple[float, ...] | None:
-    if state and (len(state) != 12 or not all(map(math.isfinite, state))):
-        raise SimulatorParameterError(f'{name} must be 12 finite numbers (x y z alpha beta '
-                                      f'gamma vx vy vz wx wy wz), got {list(state)}')  # fmt: skip
-    return state or None
-
-
-def _sensor_indices(name: str, sensors: tuple[int, ...]) -> tuple[int, ...]:
-    if any(k < 0 for k in sensors) or len(set(sensors)) != len(sensors):
-        raise SimulatorParameterError(f'{name} must be distinct sensor indices >= 0, got '
-                                      f'{list(sensors)}')  # fmt: skip
-    return sensors
-
-
-def _parameter_set(name: str, value: str) -> str:
-    if not value:
-        raise SimulatorParameterError(f'{name} must name a parameter set, got an empty string')
-    return value
-
+_CHECK = {'error': SimulatorParameterError}  # the config's checks raise the node's error
 
 # fmt: off
 PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
     'params': Param('maggy_v2', 'parameter set: maggy_v2, maggy_v4 or a YAML path',
-                    check=_parameter_set),
+                    check=partial(core.check_parameter_set, **_CHECK)),
     'field_model': Param('fast', 'field model: fast, accurate or filament',
                          check=one_of(*FIELD_MODELS)),
     'torque': Param('true', 'torque model: true or published', check=one_of(*TORQUE_MODES)),
@@ -108,7 +79,7 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
                     check=one_of(*MAGNET_MODES)),
     'initial_state': Param([], '12 numbers x y z alpha beta gamma vx vy vz wx wy wz (m, rad, '
                            'm/s, rad/s); empty: resting at the first equilibrium',
-                           kind='double_array', check=_initial_state),
+                           kind='double_array', check=partial(core.check_initial_state, **_CHECK)),
     'coil_dynamics': Param(True, 'coil L/R electrics, voltage R i_cmd clipped at the supply'),
     'sensor_noise': Param(0.0, 'white sensor noise per axis, T rms', check=number(0)),
     'sensor_quantization': Param(0.0, 'sensor resolution, T per LSB (0: none)', check=number(0)),
@@ -127,7 +98,7 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
                                  f'{contract.COMMAND_TOPIC} arrived and start_subscribers '
                                  'subscribers exist (a free magnet waits for its controller)'),
     'sensors': Param([], 'indices of the sensors to publish; empty: all', kind='integer_array',
-                     check=_sensor_indices),
+                     check=partial(core.check_sensor_indices, **_CHECK)),
     'publish_state': Param(True, f'publish the true state on {contract.TRUE_STATE_TOPIC}'),
     'publish_clock': Param(True, f'publish the simulated time on {contract.CLOCK_TOPIC}'),
     'marker_rate': Param(10.0, 'RViz markers per second of wall time (0: none)', check=number(0)),
@@ -139,15 +110,27 @@ _PARAMETERS = PARAMETERS  # the name test_launch uses
 
 
 def build_config(values: dict) -> SimulatorConfig:
-    """Validate raw parameter values (missing: the default); errors name the parameter."""
+    """Validate raw parameter values into a config; errors name the parameter.
+
+    Parameters
+    ----------
+    values : dict
+        Parameter name to raw value (a missing name takes its default).
+    """
     return SimulatorConfig(**PARAMETERS.validate(values))
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
-    """:func:`maglev_ros.physics.simulator_config.make_simulator`, its errors as the node's."""
+    """Build the simulator of a config (errors as :class:`SimulatorParameterError`).
+
+    Parameters
+    ----------
+    cfg : SimulatorConfig
+        The validated parameters.
+    """
     try:
-        return _make_simulator(cfg)
-    except SimulatorConfigError as err:
+        return core.make_simulator(cfg)
+    except core.SimulatorConfigError as err:
         raise SimulatorParameterError(str(err)) from err
 
 
@@ -251,7 +234,13 @@ class SimulatorNode(Node):
         return message
 
     def set_paused(self, paused: bool) -> None:
-        """Pause (True) or resume (False) the integration (lockstep: queued commands step)."""
+        """Pause or resume the integration (lockstep: queued commands step on resume).
+
+        Parameters
+        ----------
+        paused : bool
+            True pauses, False resumes.
+        """
         self._send(self.session.set_paused(paused, time.monotonic()))
 
     def _send(self, batch: SampleBatch | None, note: str = '', warning: bool = False) -> None:
@@ -292,7 +281,13 @@ class SimulatorNode(Node):
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the simulator until SIGINT, SIGTERM or SIGHUP; exit status 0, or 2 on bad parameters."""
+    """Run the simulator until SIGINT, SIGTERM or SIGHUP; exit status 0, or 2 on bad parameters.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS arguments included).
+    """
     return run_nodes([SimulatorNode], args, NODE_NAME, (PARAMETERS.error,), PARAMETERS, ASYNC)
 
 

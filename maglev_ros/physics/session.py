@@ -68,6 +68,7 @@ __all__ = [
     'SampleBatch',
     'SimulationSession',
     'Tick',
+    'timeout_line',
 ]
 
 MODES = ('realtime', 'lockstep')
@@ -425,8 +426,6 @@ class SimulationSession:
             return Tick(self.start(now), f'started: stepping in {self.mode}')
         if self.mode == 'realtime':
             return Tick(self.pace(now)[0])
-        from .session_health import timeout_line  # it reads sessions: imported on use
-
         age = now - self.waiting_since
         batch = self.check_timeout(now)
         if batch is None:
@@ -570,3 +569,24 @@ class SimulationSession:
         if crashed:
             self.last_state = self.sim.crash_state
         return SampleBatch(indices, stamps, readings, states, currents, crashed)
+
+
+def timeout_line(session: SimulationSession, age: float) -> str:
+    """Describe a lockstep command timeout in one log line.
+
+    Parameters
+    ----------
+    session : SimulationSession
+        The session that held the last command.
+    age : float
+        s since the previous sample was returned.
+
+    Returns
+    -------
+    str
+        One line.
+    """
+    return (
+        f'no command for {age:.3f} s > {session.command_timeout} s at '
+        f't = {session.sim.time:.6f} s: holding the last command'
+    )
