@@ -6,10 +6,12 @@ checkout, e.g. the main branch), one at a time and alternating, each for
 ``--seconds`` after a warm-up. This process subscribes every sample topic
 (three fields, the true state, the currents, ``/clock``), as a recorder does,
 so the node serialises and publishes all of them. Per run it prints the
-node's CPU (user + system over the window, % of one core), its real-time
-factor (simulated time of the currents' stamps over wall time) and the
-samples received against the samples stamped (lost ones), then the ratios of
-this checkout over the baseline.
+node's CPU (user + system over the window: % of one core, and per sample
+stamped), its real-time factor (simulated time of the currents' stamps over
+wall time), the samples this listener received and those it missed (the
+listener's own speed: one Python process taking every topic), and the CPU of
+the node's threads; then the medians and the ratios of this checkout over the
+baseline.
 
 Usage::
 
@@ -99,6 +101,7 @@ def run_once(checkout: Path, env: dict, ctx, seconds: float, warmup: float) -> d
     stamped = round((s1 - s0) * 1e-9 * RATE)
     return {
         'cpu': 100.0 * (c1 - c0) / wall,
+        'us_per_sample': 1e6 * (c1 - c0) / max(stamped, 1),
         'rtf': (s1 - s0) * 1e-9 / wall,
         'received': n1 - n0,
         'lost': stamped - (n1 - n0),
@@ -128,7 +131,8 @@ def main() -> int:
                 r = run_once(checkout, env, ctx, args.seconds, args.warmup)
                 results[name].append(r)
                 print(
-                    f'{name:8s} CPU {r["cpu"]:5.1f} %  RTF {r["rtf"]:.3f}  '
+                    f'{name:8s} CPU {r["cpu"]:5.1f} % ({r["us_per_sample"]:.0f} us/sample)  '
+                    f'RTF {r["rtf"]:.3f}  '
                     f'received {r["received"]}  lost {r["lost"]}  threads '
                     + ', '.join(f'{k} {v:.1f} %' for k, v in sorted(r['threads'].items())),
                     flush=True,
@@ -136,9 +140,12 @@ def main() -> int:
     finally:
         rclpy.shutdown(context=ctx)
     cpu = {k: statistics.median(r['cpu'] for r in v) for k, v in results.items()}
+    per = {k: statistics.median(r['us_per_sample'] for r in v) for k, v in results.items()}
     rtf = {k: statistics.median(r['rtf'] for r in v) for k, v in results.items()}
     print(f'median CPU: this {cpu["this"]:.1f} %, baseline {cpu["baseline"]:.1f} % '
           f'(ratio {cpu["this"] / cpu["baseline"]:.2f})')  # fmt: skip
+    print(f'median CPU per sample: this {per["this"]:.0f} us, baseline {per["baseline"]:.0f} us '
+          f'(ratio {per["this"] / per["baseline"]:.2f})')  # fmt: skip
     print(f'median RTF: this {rtf["this"]:.3f}, baseline {rtf["baseline"]:.3f} '
           f'(ratio {rtf["this"] / rtf["baseline"]:.3f})')  # fmt: skip
     print(f'load average: {" ".join(f"{x:.2f}" for x in os.getloadavg())}')
