@@ -20,9 +20,7 @@ class Listener(Node):
         super().__init__(name, **kwargs)
         self.destroyed = destroyed
         self.received = 0
-        self.create_subscription(
-            JointState, COMMAND_TOPIC, self._on_command, LOCKSTEP_COMMAND_QOS
-        )
+        self.create_subscription(JointState, COMMAND_TOPIC, self._on_command, LOCKSTEP_COMMAND_QOS)
 
     def _on_command(self, _msg):
         self.received += 1

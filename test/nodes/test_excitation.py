@@ -11,13 +11,13 @@ from sensor_msgs.msg import JointState
 from waiting import wait_for
 
 from maglev_ros.nodes import contract
-from maglev_ros.nodes.messages import stamp_ns
 from maglev_ros.nodes.excitation import (
     ExcitationNode,
     ExcitationParameterError,
     build_config,
     commands_of,
 )
+from maglev_ros.nodes.messages import stamp_ns
 from maglev_ros.nodes.simulator import SimulatorNode
 
 TIMEOUT = 30.0
