@@ -350,7 +350,6 @@ def identifier_parameters(s: LabGraphSettings, channels=None, **more) -> dict:
         nk=list(s.identifier_orders[2]),
         initial_covariance=s.initial_covariance,
         publish_rate=1.0,
-        intra_process=True,
         **more,
     )
 
@@ -548,7 +547,7 @@ def run_closed_loop_lab(
         )
         # from the first recorded sample, logged at the samples' stamps (a command at
         # the newest: the sample it follows); real time: to the last, the loop runs on
-        recording = dict(record_from=first_s, log_clock='stamp', intra_process=True)
+        recording = dict(record_from=first_s, log_clock='stamp')
         if rt:
             recording.update(record_until=last_s)
         recorder = lab.add(
@@ -663,7 +662,7 @@ def _run_lockstep(
         'the simulator, estimator, controller, identifier and recorder',
         stop=stop,
     )
-    sim.pause_after(settle_n)
+    sim.session.pause_after(settle_n)
     sim.set_paused(False)
     _wait_paused(lab, sim, ctrl, settle_n, 'settling', report, stop)
     # the identifier starts afresh with the first recorded sample: every settling
@@ -672,7 +671,7 @@ def _run_lockstep(
     answer = reset.call_async(Trigger.Request())
     lab.wait_until(answer.done, 'the identifier reset', stop=stop)
     wall = time.monotonic()
-    sim.pause_after(last)
+    sim.session.pause_after(last)
     sim.set_paused(False)
     _wait_paused(lab, sim, ctrl, last, 'recording', report, stop, first=settle_n)
     wall = time.monotonic() - wall
@@ -704,7 +703,7 @@ def _run_realtime(lab, s, sim, ctrl, ident, recorder, topics, report, stop) -> L
     # (~0.1 s) in the middle of the run would stall the loop's thread
     gc.freeze()
     # one burst beyond the window: the identifier completes a sample at the next one
-    sim.pause_after(last + sim.session.burst)
+    sim.session.pause_after(last + sim.session.burst)
     sim.set_paused(False)
     wall = [time.monotonic(), None]
 

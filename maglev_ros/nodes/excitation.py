@@ -54,15 +54,8 @@ from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.topics import COIL_NAMES, COMMAND_TOPIC, CURRENTS_TOPIC
 
-__all__ = [
-    'PARAMETERS',
-    'ExcitationConfig',
-    'ExcitationNode',
-    'ExcitationParameterError',
-    'build_config',
-    'commands_of',
-    'main',
-]
+__all__ = ['PARAMETERS', 'ExcitationConfig', 'ExcitationNode', 'ExcitationParameterError',
+           'build_config', 'commands_of', 'main']  # fmt: skip
 
 NODE_NAME = 'maglev_excitation'
 TRIGGERS = ('sample', 'timer')
@@ -266,9 +259,16 @@ class ExcitationNode(Node):
         """
         return self._pub.get_subscription_count()
 
-    def publish_next(self) -> None:
-        """Publish the next command stamped with the node clock's time (none once exhausted)."""
-        self._publish(self.sequence.message(self.get_clock().now().nanoseconds))
+    def publish_next(self, stamp_ns: int | None = None) -> None:
+        """Publish the next command (nothing once ``max_commands`` are sent).
+
+        Parameters
+        ----------
+        stamp_ns : int, optional
+            Stamp of the sample it answers, ns (default: the node clock's time).
+        """
+        now = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        self._publish(self.sequence.message(now))
 
     def _on_sample(self, raw: bytes) -> None:
         self._publish(self.sequence.answer(raw))  # stamped with the sample it answers

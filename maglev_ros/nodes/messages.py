@@ -109,52 +109,50 @@ def currents_message(t_ns: int, currents: Sequence[float]) -> JointState:
 
 
 class CommandMessageError(ValueError):
-    """A command message does not hold the four coil currents in the contract's order."""
+    """A command message does not name the coils in the contract's order."""
 
 
-def command_message(stamp_ns: int, currents: Sequence[float]) -> JointState:
-    """Build a coil command: JointState, names x+ x- y+ y-, effort = currents in A.
-
-    ``position`` and ``velocity`` stay empty and ``header.frame_id`` is ``''``
-    (as on ``maglev/currents``).
+def command_message(t_ns: int, currents: Sequence[float]) -> JointState:
+    """Return a coil command (``maglev/currents/command``, ``.../excitation``): JointState, A.
 
     Parameters
     ----------
-    stamp_ns : int
-        Stamp of the sample the command answers (its ``header.stamp``), ns.
+    t_ns : int
+        Stamp of the sample the command answers, ns.
     currents : sequence of float, shape (4,)
-        Coil currents x+ x- y+ y-, A.
+        Commanded currents x+ x- y+ y-, A (``effort``).
     """
-    return currents_message(stamp_ns, currents)
+    return currents_message(t_ns, currents)
 
 
 def command_currents(msg: JointState) -> np.ndarray:
-    """Return the coil currents of a command message, A, order x+ x- y+ y-.
+    """Return a command's currents, A, in :data:`~maglev_ros.topics.COIL_NAMES` order.
+
+    Their count and values are the consumer's to check (the board's command
+    guard and the simulator count what they refuse).
 
     Parameters
     ----------
     msg : JointState
-        A command (:func:`command_message`). Its names, when present, must be
-        x+ x- y+ y- in that order; without names the efforts are taken in
-        that order.
-
-    Returns
-    -------
-    ndarray, shape (n,)
-        The efforts as they came: the core that takes the command judges
-        their number and values (and counts a rejection).
+        A command (:func:`command_message`). Without names, or with the
+        coils' names in the contract's order, the efforts are taken as they
+        are; other names must be the coils' in another order (one per effort).
 
     Raises
     ------
     CommandMessageError
-        If the names are present and not the coils' in order.
+        If the names are not the coils'.
     """
-    if len(msg.name) and list(msg.name) != list(COIL_NAMES):
+    effort = np.asarray(msg.effort, dtype=float)
+    names = list(msg.name)
+    if not names or names == list(COIL_NAMES):
+        return effort
+    if sorted(names) != sorted(COIL_NAMES) or len(names) != effort.size:
         raise CommandMessageError(
-            f'command names must be {" ".join(COIL_NAMES)} in this order (or none), '
-            f'got {" ".join(msg.name)}'
+            f'a command names the coils {list(COIL_NAMES)}, one effort each; got names '
+            f'{names} and {effort.size} efforts'
         )
-    return np.array(msg.effort, dtype=float)
+    return effort[[names.index(c) for c in COIL_NAMES]]
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:

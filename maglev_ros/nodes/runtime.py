@@ -140,7 +140,7 @@ def run_nodes(
         Logger name for parameter errors.
     errors : tuple of exception types
         Parameter errors: logged in one line, exit status 2.
-    parameters : maglev_ros.nodes.params.ParameterTable, optional
+    parameters : maglev_ros.parameters.ParameterTable, optional
         The node's parameters: ``--help`` (``-h``) before ``--ros-args``
         prints them and returns 0 without starting ROS.
     environment : dict, optional

@@ -30,10 +30,15 @@ def test_a_command_without_names_is_taken_in_coil_order():
     )
 
 
+def test_the_coils_named_in_another_order_are_put_in_coil_order():
+    msg = JointState(name=['y-', 'x+', 'y+', 'x-'], effort=[4.0, 1.0, 3.0, 2.0])
+    np.testing.assert_array_equal(command_currents(msg), [1.0, 2.0, 3.0, 4.0])
+
+
 @pytest.mark.parametrize(
-    'names', [['x-', 'x+', 'y+', 'y-'], ['x+', 'x-', 'y+'], ['a', 'b', 'c', 'd']]
+    'names', [['x+', 'x-', 'y+'], ['a', 'b', 'c', 'd'], ['x+', 'x+', 'y+', 'y-']]
 )
 def test_other_names_are_refused_naming_them(names):
     msg = JointState(name=names, effort=[0.0] * len(names))
-    with pytest.raises(CommandMessageError, match=re.escape(f'got {" ".join(names)}')):
+    with pytest.raises(CommandMessageError, match=re.escape(f'got names {names}')):
         command_currents(msg)
