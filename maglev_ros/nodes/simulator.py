@@ -210,7 +210,7 @@ class SimulatorNode(Node):
     def _on_command(self, msg: JointState) -> None:
         try:
             batch = self.session.command(command_currents(msg), time.monotonic(), stamp_ns(msg))
-        except ValueError as err:  # names, number or values (counted by the session)
+        except ValueError as err:  # the names; the number or values (counted by the session)
             self.get_logger().warning(f'rejected command: {err}', throttle_duration_sec=1.0)
         else:
             self._send(batch)
