@@ -87,7 +87,7 @@ def test_lockstep_experiment_recorded_with_metadata_and_exact_alignment(ctx, tmp
     data = read_bag(
         bag,
         ['maglev/sensor_0/field:magnetic_field.z'],
-        [f'maglev/currents/command:data[{j}]' for j in range(4)],
+        [f'maglev/currents/command:effort[{j}]' for j in range(4)],
     )
     assert data.data.Ts == pytest.approx(2e-4)
     assert data.alignment.gaps == () if hasattr(data.alignment, 'gaps') else True
