@@ -1,24 +1,27 @@
 """The board driver's configuration, ROS-free: validated settings and their defaults.
 
-The driver node's parameter table checks each parameter on its own;
-:func:`driver_config` then applies the rules that join several (frames per
-sensor, the scaling, the back-off bounds, the firmware's default baud rate)
-and builds the frozen :class:`DriverConfig`.
+:data:`VALUE_RULES` are the rules of each setting on its own (the driver
+node's parameter table applies them); :func:`driver_config` then applies the
+rules that join several (frames per sensor, the scaling, the back-off bounds,
+the firmware's default baud rate) and builds the frozen :class:`DriverConfig`.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 from ..topics import sensor_frame
-from .packet import PWM_FULL_SCALE
+from .packet import PWM_FULL_SCALE, WATCHDOG_S
 from .scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from .v4x_pc_poller import DEFAULT_POLL_RATE
 
 __all__ = [
     'DEFAULT_BAUD',
+    'MAX_POLL_RATE',
     'MAX_READ_INTERVAL_S',
+    'VALUE_RULES',
     'DriverConfig',
     'DriverConfigError',
     'driver_config',
@@ -26,6 +29,53 @@ __all__ = [
 
 DEFAULT_BAUD = {'v2x': 9600, 'v4x': 115200, 'v4x_pc': 115200}  # ignored by USB CDC, set anyway
 MAX_READ_INTERVAL_S = 0.05  # s: 50 ms of 3-sensor V2x data is 12 KB, inside a pty's buffer
+MAX_POLL_RATE = 5000.0  # Hz: the V4x PC-control board samples every 200 us
+
+
+def _positive(v: float) -> bool:
+    return math.isfinite(v) and v > 0
+
+
+def _positive_or_zero(v: float) -> bool:
+    return v == 0 or _positive(v)
+
+
+_POSITIVE = (_positive, 'a positive finite number')
+_POSITIVE_OR_ZERO = (_positive_or_zero, 'a positive finite number or 0')
+
+#: Per setting: ``(test, words)`` pairs; a value failing ``test`` "must be WORDS"
+#: (the first failing pair is reported). Settings of the right type with no rule here
+#: take any value.
+VALUE_RULES: dict[str, tuple[tuple[Callable[[object], bool], str], ...]] = {
+    'port': ((bool, 'a device path'),),
+    'firmware': ((DEFAULT_BAUD.__contains__, "'v2x', 'v4x' or 'v4x_pc' (V4x PC control)"),),
+    'baudrate': ((lambda v: v >= 0, '> 0 (0: default)'),),
+    'supply_voltage': (_POSITIVE,),
+    'coil_resistance': (_POSITIVE,),
+    'counts_per_ampere': (_POSITIVE_OR_ZERO,),
+    'current_limit': (_POSITIVE_OR_ZERO,),
+    'command_timeout': (
+        _POSITIVE,
+        (
+            lambda v: v <= WATCHDOG_S,
+            f"at most the firmware's {WATCHDOG_S:g} s watchdog (the board zeroes its PWM "
+            'after that long without a packet)',
+        ),
+    ),
+    'reconnect_min_delay': (_POSITIVE,),
+    'reconnect_max_delay': (_POSITIVE,),
+    'diagnostics_period': (_POSITIVE,),
+    'read_interval': (
+        (lambda v: 0.0 <= v <= MAX_READ_INTERVAL_S, f'in 0 .. {MAX_READ_INTERVAL_S} s'),
+    ),
+    'poll_rate': (
+        (
+            lambda v: v == 0 or 100.0 <= v <= MAX_POLL_RATE,
+            f'0 (as fast as the board answers) or in 100 .. {MAX_POLL_RATE:g} Hz (the board '
+            'samples at 5 kHz)',
+        ),
+    ),
+}
 
 
 class DriverConfigError(ValueError):
@@ -66,9 +116,6 @@ class DriverConfig:
     read_interval : float
         Shortest time in s between reads of the port (0: read as soon as data
         arrives, every burst).
-    intra_process : bool
-        Hand the samples to nodes of the same process directly and take a
-        composed controller's commands (the node's ``intra_process``).
     poll_rate : float
         V4x PC control: steps (read sensors and currents, write the command)
         per second; 0: as fast as the board answers.
@@ -88,7 +135,6 @@ class DriverConfig:
     diagnostics_period: float
     confirm_records: bool = True
     read_interval: float = 0.0
-    intra_process: bool = False
     poll_rate: float = DEFAULT_POLL_RATE
 
 
@@ -160,6 +206,5 @@ def driver_config(v: Mapping[str, object]) -> DriverConfig:
         diagnostics_period=v['diagnostics_period'],
         confirm_records=v['confirm_records'],
         read_interval=v['read_interval'],
-        intra_process=bool(v.get('intra_process', False)),
         poll_rate=float(v.get('poll_rate', DEFAULT_POLL_RATE)),
     )

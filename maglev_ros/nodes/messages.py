@@ -18,6 +18,9 @@ from sensor_msgs.msg import JointState, MagneticField
 from maglev_ros.topics import BASE_FRAME, COIL_NAMES, MAGNET_FRAME, sensor_frame
 
 __all__ = [
+    'CommandMessageError',
+    'command_currents',
+    'command_message',
     'currents_message',
     'diagnostic_array',
     'field_message',
@@ -103,6 +106,50 @@ def currents_message(t_ns: int, currents: Sequence[float]) -> JointState:
     msg = JointState(name=list(COIL_NAMES))
     _set_effort(msg, currents)
     return _stamp(msg, t_ns)
+
+
+class CommandMessageError(ValueError):
+    """A command message does not name the coils in the contract's order."""
+
+
+def command_message(t_ns: int, currents: Sequence[float]) -> JointState:
+    """A coil command (``maglev/currents/command``, ``.../excitation``): JointState, A.
+
+    Parameters
+    ----------
+    t_ns : int
+        Stamp of the sample the command answers, ns.
+    currents : sequence of float, shape (4,)
+        Commanded currents x+ x- y+ y-, A (``effort``).
+    """
+    return currents_message(t_ns, currents)
+
+
+def command_currents(msg: JointState, n: int = len(COIL_NAMES)) -> np.ndarray:
+    """Return a command's currents, A, shape (n,), in :data:`~maglev_ros.topics.COIL_NAMES` order.
+
+    Parameters
+    ----------
+    msg : JointState
+        A command (:func:`command_message`); names, when given, must be the
+        coils' (any order: the efforts are put in the contract's order).
+    n : int
+        Coils expected.
+
+    Raises
+    ------
+    CommandMessageError
+        If the efforts are not ``n`` numbers, or the names are not the coils'.
+    """
+    effort = np.asarray(msg.effort, dtype=float)
+    if effort.shape != (n,):
+        raise CommandMessageError(f'a command carries {n} efforts (A), got {effort.size}')
+    names = list(msg.name)
+    if not names or names == list(COIL_NAMES[:n]):
+        return effort
+    if sorted(names) != sorted(COIL_NAMES[:n]):
+        raise CommandMessageError(f'a command names the coils {list(COIL_NAMES[:n])}, got {names}')
+    return effort[[names.index(c) for c in COIL_NAMES[:n]]]
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:
