@@ -2,15 +2,11 @@
 
 Talks to a Maggy board (or ``maglev-virtual-board``) over a serial port and
 publishes on the shared topics (``docs/topics.md``), like the simulator node:
-
-* ``maglev/sensor_<k>/field`` (sensor_msgs/MagneticField, T), frame from
-  ``sensor_frames``: V2x the raw sensor fields, V4x (``v4x``, read only, and
-  ``v4x_pc``, PC control) the board's processed ones (``/diagnostics``);
-* ``maglev/currents`` (sensor_msgs/JointState, names x+ x- y+ y-, effort A):
-  V2x the currents of the applied PWM, V4x the measured ones;
-* subscribes ``maglev/currents/command`` (sensor_msgs/JointState, effort A,
-  names checked when given); service ``maglev/enable`` (std_srvs/SetBool);
-  ``/diagnostics``: link state, rates, counters.
+``maglev/sensor_<k>/field`` (MagneticField, T; V2x the raw fields, V4x the
+board's processed ones), ``maglev/currents`` (JointState, effort A; V2x the
+currents of the applied PWM, V4x the measured ones) and ``/diagnostics``. It
+takes ``maglev/currents/command`` (JointState, effort A, names checked when
+given) and the service ``maglev/enable`` (std_srvs/SetBool).
 
 Everything between the port and the topics is the ROS-free
 :class:`~maglev_ros.hardware.board_session.BoardSession` (the link thread,
@@ -150,6 +146,11 @@ _PARAMETERS = PARAMETERS  # the name test_launch and older callers use
 def build_config(values: dict) -> DriverConfig:
     """Validate raw parameter values (a missing one takes its default) into a ``DriverConfig``.
 
+    Parameters
+    ----------
+    values : dict
+        Parameter name to raw value (the same rules at start-up and at run time).
+
     Raises
     ------
     DriverParameterError
@@ -212,6 +213,13 @@ class DriverNode(Node):
 
     @config.setter
     def config(self, config: DriverConfig) -> None:
+        """Store validated parameters; the limit and timeout reach the guard.
+
+        Parameters
+        ----------
+        config : DriverConfig
+            The validated parameters.
+        """
         self._config = config
         if self.session is not None:
             self.session.configure(config)
@@ -263,30 +271,24 @@ class DriverNode(Node):
                 publish(message)
 
     def _publish_diagnostics(self) -> None:
-        health = self.session.report()
-        self._diag_pub.publish(
-            diagnostic_array(
-                self.get_clock().now().nanoseconds,
-                f'{NODE_NAME}: board link',
-                health.level,
-                health.message,
-                health.values,
-                hardware_id=self.config.port,
-            )
-        )
-
-    def close(self) -> None:
-        """Stop the board's link thread, zero the coils and close the port (idempotent)."""
-        self.session.close()
+        h, now = self.session.report(), self.get_clock().now().nanoseconds
+        name, port = f'{NODE_NAME}: board link', self.config.port
+        self._diag_pub.publish(diagnostic_array(now, name, h.level, h.message, h.values, port))
 
     def destroy_node(self) -> None:
-        """Close the board (zero currents first), then destroy the node."""
-        self.close()
+        """Close the board (link thread stopped, zero currents, port closed), then the node."""
+        self.session.close()
         super().destroy_node()
 
 
 def main(args: list[str] | None = None) -> int:
-    """Run the driver until SIGINT, SIGTERM or SIGHUP; exit status 0, or 2 for bad parameters."""
+    """Run the driver until SIGINT, SIGTERM or SIGHUP; exit status 0, or 2 for bad parameters.
+
+    Parameters
+    ----------
+    args : list of str, optional
+        Command-line arguments (ROS arguments included; None: ``sys.argv``).
+    """
     return run_nodes([DriverNode], args, NODE_NAME, (DriverParameterError,), PARAMETERS)
 
 

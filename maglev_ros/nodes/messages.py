@@ -113,7 +113,7 @@ class CommandMessageError(ValueError):
 
 
 def command_message(t_ns: int, currents: Sequence[float]) -> JointState:
-    """A coil command (``maglev/currents/command``, ``.../excitation``): JointState, A.
+    """Return a coil command (``maglev/currents/command``, ``.../excitation``): JointState, A.
 
     Parameters
     ----------
