@@ -12,8 +12,9 @@ Everything between the port and the topics is the ROS-free
 :class:`~maglev_ros.hardware.board_session.BoardSession` (the link thread,
 decoding and stamps, the command guard, the command timeout, zero currents on
 shutdown); this node declares its parameters, publishes the samples the session
-queued at every tick (1 ms), and hands it commands, the enable state and the
-timeout check. Behaviour, latency and QoS: ``docs/boards.md``, "The driver node".
+queued at every tick (1 ms, or ``read_interval``), and hands it commands, the
+enable state and the timeout check. Behaviour, latency and QoS:
+``docs/boards.md``, "The driver node".
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ __all__ = [
 ]
 
 NODE_NAME = 'maglev_driver'
-PUBLISH_PERIOD_S = 0.001  # s between publications of the queued samples (a V2x USB burst)
+PUBLISH_PERIOD_S = 0.001  # s between publications (a V2x USB burst), or read_interval
 
 
 class DriverParameterError(NodeParameterError):
@@ -197,7 +198,7 @@ class DriverNode(Node):
         )
         self.create_subscription(JointState, topics.COMMAND_TOPIC, self._on_command, COMMAND_QOS)
         self.create_service(SetBool, topics.ENABLE_SERVICE, self._on_enable)
-        self.create_timer(PUBLISH_PERIOD_S, self._on_tick)
+        self.create_timer(max(PUBLISH_PERIOD_S, cfg.read_interval), self._on_tick)
         self.create_timer(min(0.02, cfg.command_timeout / 4), self.session.check_timeout)
         self.create_timer(cfg.diagnostics_period, self._publish_diagnostics)
         try:
