@@ -125,31 +125,34 @@ def command_message(t_ns: int, currents: Sequence[float]) -> JointState:
     return currents_message(t_ns, currents)
 
 
-def command_currents(msg: JointState, n: int = len(COIL_NAMES)) -> np.ndarray:
-    """Return a command's currents, A, shape (n,), in :data:`~maglev_ros.topics.COIL_NAMES` order.
+def command_currents(msg: JointState) -> np.ndarray:
+    """Return a command's currents, A, in :data:`~maglev_ros.topics.COIL_NAMES` order.
+
+    Their count and values are the consumer's to check (the board's command
+    guard and the simulator count what they refuse).
 
     Parameters
     ----------
     msg : JointState
-        A command (:func:`command_message`); names, when given, must be the
-        coils' (any order: the efforts are put in the contract's order).
-    n : int
-        Coils expected.
+        A command (:func:`command_message`). Without names, or with the
+        coils' names in the contract's order, the efforts are taken as they
+        are; other names must be the coils' in another order (one per effort).
 
     Raises
     ------
     CommandMessageError
-        If the efforts are not ``n`` numbers, or the names are not the coils'.
+        If the names are not the coils'.
     """
     effort = np.asarray(msg.effort, dtype=float)
-    if effort.shape != (n,):
-        raise CommandMessageError(f'a command carries {n} efforts (A), got {effort.size}')
     names = list(msg.name)
-    if not names or names == list(COIL_NAMES[:n]):
+    if not names or names == list(COIL_NAMES):
         return effort
-    if sorted(names) != sorted(COIL_NAMES[:n]):
-        raise CommandMessageError(f'a command names the coils {list(COIL_NAMES[:n])}, got {names}')
-    return effort[[names.index(c) for c in COIL_NAMES[:n]]]
+    if sorted(names) != sorted(COIL_NAMES) or len(names) != effort.size:
+        raise CommandMessageError(
+            f'a command names the coils {list(COIL_NAMES)}, one effort each; got names '
+            f'{names} and {effort.size} efforts'
+        )
+    return effort[[names.index(c) for c in COIL_NAMES]]
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:

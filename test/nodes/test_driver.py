@@ -76,7 +76,7 @@ class Harness:
         return store
 
     def command(self, currents):
-        self.commands.publish(command_message(0, currents))
+        self.commands.publish(command_message(0, [float(c) for c in currents]))
 
     def command_until(self, currents, board, expected):
         """Publish until the board applied ``expected`` (the first messages after

@@ -132,7 +132,7 @@ class Harness:
         deadline = time.monotonic() + TIMEOUT
         while fw(board, 'pwm').tolist() != list(pwm):
             assert time.monotonic() < deadline, f'command {currents} never reached the board'
-            self.commands.publish(command_message(0, currents))
+            self.commands.publish(command_message(0, [float(c) for c in currents]))
             time.sleep(0.02)
 
     def enable(self, flag):

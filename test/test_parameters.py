@@ -1,4 +1,4 @@
-"""The parameter spec (maglev_ros.nodes.params), without ROS."""
+"""The parameter spec (maglev_ros.parameters), without ROS."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import importlib
 
 import pytest
 
-from maglev_ros.nodes.params import (
+from maglev_ros.nodes.params import ParameterTable
+from maglev_ros.parameters import (
     KINDS,
     NodeParameterError,
     Param,
-    ParameterTable,
     choice,
     coerce,
     help_requested,
