@@ -28,19 +28,16 @@ from maglev_ros import topics
 from maglev_ros.cdr.batch import sensor_sample_serialiser
 from maglev_ros.hardware.board_session import BoardSession
 from maglev_ros.hardware.driver_config import (
-    VALUE_RULES,
     DriverConfig,
     DriverConfigError,
+    DriverSettings,
     driver_config,
 )
-from maglev_ros.hardware.packet import WATCHDOG_S
-from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE
 from maglev_ros.hardware.serial_link import LinkError
 from maglev_ros.hardware.v2x_stream import DecoderStats
-from maglev_ros.hardware.v4x_pc_poller import DEFAULT_POLL_RATE
 from maglev_ros.nodes.contract import COMMAND_QOS, DIAGNOSTICS_QOS, SENSOR_QOS, run_nodes
 from maglev_ros.nodes.messages import CommandMessageError, command_currents, diagnostic_array
-from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer
+from maglev_ros.nodes.params import NodeParameterError, ParameterTable, config_params
 
 __all__ = [
     'PARAMETERS',
@@ -64,78 +61,10 @@ class BoardNotFoundError(DriverParameterError):
     """The port holds no board answering as the firmware parameter says (V4x PC control)."""
 
 
-def _check(rules):
-    """Return a check of the core's ``(test, words)`` rules, refusing as this node's error."""
-
-    def check(name: str, value):
-        for test, words in rules:
-            if not test(value):
-                raise DriverParameterError(f'{name} must be {words}, got {value!r}')
-        return value
-
-    check.rule = '; '.join(words for _, words in rules)
-    return check
-
-
-_TABLE = {
-    'port': Param('/dev/ttyACM0', 'serial device path (a udev symlink is best)'),
-    'firmware': Param(
-        'v2x',
-        "board firmware: 'v2x' (binary stream), 'v4x' (text, read only) or 'v4x_pc' "
-        '(V4x PC control, COBS request/response)',
-    ),
-    'baudrate': Param(0, 'baud rate; 0: 9600 for v2x, 115200 for v4x'),
-    'n_sensors': Param(
-        1, 'number of sensors per record (not announced by the board)', check=integer(1, 64)
-    ),
-    'sensor_frames': Param(
-        [],
-        f'frame id per sensor; empty: {topics.sensor_frame("<k>")}',
-        kind='string_array',
-        check=lambda name, v: tuple(f for f in v if f),  # empty strings: the default
-    ),
-    'supply_voltage': Param(BOARD_SUPPLY_VOLTAGE, 'H-bridge supply voltage in V (V2x scaling)'),
-    'coil_resistance': Param(
-        BOARD_COIL_RESISTANCE, 'coil resistance in ohm, wiring included (V2x scaling)'
-    ),
-    'counts_per_ampere': Param(0.0, 'PWM counts per A; > 0 overrides voltage/resistance'),
-    'current_limit': Param(
-        0.0, 'largest commanded |current| in A; 0: full duty (V/R)', mutable=True
-    ),
-    'command_timeout': Param(
-        0.1,
-        f"s without a valid command before zero currents (at most the firmware's "
-        f'{WATCHDOG_S:g} s watchdog)',
-        mutable=True,
-    ),
-    'start_enabled': Param(False, 'enable state at start-up (disabled: zero currents)'),
-    'reconnect_min_delay': Param(0.2, 's, first delay before reopening the port'),
-    'reconnect_max_delay': Param(5.0, 's, longest delay between reopen attempts'),
-    'diagnostics_period': Param(1.0, f's between {topics.DIAGNOSTICS_TOPIC} messages'),
-    'confirm_records': Param(
-        True,
-        'V2x: hold the newest record until the next confirms it (a cut record is then '
-        'dropped, not published corrupted; up to 1 ms more latency for the last record '
-        'of each burst); false: publish at once',
-    ),
-    'read_interval': Param(
-        0.0,
-        's, shortest time between reads of the port (0: every burst as it arrives; '
-        '0.002: two 1 ms bursts per read, less CPU, up to 2 ms more latency)',
-    ),
-    'poll_rate': Param(
-        DEFAULT_POLL_RATE,
-        'v4x_pc: Hz, steps (read field and currents, write the command) per second; '
-        '0: as fast as the board answers',
-    ),
-}
 PARAMETERS = ParameterTable(
     NODE_NAME,
     DriverParameterError,
-    {
-        n: p._replace(check=_check(VALUE_RULES[n])) if n in VALUE_RULES else p
-        for n, p in _TABLE.items()
-    },
+    config_params(DriverSettings),  # each setting declared once, in the ROS-free core
     removed={
         'intra_process': 'a loop process runs the board in-process (maglev_ros.loop); '
         'this node always publishes on the topics',
