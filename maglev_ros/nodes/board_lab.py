@@ -333,7 +333,6 @@ def run_board_closed_loop_lab(
                     storage=s.storage,
                     topics=topics,
                     log_clock='stamp',
-                    intra_process=True,
                     metadata_node=driver.get_name(),
                     record_from=nothing['first'],
                     record_until=nothing['last'],

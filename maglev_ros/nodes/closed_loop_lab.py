@@ -350,7 +350,6 @@ def identifier_parameters(s: LabGraphSettings, channels=None, **more) -> dict:
         nk=list(s.identifier_orders[2]),
         initial_covariance=s.initial_covariance,
         publish_rate=1.0,
-        intra_process=True,
         **more,
     )
 
@@ -548,7 +547,7 @@ def run_closed_loop_lab(
         )
         # from the first recorded sample, logged at the samples' stamps (a command at
         # the newest: the sample it follows); real time: to the last, the loop runs on
-        recording = dict(record_from=first_s, log_clock='stamp', intra_process=True)
+        recording = dict(record_from=first_s, log_clock='stamp')
         if rt:
             recording.update(record_until=last_s)
         recorder = lab.add(

@@ -1,7 +1,8 @@
 """Excitation node: ``ros2 run maglev_ros excitation``.
 
 Publishes identification inputs on ``maglev/currents/command``
-(sensor_msgs/JointState, 4 currents in A, x+ x- y+ y-, stamped with the node's clock): PRBS, random
+(sensor_msgs/JointState, 4 currents in A, x+ x- y+ y-, stamped with the sample it
+answers, or the node's clock with ``trigger: timer``): PRBS, random
 binary, multisine or chirp (:mod:`maglev_ros.excitation`), with amplitude,
 band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
 -u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
@@ -32,6 +33,7 @@ import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 
+from maglev_ros.bags.recording import header_stamp_ns
 from maglev_ros.excitation import (
     PATTERNS,
     SIGNALS,
@@ -261,19 +263,26 @@ class ExcitationNode(Node):
         """
         return self._pub.get_subscription_count()
 
-    def publish_next(self) -> None:
-        """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
+    def publish_next(self, stamp_ns: int | None = None) -> None:
+        """Publish the next command of the sequence (nothing once ``max_commands`` are sent).
+
+        Parameters
+        ----------
+        stamp_ns : int, optional
+            Stamp of the sample it answers, ns (default: the node's clock).
+        """
         if self.exhausted:
             return
         if self.finished:
             data = self._rest
         else:
             data = self._rows[self.sent % self.config.length]
-        self._pub.publish(command_message(self.get_clock().now().nanoseconds, data))
+        stamp_ns = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        self._pub.publish(command_message(stamp_ns, data))
         self.sent += 1
 
-    def _on_sample(self, _raw: bytes) -> None:
-        self.publish_next()
+    def _on_sample(self, raw: bytes) -> None:
+        self.publish_next(header_stamp_ns(raw))  # the command answers this sample
 
 
 def main(args: list[str] | None = None) -> int:
@@ -282,12 +291,7 @@ def main(args: list[str] | None = None) -> int:
     Parameters
     ----------
     args : list of str, optional
-        Command-line arguments (ROS arguments included).
-
-    Returns
-    -------
-    int
-        Exit status: 0, or 2 for invalid parameters.
+        Command-line arguments (ROS ones included); exit status 2 for bad parameters.
     """
     return run_nodes([ExcitationNode], args, NODE_NAME, (ExcitationParameterError,), PARAMETERS)
 
