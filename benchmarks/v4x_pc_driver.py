@@ -139,9 +139,9 @@ def driver_node(port: str, seconds: float) -> tuple[float, np.ndarray]:
     from rclpy.parameter import Parameter
     from rclpy.qos import QoSProfile, ReliabilityPolicy
     from sensor_msgs.msg import JointState, MagneticField
-    from std_msgs.msg import Float64MultiArray
 
     from maglev_ros.nodes.driver import DriverNode
+    from maglev_ros.nodes.messages import command_message, stamp_ns
     from maglev_ros.nodes.runtime import Spinner
 
     ctx = Context()
@@ -154,7 +154,7 @@ def driver_node(port: str, seconds: float) -> tuple[float, np.ndarray]:
     ]
     driver = DriverNode(context=ctx, parameter_overrides=params)
     peer = rclpy.create_node('bench_controller', context=ctx)
-    pub = peer.create_publisher(Float64MultiArray, 'maglev/currents/command', 10)
+    pub = peer.create_publisher(JointState, 'maglev/currents/command', 10)
     qos = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
     latest = {}
 
@@ -168,16 +168,16 @@ def driver_node(port: str, seconds: float) -> tuple[float, np.ndarray]:
         if f is None:
             return
         c = _command(np.array([f.magnetic_field.x, f.magnetic_field.y, 0.0])) / 85.0
-        pub.publish(Float64MultiArray(data=[float(v) for v in c]))
+        pub.publish(command_message(stamp_ns(f), c))
 
     peer.create_subscription(JointState, 'maglev/currents', on_currents, qos)
     spinner = Spinner(ctx, [driver, peer])
     time.sleep(1.0)  # discovery
-    driver.link.latencies_ns.clear()
+    driver.session.link.latencies_ns.clear()
     start, records = time.monotonic(), driver.counters['records']
     time.sleep(seconds)
     rate = (driver.counters['records'] - records) / (time.monotonic() - start)
-    latencies = np.array(driver.link.latencies_ns)
+    latencies = np.array(driver.session.link.latencies_ns)
     spinner.close()
     driver.destroy_node()
     peer.destroy_node()

@@ -5,6 +5,8 @@ Re-exports only; see the modules: ``packet`` (V2x command packets),
 ``scaling`` (current <-> PWM), ``board_clock`` (board time to host time),
 ``command_guard`` (which commands reach the coils, as PWM counts),
 ``board_stream`` (the board's bytes to stamped samples in SI units),
+``board_session`` (the driver's board: link thread, samples to publish, guarded
+commands, timeout, zero on close),
 ``serial_link`` (the port handle), ``firmware`` (board emulators),
 ``physics_plant`` (the physics simulator as an emulator plant),
 ``virtual_board`` (an emulator on a pty), and for the V4x PC-control firmware

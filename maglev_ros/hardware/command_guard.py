@@ -208,6 +208,22 @@ class CommandGuard:
         self._timed_out = False
         return GuardDecision(self.scaling.to_counts(values if self._enabled else _ZERO), warning)
 
+    def reject(self, reason: str) -> GuardDecision:
+        """Reject a command that could not be read (a malformed message), counted.
+
+        Parameters
+        ----------
+        reason : str
+            What was wrong with it.
+
+        Returns
+        -------
+        GuardDecision
+            Nothing to send, and the warning (``rejected command: REASON``).
+        """
+        self.counters['commands_rejected'] += 1
+        return GuardDecision(None, f'rejected command: {reason}')
+
     def set_enabled(self, enabled: bool) -> np.ndarray | None:
         """Enable or disable the coils.
 

@@ -24,7 +24,7 @@ from maglev_ros.cdr import (
     odometry_layout,
     raw_layout,
 )
-from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser
+from maglev_ros.cdr.batch import RawMessageBatch, SampleSerialiser, sensor_sample_serialiser
 from maglev_ros.nodes import contract
 
 COILS = contract.COIL_NAMES
@@ -105,6 +105,22 @@ def test_sample_serialiser_interleaves_the_parts_per_sample(stamps):
                 assert got == contract.field_message(k, t_ns, fields[i, k])
             joint = deserialize_message(messages[3 * i + 2], JointState)
             assert joint == contract.currents_message(t_ns, currents[i])
+
+
+def test_sensor_sample_serialiser_is_the_drivers_sample(stamps):
+    rng = np.random.default_rng(4)
+    values = rng.normal(0.0, 0.05, (N, 3 * 2 + 4))  # two sensors' fields, then currents
+    frames = ('board_a', 'board_b')
+    messages = sensor_sample_serialiser(frames).serialise(stamps, values)
+    assert len(messages) == 3 * N
+    for i in range(N):
+        t_ns = int(stamps[i])
+        for k in range(2):
+            expected = contract.field_message(k, t_ns, values[i, 3 * k : 3 * k + 3])
+            expected.header.frame_id = frames[k]
+            assert deserialize_message(messages[3 * i + k], MagneticField) == expected
+        joint = deserialize_message(messages[3 * i + 2], JointState)
+        assert joint == contract.currents_message(t_ns, values[i, 6:])
 
 
 def test_burst_of_one_equals_message_objects():

@@ -2,8 +2,9 @@
 
 import pytest
 
-from maglev_ros.hardware.driver_config import DriverConfigError, driver_config
+from maglev_ros.hardware.driver_config import DriverConfigError, DriverSettings, driver_config
 from maglev_ros.hardware.scaling import BOARD_COIL_RESISTANCE, BOARD_SUPPLY_VOLTAGE
+from maglev_ros.parameters import config_params
 
 VALUES = {
     'port': '/dev/ttyACM0',
@@ -79,3 +80,31 @@ def test_v4x_pc_scaling_is_8_bit():
     assert config.current_limit == pytest.approx(3.0)
     assert config.baudrate == 115200
     assert config.poll_rate == 1000.0  # the default: above the lab host's 800 Hz
+
+
+def test_settings_declare_each_parameter_once_with_its_rule():
+    settings = DriverSettings()  # the defaults pass their own rules
+    assert settings.sensor_frames == () and settings.command_timeout == 0.1
+    params = config_params(DriverSettings)
+    assert set(VALUES) | {'poll_rate'} == set(params)
+    assert params['current_limit'].mutable and not params['port'].mutable
+    assert 'watchdog' in params['command_timeout'].constraints
+    assert DriverSettings(sensor_frames=('a', '', 'b')).sensor_frames == ('a', 'b')
+    assert DriverSettings(supply_voltage=12).supply_voltage == 12.0  # an integer for a double
+
+
+@pytest.mark.parametrize(
+    'changes, match',
+    [
+        ({'command_timeout': 1.5}, r"command_timeout must be at most the firmware's 1 s watchdog"),
+        ({'command_timeout': -1.0}, 'command_timeout must be a positive finite number'),
+        ({'poll_rate': 50.0}, r'poll_rate must be 0 \(as fast as the board answers\) or in 100'),
+        ({'read_interval': 0.1}, r'read_interval must be in 0 .. 0.05 s, got 0.1'),
+        ({'firmware': 'v5x'}, r"firmware must be 'v2x', 'v4x' or 'v4x_pc'"),
+        ({'port': ''}, 'port must be a device path'),
+        ({'n_sensors': 2.5}, 'n_sensors must be an integer, got 2.5'),
+    ],
+)
+def test_a_setting_against_its_rule_is_refused_by_name(changes, match):
+    with pytest.raises(DriverConfigError, match=match):
+        DriverSettings(**changes)

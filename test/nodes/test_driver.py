@@ -455,6 +455,41 @@ def test_node_rejects_invalid_parameters(ctx):
         DriverNode(context=ctx, parameter_overrides=[Parameter('n_sensors', value=0)])
 
 
+def test_node_refuses_the_removed_intra_process(ctx):
+    with pytest.raises(DriverParameterError, match='intra_process was removed: a loop process'):
+        DriverNode(context=ctx, parameter_overrides=[Parameter('intra_process', value=True)])
+
+
+def test_commands_are_taken_by_coil_name(make_harness):
+    board, _ = v2x_board()
+    with board:
+        h = make_harness(
+            board.path, counts_per_ampere=1000.0, start_enabled=True, command_timeout=1.0
+        )
+
+        def publish_until(msg, expected):
+            deadline = time.monotonic() + TIMEOUT
+            while last_accepted(board) != expected:
+                assert time.monotonic() < deadline, f'{msg} never reached the board'
+                h.commands.publish(msg)
+                time.sleep(0.05)
+
+        h.command_until([0.1, 0.2, 0.3, 0.4], board, (100, 200, 300, 400))
+        msg = command_message(0, [0.8, 0.7, 0.6, 0.5])
+        msg.name = ['y-', 'y+', 'x-', 'x+']  # another order: the efforts follow their names
+        publish_until(msg, (500, 600, 700, 800))
+        msg.name = []  # no names: the contract's order x+ x- y+ y-
+        publish_until(msg, (800, 700, 600, 500))
+        before = h.driver.counters['commands_rejected']
+        msg.name = ['a', 'b', 'c', 'd']  # not the coils: rejected, counted, nothing sent
+        deadline = time.monotonic() + TIMEOUT
+        while h.driver.counters['commands_rejected'] == before:
+            assert time.monotonic() < deadline, 'the misnamed command never reached the driver'
+            h.commands.publish(msg)
+            time.sleep(0.05)
+        assert last_accepted(board) == (800, 700, 600, 500)
+
+
 def test_runtime_parameter_validation(make_harness):
     board, _ = v2x_board()
     with board:

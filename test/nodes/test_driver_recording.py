@@ -188,7 +188,7 @@ def test_driver_bag_converts_to_the_board_fields_in_tesla(ctx, tmp_path, read_in
 
     # the command topic (no header: log times) converts too, next to the applied current
     commanded = load_bag_dataset(
-        bag, outputs[:1], ['u=maglev/currents/command:data[0]'], allow_gaps=True
+        bag, outputs[:1], ['u=maglev/currents/command:effort[0]'], allow_gaps=True
     )  # a wall-clock timer: jitter, late ticks
     assert list(commanded.input_units) == ['A']
     assert set(np.unique(np.abs(np.asarray(commanded.u)))) == {AMPLITUDE}
