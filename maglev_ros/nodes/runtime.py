@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
+from maglev_ros.compile_watch import CompileWatch, compile_estimate
 from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
 from maglev_ros.stop_signals import StopSignals
@@ -163,7 +165,20 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         return 2
     nodes = []
     executor = None
-    with StopSignals() as stop:
+    cleaned = threading.Lock()  # the clean-up runs once: here, or in CompileWatch's on_abort
+
+    def clean_up() -> None:
+        if not cleaned.acquire(blocking=False):
+            return
+        if executor is not None:
+            executor.shutdown()
+        for node in reversed(nodes):
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+    # a stop signal during a first run's kernel compile ends it within about 1 s
+    watch = CompileWatch(name, compile_estimate(name), on_abort=clean_up)
+    with StopSignals() as stop, watch:
         try:
             for factory in factories:
                 nodes.append(factory())
@@ -178,10 +193,10 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         except errors as err:
             rclpy.logging.get_logger(name).error(str(err))
             return 2
+        except Exception:
+            if not watch.interrupted:  # else numba's own error after the stop: a stop
+                raise
         finally:
-            if executor is not None:
-                executor.shutdown()
-            for node in reversed(nodes):
-                node.destroy_node()
-            rclpy.try_shutdown()
+            clean_up()
+    watch.end_if_interrupted(0)  # cleaned up; the interpreter's teardown takes 1-3 s more
     return 0
