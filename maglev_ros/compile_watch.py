@@ -137,11 +137,17 @@ class CompileWatch:
         self._thread: threading.Thread | None = None
         self._main_id = threading.main_thread().ident
         self._stop_signum: int | None = None
+        self._cut = False  # a compile was stopped (or refused) for a stop signal
+
+    @property
+    def stop_signal(self) -> int | None:
+        """The first stop signal the watcher saw, or None."""
+        return self._stop_signum
 
     @property
     def interrupted(self) -> bool:
-        """Whether a stop signal came during a compile."""
-        return self._stop_signum is not None
+        """Whether a compile was stopped, or refused to start, for a stop signal."""
+        return self._cut
 
     def end_if_interrupted(self, status: int) -> None:
         """End the process now with ``status`` if a stop signal came during a compile.
@@ -206,6 +212,7 @@ class CompileWatch:
 
     def _started(self, dispatcher) -> None:
         if self._stop_signum is not None:  # no new compile once a stop signal came
+            self._cut = True
             raise CompileInterrupted(f'signal {self._stop_signum} during the kernel compile')
         self.compiles += 1
         self._depth += 1
@@ -233,11 +240,14 @@ class CompileWatch:
             if not data:
                 return
             stops = [s for s in data if s in _STOP_SIGNALS]
-            if stops and self.compiling:
-                self._interrupt(stops[0])
+            if stops and self._stop_signum is None:
+                # from now on no compile starts (_started raises); one running is ended
+                self._stop_signum = stops[0]
+                if self.compiling:
+                    self._interrupt(stops[0])
 
     def _interrupt(self, signum: int) -> None:
-        self._stop_signum = signum
+        self._cut = True
         deadline = time.monotonic() + self.grace
         while self.compiling and _compiler_busy():
             if time.monotonic() >= deadline:

@@ -46,6 +46,25 @@ def test_no_line_when_nothing_compiles():
     assert out.getvalue() == '' and watch.compiles == 0
 
 
+def test_no_compile_starts_after_a_stop_signal():
+    from waiting import wait_for
+
+    from maglev_ros.compile_watch import CompileInterrupted
+    from maglev_ros.stop_signals import StopSignals
+
+    @numba.njit
+    def later(x):
+        return x - 1.0
+
+    out = io.StringIO()
+    with StopSignals([signal.SIGHUP]) as stop, CompileWatch('maglev-test', 1, stream=out) as watch:
+        os.kill(os.getpid(), signal.SIGHUP)  # between compiles: nothing to interrupt yet
+        wait_for(lambda: watch.stop_signal == signal.SIGHUP, what='the watcher')
+        with pytest.raises(CompileInterrupted, match='during the kernel compile'):
+            later(1.0)
+    assert stop.requested and watch.interrupted and out.getvalue() == ''
+
+
 def test_the_estimate_is_the_main_jobs_for_the_lab():
     assert compile_estimate('maglev-lab') > compile_estimate('maglev_simulator') > 0
 
