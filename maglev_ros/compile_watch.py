@@ -37,10 +37,13 @@ from collections.abc import Callable
 from types import TracebackType
 from typing import TextIO
 
-from numba.core import event
-from numba.core.compiler_lock import global_compiler_lock
-
-__all__ = ['CompileInterrupted', 'CompileWatch', 'PROGRESS_TEXT', 'compile_estimate']
+__all__ = [
+    'CompileInterrupted',
+    'CompileWatch',
+    'PROGRESS_TEXT',
+    'compile_estimate',
+    'end_process',
+]
 
 PROGRESS_TEXT = 'compiling kernels, first run only'
 # s, the first run's compile on a 2-core machine at load 1 (numba 0.68), by program
@@ -64,6 +67,8 @@ _STOP_SIGNALS = frozenset({int(signal.SIGINT), int(signal.SIGTERM), int(signal.S
 
 def _compiler_busy() -> bool:
     """Whether a thread holds numba's compiler lock (compiling or loading a kernel)."""
+    from numba.core.compiler_lock import global_compiler_lock
+
     lock = global_compiler_lock._lock
     if lock.acquire(blocking=False):
         lock.release()
@@ -71,19 +76,46 @@ def _compiler_busy() -> bool:
     return True
 
 
+def end_process(status: int) -> None:
+    """End the process now, after its clean-up, without the interpreter's teardown.
+
+    Flushes stdout, stderr and the logging handlers, then ``os._exit``: the
+    teardown (garbage-collecting numba's and rclpy's objects, 1 to 3 s on a
+    loaded 2-core machine) is skipped, so a stopped process ends within 2 s of
+    the signal. Only for a process whose clean-up has run.
+
+    Parameters
+    ----------
+    status : int
+        Exit status.
+    """
+    import logging
+
+    logging.shutdown()
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except (OSError, ValueError):
+            pass
+    os._exit(status)
+
+
 class CompileInterrupted(KeyboardInterrupt):
     """A stop signal arrived while numba compiled a kernel."""
 
 
-class _Listener(event.Listener):
-    def __init__(self, watch: CompileWatch) -> None:
-        self.watch = watch
+def _listener(watch: CompileWatch):
+    """Return a numba event listener calling the watch (numba imported now, not earlier)."""
+    from numba.core import event
 
-    def on_start(self, ev: event.Event) -> None:
-        self.watch._started(ev.data.get('dispatcher'))
+    class _Listener(event.Listener):
+        def on_start(self, ev: event.Event) -> None:
+            watch._started(ev.data.get('dispatcher'))
 
-    def on_end(self, ev: event.Event) -> None:
-        self.watch._ended()
+        def on_end(self, ev: event.Event) -> None:
+            watch._ended()
+
+    return _Listener()
 
 
 class CompileWatch:
@@ -131,7 +163,7 @@ class CompileWatch:
         self.compiles = 0
         self._depth = 0
         self._announced = False
-        self._listener = _Listener(self)
+        self._listener = None
         self._fds: tuple[int, int] | None = None
         self._previous_fd = -1
         self._thread: threading.Thread | None = None
@@ -150,11 +182,10 @@ class CompileWatch:
         return self._cut
 
     def end_if_interrupted(self, status: int) -> None:
-        """End the process now with ``status`` if a stop signal came during a compile.
+        """End the process now with ``status`` if a stop signal cut a compile.
 
-        Call it after the clean-up (bags finalised, coils zeroed): it flushes
-        stdout and stderr and skips the interpreter's teardown (1 to 3 s after a
-        compile, under load), so the process ends within 2 s of the signal.
+        Call it after the clean-up (bags finalised, coils zeroed); see
+        :func:`end_process`.
 
         Parameters
         ----------
@@ -162,12 +193,7 @@ class CompileWatch:
             Exit status.
         """
         if self.interrupted:
-            for stream in (sys.stdout, sys.stderr):
-                try:
-                    stream.flush()
-                except (OSError, ValueError):
-                    pass
-            os._exit(status)
+            end_process(status)
 
     @property
     def compiling(self) -> bool:
@@ -175,6 +201,9 @@ class CompileWatch:
         return self._depth > 0
 
     def __enter__(self) -> CompileWatch:
+        from numba.core import event  # here: a process that never compiles imports it late
+
+        self._listener = _listener(self)
         event.register('numba:compile', self._listener)
         if threading.current_thread() is threading.main_thread():
             read_fd, write_fd = os.pipe()
@@ -198,6 +227,8 @@ class CompileWatch:
         exc: BaseException | None,
         tb: TracebackType | None,
     ) -> None:
+        from numba.core import event
+
         event.unregister('numba:compile', self._listener)
         if self._fds is not None:
             signal.set_wakeup_fd(self._previous_fd)

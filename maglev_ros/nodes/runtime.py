@@ -11,7 +11,7 @@ import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
-from maglev_ros.compile_watch import CompileWatch, compile_estimate
+from maglev_ros.compile_watch import CompileWatch, compile_estimate, end_process
 from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
 from maglev_ros.stop_signals import StopSignals
@@ -198,5 +198,6 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
                 raise
         finally:
             clean_up()
-    watch.end_if_interrupted(0)  # cleaned up; the interpreter's teardown takes 1-3 s more
+    if stop.requested:  # cleaned up; the interpreter's teardown would take 1-3 s more
+        end_process(0)
     return 0
