@@ -72,7 +72,7 @@ def physics_check_figure(
     """
     from matplotlib.patches import Patch
 
-    from .plots import model_title
+    from .plots import DASHES, model_title
 
     nyquist = 0.5 / plant.Ts
     if full_range:
@@ -99,8 +99,9 @@ def physics_check_figure(
         if isinstance(check, FrequencyDeviation):
             label = f'{label}: max {check.max_db:.2f} dB / {check.max_deg:.1f} deg'
         mag = 20 * np.log10(np.abs(h) * _MT)
-        mag_ax.semilogx(f, mag, color=f'C{k}', lw=1.2, label=label)
-        phase_ax.semilogx(f, phase, color=f'C{k}', lw=1.2)
+        style = dict(color=f'C{k}', lw=1.4, ls=DASHES[k % len(DASHES)])  # overlaps stay visible
+        mag_ax.semilogx(f, mag, label=label, **style)
+        phase_ax.semilogx(f, phase, **style)
         curves.append((mag, phase))
     truth_mag = 20 * np.log10(np.abs(truth) * _MT)
     mag_ax.semilogx(f, truth_mag, 'k', lw=2.2, alpha=0.6, label='linearisation (the physics)')

@@ -34,6 +34,7 @@ from .model import PolyModel
 from .validation import ResidualAnalysis, compare
 
 __all__ = [
+    'DASHES',
     'ZOOM_SAMPLES',
     'bode_figure',
     'bode_plot',
@@ -47,6 +48,7 @@ __all__ = [
 
 ZOOM_SAMPLES = 60  # samples in the zoomed window of compare (12 ms at 5 kHz)
 MEASURED = dict(color='black', lw=1.0)
+DASHES = ('-', (0, (5, 3)), (0, (1, 2)), (0, (6, 2, 1, 2)))  # solid, dashed, dotted, dash-dot
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
@@ -216,7 +218,8 @@ def compare_figure(
             _outside_legend(full)
             if k:
                 full.sharey(rows_full[0])
-            close.plot(t[zs], yhat[zs], color=color, lw=1.2, label=text)
+            dashes = DASHES[k % len(DASHES)]
+            close.plot(t[zs], yhat[zs], color=color, lw=1.4, ls=dashes, label=text)
             freq, psd = welch(errors[k, :, i] * escale, fs=1.0 / data.Ts, nperseg=nseg)
             rms_text = f'{rms[k, i] * escale:#.3g} {eunit}'.rstrip()  # 3 digits, zeros kept
             error.loglog(freq[1:], np.sqrt(psd[1:]), color=color, lw=1.0,
@@ -423,8 +426,10 @@ def bode_figure(
                     continue  # structurally zero: no path from this input
                 drawn = True
                 h = H[:, i, j] * yscale
-                mag_ax.semilogx(f, 20 * np.log10(np.abs(h)), color=f'C{k}', label=label)
-                phase_ax.semilogx(f, np.degrees(np.unwrap(np.angle(h))), color=f'C{k}')
+                # a dash pattern each: curves on top of each other stay visible
+                style = dict(color=f'C{k}', ls=DASHES[k % len(DASHES)], lw=1.6)
+                mag_ax.semilogx(f, 20 * np.log10(np.abs(h)), label=label, **style)
+                phase_ax.semilogx(f, np.degrees(np.unwrap(np.angle(h))), **style)
             if not drawn:
                 for ax in (mag_ax, phase_ax):
                     ax.text(0.5, 0.5, 'no path (nb = 0)', ha='center', va='center',

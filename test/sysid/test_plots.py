@@ -95,6 +95,9 @@ def test_bode_skips_structural_zeros_and_resid_names_the_model():
     low = min(line.get_ydata().min() for ax in axes[[0, 2]].ravel() for line in ax.get_lines())
     assert low > -300  # no -6000 dB floor
     assert fig.get_suptitle().startswith('Bode plot of the identified models: ARX (na=[4 4;0 4]')
+    fig = bode_figure([model, model], ['ARX', 'the same'])
+    first, second = fig.axes[0].get_lines()  # on top of each other: told apart by the dashes
+    assert first.get_linestyle() != second.get_linestyle()
     fig = resid_figure(resid(model, val), model_label='ARX 4 2 1')
     assert fig.get_suptitle().startswith('ARX 4 2 1: residuals on validation data')
     assert max(len(line) for line in fig.get_suptitle().splitlines()) <= fig.get_figwidth() * 11
