@@ -65,8 +65,13 @@ def test_no_compile_starts_after_a_stop_signal():
     assert stop.requested and watch.interrupted and out.getvalue() == ''
 
 
-def test_the_estimate_is_the_main_jobs_for_the_lab():
-    assert compile_estimate('maglev-lab') > compile_estimate('maglev_simulator') > 0
+def test_the_estimate_is_the_main_jobs_for_the_lab_and_grows_with_the_load(monkeypatch):
+    monkeypatch.setattr(os, 'cpu_count', lambda: 2)
+    monkeypatch.setattr(os, 'getloadavg', lambda: (0.5, 0.5, 0.5))
+    idle = compile_estimate('maglev-lab')
+    assert idle > compile_estimate('maglev_simulator') > 0
+    monkeypatch.setattr(os, 'getloadavg', lambda: (12.0, 12.0, 12.0))
+    assert compile_estimate('maglev-lab') == pytest.approx(6 * idle)
 
 
 def _start_compiling(cmd, tmp_path, domain):
