@@ -165,16 +165,21 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         return 2
     nodes = []
     executor = None
-    cleaned = threading.Lock()  # the clean-up runs once: here, or in CompileWatch's on_abort
+    # the clean-up runs once: here, or in CompileWatch's on_abort (the other caller
+    # waits for it to finish)
+    cleaning = threading.Lock()
+    cleaned = []
 
     def clean_up() -> None:
-        if not cleaned.acquire(blocking=False):
-            return
-        if executor is not None:
-            executor.shutdown()
-        for node in reversed(nodes):
-            node.destroy_node()
-        rclpy.try_shutdown()
+        with cleaning:
+            if cleaned:
+                return
+            cleaned.append(True)
+            if executor is not None:
+                executor.shutdown()
+            for node in reversed(nodes):
+                node.destroy_node()
+            rclpy.try_shutdown()
 
     # a stop signal during a first run's kernel compile ends it within about 1 s
     watch = CompileWatch(name, compile_estimate(name), on_abort=clean_up)
