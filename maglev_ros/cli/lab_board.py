@@ -103,15 +103,34 @@ def stop_child(child: subprocess.Popen) -> None:
 
 
 def board_sensors(args: argparse.Namespace) -> int:
-    """Sensors per board record: ``--board-sensors``, the model's, or max(--sensors) + 1.
+    """Sensors per board record: ``--board-sensors``, the model's, or read from the board.
+
+    A board given by ``--board`` is probed: its records tell their sensor
+    count (:func:`~maglev_ros.hardware.sensor_count.probe_sensor_count`,
+    2 to 3 s); without a board, max(--sensors) + 1.
 
     Parameters
     ----------
     args : argparse.Namespace
         maglev-lab's parsed arguments.
+
+    Raises
+    ------
+    UsageError
+        If the board's stream does not tell its sensor count within 4.5 s.
     """
     if args.board_sensors is not None:
         return args.board_sensors
+    if getattr(args, 'board', None):
+        from maglev_ros.hardware.sensor_count import SensorCountError, probe_sensor_count
+
+        try:
+            return probe_sensor_count(args.board)
+        except SensorCountError as err:
+            raise UsageError(
+                f'--board: {err}; is the board powered and streaming? '
+                'Or give its sensor count with --board-sensors N'
+            ) from None
     if args.virtual_board:
         from maglev_ros.physics import make_model
 

@@ -192,9 +192,15 @@ def run_command(
         Anything but ``ValueError`` and ``OSError`` (a programming error),
         with its traceback.
     """
+    from maglev_ros.compile_watch import CompileWatch, compile_estimate
+
+    watch = CompileWatch(prog, compile_estimate(prog))
     try:
         args = parser.parse_args(None if argv is None else list(argv))
-        return run(args)
+        with watch:
+            status = run(args)
+        watch.end_if_interrupted(status)  # stopped during a first run's compile: no teardown
+        return status
     except SystemExit as exc:  # --help / --version
         return int(exc.code or 0)
     except (ValueError, OSError) as exc:
@@ -204,6 +210,7 @@ def run_command(
         return 2
     except KeyboardInterrupt:
         print(f'{prog}: interrupted', file=sys.stderr)
+        watch.end_if_interrupted(130)  # stopped during a first run's compile: no teardown
         return 130
 
 

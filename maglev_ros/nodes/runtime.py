@@ -4,12 +4,14 @@ from __future__ import annotations
 
 import os
 import sys
+import threading
 import time
 
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.signals import SignalHandlerOptions
 
+from maglev_ros.compile_watch import CompileWatch, compile_estimate, end_process
 from maglev_ros.nodes.params import help_requested
 from maglev_ros.nodes.scheduling import relax_event_threads
 from maglev_ros.stop_signals import StopSignals
@@ -175,7 +177,25 @@ def run_nodes(
         return 2
     nodes = []
     executor = None
-    with StopSignals() as stop:
+    # the clean-up runs once: here, or in CompileWatch's on_abort (the other caller
+    # waits for it to finish)
+    cleaning = threading.Lock()
+    cleaned = []
+
+    def clean_up() -> None:
+        with cleaning:
+            if cleaned:
+                return
+            cleaned.append(True)
+            if executor is not None:
+                executor.shutdown()
+            for node in reversed(nodes):
+                node.destroy_node()
+            rclpy.try_shutdown()
+
+    # a stop signal during a first run's kernel compile ends it within about 1 s
+    watch = CompileWatch(name, compile_estimate(name), on_abort=clean_up)
+    with StopSignals() as stop, watch:
         try:
             for factory in factories:
                 nodes.append(factory())
@@ -190,10 +210,11 @@ def run_nodes(
         except errors as err:
             rclpy.logging.get_logger(name).error(str(err))
             return 2
+        except Exception:
+            if not watch.interrupted:  # else numba's own error after the stop: a stop
+                raise
         finally:
-            if executor is not None:
-                executor.shutdown()
-            for node in reversed(nodes):
-                node.destroy_node()
-            rclpy.try_shutdown()
+            clean_up()
+    if stop.requested:  # cleaned up; the interpreter's teardown would take 1-3 s more
+        end_process(0)
     return 0

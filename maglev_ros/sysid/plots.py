@@ -5,15 +5,17 @@ so no display and no global ``pyplot`` state are involved.
 
 Made to be read at a glance by a control engineer:
 
-* ``compare``: per output, the whole validation record on its own time axis
-  (the record's, not restarted at 0), a zoomed window in which single samples
-  and input steps are visible, and the error ``y - yhat`` of each model;
-  legends name every model with its fit to two decimals;
+* ``compare``: per output, one row per model over the whole validation record
+  on its own time axis (the record's, not restarted at 0), a zoomed window in
+  which single samples and input steps are visible, and the spectrum of each
+  model's error ``y - yhat`` (RMS to three digits); legends, beside the axes,
+  name every model with its fit to two decimals;
 * fields given in tesla are drawn in mT; other units get engineering
   prefixes instead of an offset exponent;
 * ``resid``: the model's name and the verdict in a title that fits;
 * ``bode``: structurally zero paths (``nb = 0``) are labelled as such, not drawn
-  as -6000 dB.
+  as -6000 dB;
+* every figure's title names what it shows and the models with their orders.
 """
 
 from __future__ import annotations
@@ -32,18 +34,21 @@ from .model import PolyModel
 from .validation import ResidualAnalysis, compare
 
 __all__ = [
+    'DASHES',
     'ZOOM_SAMPLES',
     'bode_figure',
     'bode_plot',
     'compare_figure',
     'compare_plot',
     'display_scale',
+    'model_title',
     'resid_figure',
     'resid_plot',
 ]
 
 ZOOM_SAMPLES = 60  # samples in the zoomed window of compare (12 ms at 5 kHz)
 MEASURED = dict(color='black', lw=1.0)
+DASHES = ('-', (0, (5, 3)), (0, (1, 2)), (0, (6, 2, 1, 2)))  # solid, dashed, dotted, dash-dot
 
 
 def _save(fig: Figure, path: str | Path) -> Path:
@@ -103,6 +108,32 @@ def compare_plot(
     return _save(compare_figure(data, models, labels, horizon, ic, zoom), path)
 
 
+def model_title(model: PolyModel, label: str) -> str:
+    """Return a model's name with its orders: the label, plus the orders if it names none.
+
+    Parameters
+    ----------
+    model : PolyModel
+        The model.
+    label : str
+        Its legend name (``'ARX 7 9 1'``, or ``'ARX'`` for order matrices).
+
+    Returns
+    -------
+    str
+        ``label`` if it holds a digit, else ``'label (na=[..] nb=[..] nk=[..])'``.
+    """
+    if any(ch.isdigit() for ch in label):
+        return label
+    return f'{label} ({model.orders.describe()})'
+
+
+def _outside_legend(ax, **kwargs) -> None:
+    """Put the legend right of the axes: it never covers the curves."""
+    ax.legend(loc='upper left', bbox_to_anchor=(1.005, 1.0), borderaxespad=0.0,
+              fontsize='small', framealpha=0.9, **kwargs)  # fmt: skip
+
+
 def compare_figure(
     data: IdData,
     models: Sequence[PolyModel],
@@ -111,12 +142,15 @@ def compare_figure(
     ic: str = 'zero',
     zoom: int = ZOOM_SAMPLES,
 ) -> Figure:
-    """Plot measured outputs against each model's output, with a zoom and the errors.
+    """Plot measured outputs against each model's output, with a zoom and the error spectra.
 
-    Per output: the whole record (the zoomed window shaded), the zoomed window
-    (measured samples as dots), the inputs' steps in that window, and the error
-    ``y - yhat`` of each model over the whole record (in µT when a field's
-    error is below 10 uT).
+    Per output: one row per model over the whole record (the measured output in
+    grey under the model's, the zoomed window shaded; the rows share their
+    scale), the zoomed window with all models (measured samples as dots), the
+    inputs' steps in that window, and the amplitude spectrum of each model's
+    error ``y - yhat`` (Welch; its RMS in the legend, in µT when a field's
+    error is below 10 µT). Legends sit right of the axes; the title names the
+    outputs, the inputs and every model with its orders.
 
     Parameters
     ----------
@@ -125,7 +159,8 @@ def compare_figure(
     models : sequence of PolyModel
         Models to compare.
     labels : sequence of str, optional
-        Legend names of the models (default their structure).
+        Legend names of the models (default their structure); a name without
+        orders gets them appended in the title.
     horizon : int or None
         Prediction horizon (None: simulation).
     ic : {'zero', 'estimate'}
@@ -136,78 +171,108 @@ def compare_figure(
     Returns
     -------
     Figure
-        Per output the axes whole record, zoom, inputs in the zoom (if any
-        input), error.
+        Per output the axes: one per model (whole record), zoom, inputs in the
+        zoom (if any input), error spectrum. All error spectra share one scale.
     """
-    labels = list(labels) if labels else [m.structure for m in models]
+    from scipy.signal import welch
+
+    labels = list(labels) if labels else [m.structure.upper() for m in models]
     results = [compare(model, data, horizon, ic) for model in models]
     t = data.time
     n_zoom = int(min(max(zoom, 10), data.N))
     z0 = (data.N - n_zoom) // 2
     zs = slice(z0, z0 + n_zoom)
-    panels = 4 if data.nu else 3
-    ratios = [3, 3, 1.4, 2.2] if data.nu else [3, 3, 2.2]
-    fig = Figure(figsize=(11, 7.6 * data.ny), layout='constrained')
+    nm = len(models)
+    rows = [1.5] * nm + ([3, 1.4, 2.4] if data.nu else [3, 2.4])
+    panels = len(rows)
+    fig = Figure(figsize=(11, 0.9 + 0.82 * sum(rows) * data.ny), layout='constrained')
     grid = fig.subplots(
-        panels * data.ny, 1, squeeze=False, gridspec_kw={'height_ratios': ratios * data.ny}
+        panels * data.ny, 1, squeeze=False, gridspec_kw={'height_ratios': rows * data.ny}
     )[:, 0]
     what = 'simulation' if horizon is None else f'{horizon}-step prediction'
+    errors = np.stack([data.y - r.yhat for r in results])  # (models, N, ny)
+    rms = np.sqrt(np.mean(errors**2, axis=1))  # (models, ny)
+    field = [display_scale(u)[1] == 'mT' for u in data.output_units]
+    micro = all(field) and rms.max() * 1e3 < 1e-2  # every error below 10 uT: in uT
+    nseg = int(min(1024, max(16, data.N // 4)))
+    error_axes = []
     for i in range(data.ny):
         scale, unit = display_scale(data.output_units[i])
+        escale, eunit = (scale * 1e3, 'µT') if micro and field[i] else (scale, unit)
         name = data.output_names[i]
         axes = list(grid[panels * i : panels * (i + 1)])
-        full, close, error = axes[0], axes[1], axes[-1]
+        rows_full, close, error = axes[:nm], axes[nm], axes[-1]
         y = data.y[:, i] * scale
-        full.plot(t, y, label='measured', **MEASURED)
         close.plot(t[zs], y[zs], marker='o', ms=2.5, label='measured (samples)', **MEASURED)
-        errors = []
         for k, (result, label) in enumerate(zip(results, labels, strict=True)):
             color = f'C{k}'
             yhat = result.yhat[:, i] * scale
             fit = result.fit[i]
             text = f'{label}: {fit:.2f} %' if fit >= -999 else f'{label}: < -999 % (diverges)'
-            full.plot(t, yhat, color=color, lw=0.7, alpha=0.8, label=text)
-            close.plot(t[zs], yhat[zs], color=color, lw=1.2, label=text)
-            errors.append((float(np.sqrt(np.mean((y - yhat) ** 2))), k, label, y - yhat))
-        # an error far below the signal gets its own unit (mT -> µT)
-        escale, eunit = (
-            (1e3, 'µT') if unit == 'mT' and max(e[0] for e in errors) < 1e-2 else (1.0, unit)
+            full = rows_full[k]
+            full.plot(t, y, color='0.6', lw=0.7, label='measured')
+            full.plot(t, yhat, color=color, lw=0.7, label=f'{label}: fit {text.split(": ")[1]}')
+            full.axvspan(t[zs][0], t[zs][-1], color='0.88', zorder=0)
+            full.set_xlim(t[0], t[-1])
+            _axis_label(full, name, unit)
+            _outside_legend(full)
+            if k:
+                full.sharey(rows_full[0])
+            dashes = DASHES[k % len(DASHES)]
+            close.plot(t[zs], yhat[zs], color=color, lw=1.4, ls=dashes, label=text)
+            freq, psd = welch(errors[k, :, i] * escale, fs=1.0 / data.Ts, nperseg=nseg)
+            rms_text = f'{rms[k, i] * escale:#.3g} {eunit}'.rstrip()  # 3 digits, zeros kept
+            error.loglog(freq[1:], np.sqrt(psd[1:]), color=color, lw=1.0,
+                         label=f'{label} (rms {rms_text})')  # fmt: skip
+        rows_full[0].set_title(
+            f"{name}: measured (grey) and each model's {what} on validation data "
+            '(shaded: the zoomed window)',
+            loc='left',
         )
-        # largest error first, so that the best model is drawn on top and stays visible
-        for rms, k, label, e in sorted(errors, key=lambda item: -item[0]):
-            # no unit stored: a plain number (an SI prefix such as "m" would read as metres)
-            rms_text = f'{rms * escale:.3g} {eunit}' if eunit else f'{rms:.3g}, no unit stored'
-            error.plot(t, e * escale, color=f'C{k}', lw=0.6, label=f'{label} (rms {rms_text})')
+        rows_full[-1].set_xlabel('time [s]')
         if data.nu:
-            inputs = axes[2]
+            inputs = axes[-2]
             for j in range(data.nu):
                 inputs.plot(t[zs], data.u[zs, j], color=f'C{7 + j % 3}', lw=1.0,
                             drawstyle='steps-post', label=data.input_names[j])  # fmt: skip
             iunit = data.input_units[0]
             inputs.set_ylabel(f'input [{iunit}]' if iunit else 'input')
             inputs.set_title('inputs in the zoomed window', loc='left')
-            inputs.legend(loc='upper right', fontsize='small', framealpha=0.9, ncols=data.nu)
-        for ax in axes[1:-1]:  # zoom and its inputs: the same window, one sample past
+            _outside_legend(inputs)
+            inputs.set_xlabel('time [s]')
+        for ax in axes[nm:-1]:  # zoom and its inputs: the same window, one sample past
             ax.set_xlim(t[z0] - 0.5 * data.Ts, t[z0 + n_zoom - 1] + 1.5 * data.Ts)
-        close.legend(loc='upper right', fontsize='small', framealpha=0.9)
-        full.axvspan(t[zs][0], t[zs][-1], color='0.85', zorder=0)
-        full.set_title(f'{name}: measured vs model {what} on validation data', loc='left')
+        _outside_legend(close)
         close.set_title(
-            f'zoom: {n_zoom} samples ({n_zoom * data.Ts * 1e3:.3g} ms) from t = {t[z0]:.4g} s',
+            f'{name}, zoom: {n_zoom} samples ({n_zoom * data.Ts * 1e3:.3g} ms) '
+            f'from t = {t[z0]:.4g} s',
             loc='left',
         )
-        error.set_title(f'error: measured - model ({what})', loc='left')
-        error.axhline(0.0, color='k', lw=0.5)
-        for ax in (full, close):
-            _axis_label(ax, name, unit)
-        _axis_label(error, 'error', eunit)
+        close.set_xlabel('time [s]')
+        _axis_label(close, name, unit)
+        error.set_title(
+            f'{name}, error spectrum: measured - model ({what}), Welch, {nseg} samples a segment',
+            loc='left',
+        )
+        asd = f'{eunit}/√Hz' if eunit else '1/√Hz'
+        error.set_ylabel(f'error [{asd}]')
+        error.set_xlabel('frequency [Hz]')
+        error.set_xlim(freq[1], freq[-1])
+        _outside_legend(error)
         for ax in axes:
-            ax.grid(True, lw=0.3)
-            ax.set_xlabel('time [s]')
-        full.set_xlim(t[0], t[-1])
-        error.set_xlim(t[0], t[-1])
-        full.legend(loc='upper right', fontsize='small', framealpha=0.9)
-        error.legend(loc='upper right', fontsize='small', framealpha=0.9)
+            ax.grid(True, which='both' if ax is error else 'major', lw=0.3)
+        error_axes.append(error)
+    low = min(ax.get_ylim()[0] for ax in error_axes)
+    high = max(ax.get_ylim()[1] for ax in error_axes)
+    for ax in error_axes:  # one scale for every output's errors
+        ax.set_ylim(low, high)
+    names = ', '.join(model_title(m, lab) for m, lab in zip(models, labels, strict=True))
+    head = (
+        f'compare ({what}): {", ".join(data.output_names)} <- {", ".join(data.input_names)}'
+        if data.nu
+        else f'compare ({what}): {", ".join(data.output_names)}'
+    )
+    fig.suptitle(textwrap.fill(f'{head}; models {names}', width=120), fontsize='medium')
     return fig
 
 
@@ -361,8 +426,10 @@ def bode_figure(
                     continue  # structurally zero: no path from this input
                 drawn = True
                 h = H[:, i, j] * yscale
-                mag_ax.semilogx(f, 20 * np.log10(np.abs(h)), color=f'C{k}', label=label)
-                phase_ax.semilogx(f, np.degrees(np.unwrap(np.angle(h))), color=f'C{k}')
+                # a dash pattern each: curves on top of each other stay visible
+                style = dict(color=f'C{k}', ls=DASHES[k % len(DASHES)], lw=1.6)
+                mag_ax.semilogx(f, 20 * np.log10(np.abs(h)), label=label, **style)
+                phase_ax.semilogx(f, np.degrees(np.unwrap(np.angle(h))), **style)
             if not drawn:
                 for ax in (mag_ax, phase_ax):
                     ax.text(0.5, 0.5, 'no path (nb = 0)', ha='center', va='center',
@@ -376,4 +443,7 @@ def bode_figure(
                 ax.set_xlim(f[0], f[-1])
                 ax.grid(True, which='both', lw=0.3)
     axes[0, 0].legend(fontsize='small')
+    names = ', '.join(model_title(m, lab) for m, lab in zip(models, labels, strict=True))
+    fig.suptitle(textwrap.fill(f'Bode plot of the identified models: {names}', width=100),
+                 fontsize='medium')  # fmt: skip
     return fig

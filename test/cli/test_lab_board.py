@@ -72,3 +72,40 @@ def test_bad_board_input_is_one_line_and_status_2(argv, match, tmp_path, capfd):
     assert lab.main(argv + ['--out', str(tmp_path / 'o')]) == 2
     err = capfd.readouterr().err
     assert match in err and err.count('\n') == 1
+
+
+def _board_args(path, **kwargs):
+    import argparse
+
+    values = dict(board=path, board_sensors=None, virtual_board=False, sensors=[0])
+    return argparse.Namespace(**{**values, **kwargs})
+
+
+def test_a_board_tells_its_sensor_count():
+    from functools import partial
+
+    from maglev_ros.cli.lab_board import board_sensors
+    from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware
+    from maglev_ros.hardware.virtual_board import VirtualBoard
+
+    factory = partial(V2xFirmware, LinearPlant.default(3), 3, startup_delay=0.5)
+    with VirtualBoard(factory) as board:
+        assert board_sensors(_board_args(board.path)) == 3  # --sensors 0 alone said 1
+        assert board_sensors(_board_args(board.path, board_sensors=2)) == 2  # as given
+
+
+def test_a_silent_board_is_one_clear_line_within_5_s():
+    import time
+    from functools import partial
+
+    from maglev_ros.cli.lab_board import board_sensors
+    from maglev_ros.cli.usage import UsageError
+    from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware
+    from maglev_ros.hardware.virtual_board import VirtualBoard
+
+    factory = partial(V2xFirmware, LinearPlant.default(3), 3, startup_delay=60.0)
+    with VirtualBoard(factory) as board:
+        start = time.monotonic()
+        with pytest.raises(UsageError, match=r'nothing in 4.5 s.*--board-sensors N'):
+            board_sensors(_board_args(board.path))
+        assert time.monotonic() - start < 5.0
