@@ -502,7 +502,11 @@ def check_settings(config: Any, error: type[Exception]) -> None:
                 kept = coerce(name, param.type_kind, value)
             except NodeParameterError:
                 if param.check is not None:  # its own words, where it has them
-                    param.check(name, value)
+                    try:
+                        param.check(name, value)
+                    except (TypeError, ValueError) as other:
+                        if isinstance(other, NodeParameterError):
+                            raise
                 raise
             if param.check is not None:
                 kept = param.check(name, kept)

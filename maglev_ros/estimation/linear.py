@@ -174,8 +174,7 @@ class KalmanEstimator(Estimator):
 
         Without the magnet-strength state, one compiled call for them all
         (:func:`kernels.kf_steps`, the same numbers as :meth:`step`): a burst of
-        a real-time simulator in the same process (the estimator node's
-        ``intra_process``) at ~13 us a sample.
+        a real-time simulator at ~13 us a sample.
 
         Parameters
         ----------
