@@ -1,7 +1,8 @@
 """Excitation node: ``ros2 run maglev_ros excitation``.
 
 Publishes identification inputs on ``maglev/currents/command``
-(std_msgs/Float64MultiArray, 4 currents in A, x+ x- y+ y-): PRBS, random
+(sensor_msgs/JointState, 4 currents in A, x+ x- y+ y-, stamped with the sample it
+answers, or the node's clock with ``trigger: timer``): PRBS, random
 binary, multisine or chirp (:mod:`maglev_ros.excitation`), with amplitude,
 band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
 -u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
@@ -31,8 +32,8 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
+from maglev_ros.bags.recording import header_stamp_ns
 from maglev_ros.excitation import (
     PATTERNS,
     SIGNALS,
@@ -40,6 +41,7 @@ from maglev_ros.excitation import (
     excitation,
     pattern_signals,
 )
+from maglev_ros.nodes.messages import command_message
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -228,8 +230,7 @@ class ExcitationNode(Node):
         self._rest = [float(v) for v in cfg.offset]
         self._rows = self.commands.tolist()
         self.sent = 0
-        self._msg = Float64MultiArray()
-        self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
+        self._pub = self.create_publisher(JointState, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         if cfg.trigger == 'sample':
             self.create_subscription(
                 JointState, CURRENTS_TOPIC, self._on_sample, SENSOR_QOS, raw=True
@@ -262,20 +263,26 @@ class ExcitationNode(Node):
         """
         return self._pub.get_subscription_count()
 
-    def publish_next(self) -> None:
-        """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
+    def publish_next(self, stamp_ns: int | None = None) -> None:
+        """Publish the next command of the sequence (nothing once ``max_commands`` are sent).
+
+        Parameters
+        ----------
+        stamp_ns : int, optional
+            Stamp of the sample it answers, ns (default: the node's clock).
+        """
         if self.exhausted:
             return
         if self.finished:
             data = self._rest
         else:
             data = self._rows[self.sent % self.config.length]
-        self._msg.data = data
-        self._pub.publish(self._msg)
+        stamp_ns = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        self._pub.publish(command_message(stamp_ns, data))
         self.sent += 1
 
-    def _on_sample(self, _raw: bytes) -> None:
-        self.publish_next()
+    def _on_sample(self, raw: bytes) -> None:
+        self.publish_next(header_stamp_ns(raw))  # the command answers this sample
 
 
 def main(args: list[str] | None = None) -> int:
@@ -284,12 +291,7 @@ def main(args: list[str] | None = None) -> int:
     Parameters
     ----------
     args : list of str, optional
-        Command-line arguments (ROS arguments included).
-
-    Returns
-    -------
-    int
-        Exit status: 0, or 2 for invalid parameters.
+        Command-line arguments (ROS ones included); exit status 2 for bad parameters.
     """
     return run_nodes([ExcitationNode], args, NODE_NAME, (ExcitationParameterError,), PARAMETERS)
 
