@@ -114,3 +114,32 @@ def test_overwrite_keeps_a_directory_that_is_not_a_bag(tmp_path, capfd):
     assert lab.main(['--duration', '0.2', '--out', str(out), '--overwrite']) == 2
     assert 'is not a bag' in capfd.readouterr().err
     assert (out / 'bag' / 'notes.txt').is_file()
+
+
+def test_signal_stops_the_closed_loop_session_and_finalises_the_bag(domain, tmp_path):
+    """The main job's session stops on SIGINT between two reads: bag finalised, 130."""
+    out = tmp_path / 'lab'
+    bag = out / 'bag'
+    proc = subprocess.Popen(
+        lab_command('--samples', 300_000, '--settle', 0.1, '--out', out, '--no-plots'),
+        env=environment(domain), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+        start_new_session=True,
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + START_TIMEOUT
+        while _mcap_size(bag) < 200_000:  # recording for a while: data in the file
+            assert proc.poll() is None, proc.stdout.read()
+            assert time.monotonic() < deadline, 'no data recorded'
+            time.sleep(0.2)
+        os.killpg(proc.pid, signal.SIGINT)
+        output, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
+    assert proc.returncode == 128 + signal.SIGINT, output
+    assert 'Traceback' not in output and 'SIGINT: stopped; bag finalised' in output, output
+    with BagReader(bag) as reader:
+        counts = {t: i.count for t, i in reader.topics.items()}
+        assert reader.metadata['session.stopped'] is True
+    assert counts['/maglev/currents'] > 0 and len(set(counts.values())) == 1, counts
