@@ -130,7 +130,6 @@ class KalmanEstimator(Estimator):
         """
         super().reset(x0)
         self._packed = (self._model, self._ints, self._floats, self.freeze.frozen)
-        self._y_shape, self._u_shape = (self.n_outputs,), (self.n_inputs,)
 
     def _set_state(self, dx, P) -> None:
         if self._x is None:
@@ -290,11 +289,10 @@ class KalmanEstimator(Estimator):
         # burst's array, would compile the kernel again: seconds in a real-time loop)
         y = np.ascontiguousarray(y, dtype=float)
         currents = np.ascontiguousarray(currents, dtype=float)
-        if y.shape == self._y_shape and currents.shape == self._u_shape:
-            out = kf_packed_step(y, currents, *self._packed)
-            if out.shape[0]:
-                self._out_x = out
-                return out  # the prior's x_eq if the filter restarted
+        out = np.empty(12)
+        if y.ndim == 1 == currents.ndim and kf_packed_step(y, currents, *self._packed, out):
+            self._out_x = out
+            return out  # the prior's x_eq if the filter restarted
         return super().step(y, currents)  # raises the ValueError that names the input
 
     def step_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:

@@ -424,12 +424,14 @@ def kf_sample_into(
 
 
 @njit(cache=True)
-def _sample(y, currents, model, ints, floats, frozen):  # pragma: no cover - jitted
+def _sample(y, currents, model, ints, floats, frozen, out):  # pragma: no cover - jitted
     n, m, mi, k = ints[I_N], ints[I_M], ints[I_MI], ints[I_K]
     window, nr = ints[I_WINDOW], ints[I_NR]
+    if y.shape[0] != m or currents.shape[0] != mi:
+        return False  # nothing changed: the caller names the input
     for p in range(mi):
         if not np.isfinite(currents[p]):
-            return np.empty(0)  # nothing changed: the caller names the currents
+            return False
     at = 0
     F = model[at : at + n * n].reshape((n, n))
     at += n * n
@@ -515,7 +517,8 @@ def _sample(y, currents, model, ints, floats, frozen):  # pragma: no cover - jit
     for i in range(n):
         for j in range(n):
             out_p[i, j] = po[i, j]
-    out = x_eq.copy()
+    for i in range(12):
+        out[i] = x_eq[i]
     for i in range(nr):
         out[reduced[i]] += xo[i]
     # the record: NIS window, last sample, counters, a restart when lost
@@ -538,14 +541,15 @@ def _sample(y, currents, model, ints, floats, frozen):  # pragma: no cover - jit
             for j in range(n):
                 P[i, j] = p_init[i, j]
                 out_p[i, j] = p_init[i, j]
-        out[:] = x_eq
+        for i in range(12):
+            out[i] = x_eq[i]
         ints[I_RESTARTS] += 1
         ints[I_UNACCEPTED] = 0
-    return out
+    return True
 
 
 @njit(cache=True)
-def kf_packed_step(y, currents, model, ints, floats, frozen):  # pragma: no cover - jitted
+def kf_packed_step(y, currents, model, ints, floats, frozen, out):  # pragma: no cover - jitted
     """One whole KF sample on the packed arrays (see :func:`packed_sizes`), in place.
 
     What :meth:`Estimator.step <maglev_ros.estimation.base.Estimator.step>`
@@ -566,14 +570,17 @@ def kf_packed_step(y, currents, model, ints, floats, frozen):  # pragma: no cove
         The packed model, counters and state (updated in place).
     frozen : ndarray of bool, shape (k,)
         Sensors frozen now (updated in place).
+    out : ndarray, shape (12,)
+        The published estimate (written; a fresh array from the caller: cheaper
+        than one returned by a compiled function).
 
     Returns
     -------
-    ndarray, shape (12,)
-        The published estimate; empty (and nothing changed) when a current is
-        not finite.
+    bool
+        False (and nothing changed) when ``y`` or ``currents`` has the wrong
+        length or a current is not finite.
     """
-    return _sample(y, currents, model, ints, floats, frozen)
+    return _sample(y, currents, model, ints, floats, frozen, out)
 
 
 @njit(cache=True)
@@ -598,5 +605,5 @@ def kf_packed_steps(
     n = ints[I_N]
     at = n + n * n  # floats: x (n), P (n, n), then the published P (n, n)
     for i in range(ys.shape[0]):
-        x_out[i] = _sample(ys[i], us[i], model, ints, floats, frozen)
+        _sample(ys[i], us[i], model, ints, floats, frozen, x_out[i])
         p_out[i] = floats[at : at + n * n].reshape((n, n))
