@@ -148,7 +148,9 @@ class ExtendedEstimator(Estimator):
         prev = self._no_currents if self._prev_currents is None else self._prev_currents
         f = self.freeze
         out_x = np.empty(12)
-        self._x, self._P, self._out_p, accepted, nis_sensor, nis, dof = ekf_step(
+        accepted = np.empty(self.n_sensors, dtype=bool)
+        nis_sensor = np.empty(self.n_sensors)
+        nis, dof = ekf_step(
             y,
             currents,
             prev,
@@ -175,6 +177,9 @@ class ExtendedEstimator(Estimator):
             *self._f_args,
             *self.filter_model.h_args[:-1],
             out_x,
+            self._out_p,
+            accepted,
+            nis_sensor,
         )
         self._out_x = out_x
         self._record(currents, accepted, nis_sensor, nis, dof)

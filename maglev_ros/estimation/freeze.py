@@ -39,11 +39,16 @@ class FreezeDetector:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the reading history and the counts."""
-        self._last = np.full((self.n_sensors, 3), np.nan)
-        self.runs = np.zeros(self.n_sensors, dtype=np.int64)
-        self.frozen = np.zeros(self.n_sensors, dtype=bool)
-        self.events = np.zeros(self.n_sensors, dtype=np.int64)  # freezes seen
+        """Forget the reading history and the counts (in place: compiled callers hold them)."""
+        if not hasattr(self, 'runs'):
+            self._last = np.empty((self.n_sensors, 3))
+            self.runs = np.empty(self.n_sensors, dtype=np.int64)
+            self.frozen = np.empty(self.n_sensors, dtype=bool)
+            self.events = np.empty(self.n_sensors, dtype=np.int64)  # freezes seen
+        self._last[:] = np.nan
+        self.runs[:] = 0
+        self.frozen[:] = False
+        self.events[:] = 0
 
     def check(self, y: np.ndarray) -> np.ndarray:
         """Register one sample; return which sensors have a usable reading.
@@ -61,5 +66,5 @@ class FreezeDetector:
         available, frozen = freeze_check(y, self._last, self.runs, self.run)
         if frozen.any():
             self.events += frozen & ~self.frozen
-        self.frozen = frozen
+        self.frozen[:] = frozen
         return available

@@ -2,13 +2,19 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from ..physics.discretization import zoh
+from . import linear_kernels as lk
 from .base import Estimator
-from .kernels import gated_update, kf_predict, kf_sample, kf_step, kf_steps
+from .linear_kernels import (
+    kf_packed_step,
+    kf_packed_steps,
+    kf_predict_into,
+    kf_sample_into,
+    kf_update_into,
+    packed_sizes,
+)
 
 __all__ = ['KalmanEstimator']
 
@@ -43,40 +49,159 @@ class KalmanEstimator(Estimator):
     def __init__(self, model, config=None, linear=None):
         self._x = None
         self._P = None
-        self._no_currents = np.full(model.n_inputs, np.nan)  # kf_step: no previous sample
         super().__init__(model, config, linear)
 
     def _build(self) -> None:
+        """Build the model matrices and the packed arrays (:func:`linear_kernels.packed_sizes`)."""
         lin = self.linear
-        n, nr = self.n_states, self.n_reduced
+        n, nr, m, mi = self.n_states, self.n_reduced, self.n_outputs, self.n_inputs
+        k, w = self.n_sensors, self.config.nis_window
+        layout = packed_sizes(n, m, mi, k, w, nr)
+        self._model = np.zeros(layout['model']['size'])
+        self._ints = np.zeros(layout['ints']['size'], dtype=np.int64)
+        self._floats = np.zeros(layout['floats']['size'])
+
+        def section(array, table, name, shape=None):
+            a, b = table[name]
+            view = array[a:b]
+            return view.reshape(shape) if shape is not None else view
+
+        mo, it, fl = layout['model'], layout['ints'], layout['floats']
+        self.F = section(self._model, mo, 'F', (n, n))
+        self.B = section(self._model, mo, 'B', (n, mi))
+        self.H = section(self._model, mo, 'H', (m, n))
+        self.D = section(self._model, mo, 'D', (m, mi))
+        self.Q = section(self._model, mo, 'Q', (n, n))
         g = self.disturbance_matrix()
         ad, gd = zoh(lin.A, g, self.dt)  # g's first columns are B: gd's are Bd
-        F = np.eye(n)
-        F[:nr, :nr] = ad
-        B = np.zeros((n, self.n_inputs))
-        B[:nr] = gd[:, : self.n_inputs]
-        H = np.zeros((self.n_outputs, n))
-        H[:, :nr] = lin.C
+        self.F[:] = np.eye(n)
+        self.F[:nr, :nr] = ad
+        self.B[:nr] = gd[:, :mi]
+        self.H[:, :nr] = lin.C
         if n > self.bias_start:
-            H[:, self.bias_start :] = np.eye(self.n_outputs)
+            self.H[:, self.bias_start :] = np.eye(m)
         self.C = np.ascontiguousarray(lin.C, dtype=float)
         self.magnet_field = self.y_eq - self.model.measurement(
             self.x_eq, self.u_eq, with_magnet=False
         )
         if self.strength_index is not None:
-            H[:, self.strength_index] = self.magnet_field
-        self.F = np.ascontiguousarray(F)
-        self.B = np.ascontiguousarray(B)
-        self.H = np.ascontiguousarray(H)
-        self.D = np.ascontiguousarray(lin.D)
-        self.Q = np.ascontiguousarray(self.process_noise(gd))
+            self.H[:, self.strength_index] = self.magnet_field
+        self.D[:] = lin.D
+        self.Q[:] = self.process_noise(gd)
+        for name, value in (
+            ('y_eq', self.y_eq),
+            ('u_eq', self.u_eq),
+            ('r_diag', self.r_diag),
+            ('x_eq', self.x_eq),
+            ('p_init', self.initial_covariance().ravel()),
+            ('gate', [min(self.gate, np.finfo(float).max)]),
+        ):
+            section(self._model, mo, name)[:] = value
+        self._p_init = section(self._model, mo, 'p_init', (n, n))
+        self._ints[: lk.INT_HEADER] = [
+            n, m, mi, k, w, nr,
+            self.config.sensor_delay, self.freeze.run, self.config.lost_samples,
+            0, 0, 0, 0, 0,
+        ]  # fmt: skip
+        section(self._ints, it, 'reduced')[:] = self.reduced
+        self._accepted = section(self._ints, it, 'accepted')
+        self._dof = section(self._ints, it, 'dof_ring')
+        self._x = section(self._floats, fl, 'x')
+        self._P = section(self._floats, fl, 'P', (n, n))
+        self._p_out = section(self._floats, fl, 'out_p', (n, n))
+        self._prev = section(self._floats, fl, 'prev')
+        self._nis_sensor = section(self._floats, fl, 'nis_sensor')
+        self._nis = section(self._floats, fl, 'nis_ring')
+        # the freeze detector's history and the counts live in the packed arrays too
+        self._missing = section(self._ints, it, 'missing')
+        self._rejected = section(self._ints, it, 'rejected')
+        f = self.freeze
+        f._last = section(self._floats, fl, 'last', (k, 3))
+        f.runs = section(self._ints, it, 'runs')
+        f.events = section(self._ints, it, 'events')
+
+    def reset(self, x0=None) -> None:
+        """Restart: as :meth:`Estimator.reset`.
+
+        Parameters
+        ----------
+        x0 : array_like, shape (12,), optional
+            Initial estimate.
+        """
+        super().reset(x0)
+        self._packed = (self._model, self._ints, self._floats, self.freeze.frozen)
 
     def _set_state(self, dx, P) -> None:
         if self._x is None:
             self._build()
-            self._p_init = np.ascontiguousarray(self.initial_covariance())
-        self._x = np.ascontiguousarray(dx, dtype=float)
-        self._P = np.ascontiguousarray(P, dtype=float)
+        self._x[:] = dx
+        self._P[:] = P
+
+    # the record of the last sample, kept in the packed arrays
+    samples = property(
+        lambda self: int(self._ints[lk.I_SAMPLES]),
+        lambda self, v: self._ints.__setitem__(lk.I_SAMPLES, v),
+        doc='Samples processed.',
+    )
+    unaccepted = property(
+        lambda self: int(self._ints[lk.I_UNACCEPTED]),
+        lambda self, v: self._ints.__setitem__(lk.I_UNACCEPTED, v),
+        doc='Samples since a reading was last accepted.',
+    )
+    restarts = property(
+        lambda self: int(self._ints[lk.I_RESTARTS]),
+        lambda self, v: self._ints.__setitem__(lk.I_RESTARTS, v),
+        doc='Restarts from the prior (see ``lost_samples``).',
+    )
+    last_dof = property(
+        lambda self: int(self._ints[lk.I_LAST_DOF]),
+        lambda self, v: self._ints.__setitem__(lk.I_LAST_DOF, v),
+        doc="Degrees of freedom of the last sample's NIS (3 per accepted reading).",
+    )
+    last_nis = property(
+        lambda self: float(self._floats[-1]),
+        lambda self, v: self._floats.__setitem__(-1, v),
+        doc="NIS of the last sample's accepted readings.",
+    )
+    last_accepted = property(
+        lambda self: self._accepted.astype(bool),
+        lambda self, v: self._accepted.__setitem__(slice(None), v),
+        doc='Sensors whose reading the last sample accepted, shape (k,).',
+    )
+    last_nis_sensor = property(
+        lambda self: self._nis_sensor.copy(),
+        lambda self, v: self._nis_sensor.__setitem__(slice(None), v),
+        doc="Each sensor's NIS in the last sample (NaN: missing), shape (k,).",
+    )
+    _nis_ring = property(
+        lambda self: self._nis, lambda self, v: self._nis.__setitem__(slice(None), v)
+    )
+    _dof_ring = property(
+        lambda self: self._dof, lambda self, v: self._dof.__setitem__(slice(None), v)
+    )
+    missing = property(
+        lambda self: self._missing,
+        lambda self, v: self._missing.__setitem__(slice(None), v),
+        doc='Readings missing or frozen, per sensor.',
+    )
+    rejected = property(
+        lambda self: self._rejected,
+        lambda self, v: self._rejected.__setitem__(slice(None), v),
+        doc='Readings rejected by the gate, per sensor.',
+    )
+    _out_p = property(
+        lambda self: self._p_out, lambda self, v: self._p_out.__setitem__(slice(None), v)
+    )
+
+    @property
+    def _prev_currents(self):
+        return self._prev.copy() if self._ints[lk.I_HAS_PREV] else None
+
+    @_prev_currents.setter
+    def _prev_currents(self, value) -> None:
+        self._ints[lk.I_HAS_PREV] = value is not None
+        if value is not None:
+            self._prev[:] = value
 
     @property
     def deviation(self) -> np.ndarray:
@@ -124,20 +249,27 @@ class KalmanEstimator(Estimator):
         y_eq = self._linearize_strength()
         z = y - y_eq - self.D @ (currents - self.u_eq)
         nu = z - self.H @ self._x
-        nu = np.where(np.isfinite(nu), nu, 0.0)
-        x, P, accepted, nis_sensor, nis, dof = gated_update(
-            self._x, self._P, self.H, self.r_diag, nu, available, self.gate
+        nu = np.ascontiguousarray(np.where(np.isfinite(nu), nu, 0.0))
+        xp, Pp = np.empty_like(self._x), np.empty_like(self._P)
+        accepted, nis_sensor, nis, dof = kf_update_into(
+            self._x, self._P, self.H, self.r_diag, nu, available, self.gate, xp, Pp
         )
-        self._x, self._P = x, P
+        self._x[:], self._P[:] = xp, Pp
         return accepted, nis_sensor, nis, dof
+
+    def _predict(self, currents) -> None:
+        xn, Pn = np.empty_like(self._x), np.empty_like(self._P)
+        u = np.ascontiguousarray(currents - self.u_eq, dtype=float)
+        kf_predict_into(self._x, self._P, self.F, self.B, u, self.Q, xn, Pn)
+        self._x[:], self._P[:] = xn, Pn
 
     def step(self, y, currents) -> np.ndarray:
         """Process one complete sample and return the state estimate.
 
         As :meth:`Estimator.step`; without the magnet-strength state the whole
-        sample is one compiled call (:func:`kernels.kf_step`: the same
-        operations, so the same numbers), ~3x less time per sample, what a
-        5 kHz estimator in real time needs.
+        sample, bookkeeping included, is one compiled call on packed arrays
+        (:func:`linear_kernels.kf_packed_step`: the same operations, so the
+        same numbers), a few microseconds a sample.
 
         Parameters
         ----------
@@ -154,27 +286,21 @@ class KalmanEstimator(Estimator):
         if self.strength_index is not None:
             return super().step(y, currents)
         # C-contiguous always: one compiled signature (a strided row, e.g. of a
-        # burst's array, would compile kf_step again: seconds in a real-time loop)
+        # burst's array, would compile the kernel again: seconds in a real-time loop)
         y = np.ascontiguousarray(y, dtype=float)
         currents = np.ascontiguousarray(currents, dtype=float)
-        if y.shape != (self.n_outputs,):
-            raise ValueError(f'y must have {self.n_outputs} readings, got shape {y.shape}')
-        if currents.shape != (self.n_inputs,) or not math.isfinite(currents.sum()):
-            raise ValueError(f'currents must be {self.n_inputs} finite numbers, got {currents!r}')
-        out_x = np.empty(12)
-        self._x, self._P, self._out_p, accepted, nis_sensor, nis, dof = kf_step(
-            y, currents, self._previous_currents(), *self._kernel_args(), out_x
-        )
-        self._out_x = out_x
-        self._record(currents, accepted, nis_sensor, nis, dof)
-        return self._out_x  # the prior's x_eq if the filter restarted
+        out = np.empty(12)
+        if y.ndim == 1 == currents.ndim and kf_packed_step(y, currents, *self._packed, out):
+            self._out_x = out
+            return out  # the prior's x_eq if the filter restarted
+        return super().step(y, currents)  # raises the ValueError that names the input
 
     def step_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:
         """Process n complete samples in order, as n calls of :meth:`step`, in one call.
 
         Without the magnet-strength state, one compiled call for them all
-        (:func:`kernels.kf_steps`, the same numbers as :meth:`step`): a burst of
-        a real-time simulator at ~13 us a sample.
+        (:func:`linear_kernels.kf_packed_steps`, the same numbers as
+        :meth:`step`): a burst of a real-time simulator.
 
         Parameters
         ----------
@@ -198,71 +324,21 @@ class KalmanEstimator(Estimator):
         p = np.empty((n, self.n_states, self.n_states))
         if n == 0:
             return x, p
-        counters = np.array([self.samples, self.unaccepted, self.restarts], dtype=np.int64)
-        self._x, self._P, accepted, nis_sensor, nis, dof = kf_steps(
-            ys,
-            currents,
-            self._previous_currents(),
-            *self._kernel_args(),
-            self._nis_ring,
-            self._dof_ring,
-            counters,
-            self.config.lost_samples,
-            self._p_init,
-            x,
-            p,
-        )
-        self.samples, self.unaccepted, self.restarts = (int(v) for v in counters)
-        self.last_nis, self.last_dof = nis, dof
-        self.last_accepted, self.last_nis_sensor = accepted, nis_sensor
-        self._prev_currents = currents[-1].copy()
+        kf_packed_steps(ys, currents, *self._packed, x, p)
         self._out_x = x[-1].copy()
-        self._out_p = p[-1].copy()
         return x, p
 
-    def _previous_currents(self) -> np.ndarray:
-        """Return the last sample's currents for the kernels (NaN before the first), A."""
-        if self._prev_currents is None:
-            return self._no_currents
-        return np.ascontiguousarray(self._prev_currents, dtype=float)
-
-    def _kernel_args(self) -> tuple:
-        """Arguments of kf_step and kf_steps after the currents: model, gate, counts."""
-        f = self.freeze
-        return (
-            self.config.sensor_delay == 1,
-            self._x,
-            self._P,
-            self.F,
-            self.B,
-            self.H,
-            self.D,
-            self.y_eq,
-            self.u_eq,
-            self.r_diag,
-            self.Q,
-            self.gate,
-            f._last,
-            f.runs,
-            f.run,
-            f.frozen,
-            f.events,
-            self.missing,
-            self.rejected,
-            self.x_eq,
-            self.reduced,
-        )
-
     def _sample(self, y, held, across, available, delayed):
-        """Run the whole sample in one compiled call (:func:`kernels.kf_sample`)."""
+        """Update, predict and publish with :func:`linear_kernels.kf_sample_into`."""
         y_eq = self._linearize_strength()
-        x_out, p_out, self._x, self._P, accepted, nis_sensor, nis, dof = kf_sample(
+        n = self.n_states
+        xp, Pp, xn, Pn = np.empty(n), np.empty((n, n)), np.empty(n), np.empty((n, n))
+        accepted, nis_sensor, nis, dof = kf_sample_into(
             self._x,
             self._P,
             y,
-            held,
-            across,
-            delayed,
+            np.ascontiguousarray(held, dtype=float),
+            np.ascontiguousarray(across, dtype=float),
             self.F,
             self.B,
             self.H,
@@ -273,12 +349,12 @@ class KalmanEstimator(Estimator):
             self.Q,
             available,
             self.gate,
+            xp,
+            Pp,
+            xn,
+            Pn,
         )
-        self._out_x = self._full(x_out)
-        self._out_p = p_out
+        self._x[:], self._P[:] = xn, Pn
+        self._out_x = self._full(xn if delayed else xp)
+        self._out_p = Pn if delayed else Pp
         return accepted, nis_sensor, nis, dof
-
-    def _predict(self, currents) -> None:
-        self._x, self._P = kf_predict(
-            self._x, self._P, self.F, self.B, np.ascontiguousarray(currents - self.u_eq), self.Q
-        )
