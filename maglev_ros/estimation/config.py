@@ -2,10 +2,9 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 
-from ..parameters import NodeParameterError, check_settings, choice, integer, setting
+from ..parameters import NodeParameterError, check_settings, choice, finite, integer, setting
 
 __all__ = ['FILTERS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
 
@@ -17,19 +16,6 @@ PREDICTIONS = ('fast', 'full')
 
 class EstimatorConfigError(ValueError):
     """A setting of :class:`EstimatorConfig` is out of range."""
-
-
-def _finite(positive: bool = False):
-    """Return the rule of a finite number, positive or >= 0."""
-    need = 'positive' if positive else '>= 0'
-
-    def check(name: str, value: float) -> float:
-        if not (math.isfinite(value) and (value > 0 if positive else value >= 0)):
-            raise NodeParameterError(f'{name} must be a finite number {need}, got {value!r}')
-        return value
-
-    check.rule = '> 0' if positive else '>= 0'
-    return check
 
 
 def _zero_or_one(name: str, value: int) -> int:
@@ -138,28 +124,28 @@ class EstimatorConfig:
         'EKF/UKF process model: fast (one step per sample) or full (RK4)',
         choice(*PREDICTIONS),
     )
-    sample_rate: float = setting(5000.0, 'samples per second, Hz', _finite(positive=True))
+    sample_rate: float = setting(5000.0, 'samples per second, Hz', finite(positive=True))
     sensor_delay: int = setting(1, 'samples of reading delay (the board: 1)', _zero_or_one)
-    sensor_noise: float = setting(1.0e-4, 'Hall noise, T rms per axis', _finite(positive=True))
-    quantization: float = setting(0.098e-3, 'Hall resolution, T per LSB', _finite())
-    current_noise: float = setting(0.003, 'current held over a sample, A rms', _finite())
-    acceleration_noise: float = setting(0.1, 'unmodelled force per mass, m/s^2 rms', _finite())
+    sensor_noise: float = setting(1.0e-4, 'Hall noise, T rms per axis', finite(positive=True))
+    quantization: float = setting(0.098e-3, 'Hall resolution, T per LSB', finite())
+    current_noise: float = setting(0.003, 'current held over a sample, A rms', finite())
+    acceleration_noise: float = setting(0.1, 'unmodelled force per mass, m/s^2 rms', finite())
     angular_acceleration_noise: float = setting(
-        50.0, 'unmodelled torque per inertia, rad/s^2 rms', _finite()
+        50.0, 'unmodelled torque per inertia, rad/s^2 rms', finite()
     )
     bias_states: bool = setting(False, 'estimate a field offset per sensor axis')
     bias_walk: float = setting(
-        1.0e-8, 'random walk of the bias states, T rms per sample', _finite()
+        1.0e-8, 'random walk of the bias states, T rms per sample', finite()
     )
     initial_bias: float = setting(
-        1.0e-3, 'initial std of the bias states, T', _finite(positive=True)
+        1.0e-3, 'initial std of the bias states, T', finite(positive=True)
     )
     magnet_strength: bool = setting(False, "estimate the magnet's strength as one state (kf only)")
     initial_strength: float = setting(
-        0.2, 'initial std of the strength state, relative', _finite(positive=True)
+        0.2, 'initial std of the strength state, relative', finite(positive=True)
     )
     strength_walk: float = setting(
-        1.0e-7, 'random walk of the strength state, relative rms per sample', _finite()
+        1.0e-7, 'random walk of the strength state, relative rms per sample', finite()
     )
     gate_probability: float = setting(0.99999, 'per-sensor chi-square gate probability', _gate)
     freeze_samples: int = setting(
@@ -171,10 +157,10 @@ class EstimatorConfig:
         'samples without an accepted reading before the filter restarts from its prior',
         integer(2),
     )
-    initial_position: float = setting(1.0e-3, 'initial position std, m', _finite(positive=True))
-    initial_angle: float = setting(0.03, 'initial angle std, rad', _finite(positive=True))
-    initial_velocity: float = setting(0.02, 'initial velocity std, m/s', _finite(positive=True))
-    initial_rate: float = setting(2.0, 'initial body-rate std, rad/s', _finite(positive=True))
+    initial_position: float = setting(1.0e-3, 'initial position std, m', finite(positive=True))
+    initial_angle: float = setting(0.03, 'initial angle std, rad', finite(positive=True))
+    initial_velocity: float = setting(0.02, 'initial velocity std, m/s', finite(positive=True))
+    initial_rate: float = setting(2.0, 'initial body-rate std, rad/s', finite(positive=True))
 
     def __post_init__(self):
         check_settings(self, EstimatorConfigError)
