@@ -5,12 +5,14 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
-__all__ = ['FILTERS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
+__all__ = ['FILTERS', 'MEASUREMENTS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
 
 #: Filter kinds: linear KF about the equilibrium, EKF and UKF on the nonlinear model.
 FILTERS = ('kf', 'ekf', 'ukf')
 #: Process models of the EKF and UKF prediction.
 PREDICTIONS = ('fast', 'full')
+#: What the readings are: the sensors' field, or a V4x PC-control board's processed field.
+MEASUREMENTS = ('raw', 'board')
 
 
 class EstimatorConfigError(ValueError):
@@ -81,6 +83,15 @@ class EstimatorConfig:
         Initial standard deviation of ``s`` (relative).
     strength_walk : float
         Random walk of ``s``, relative, rms per sample.
+    measurement : {'raw', 'board'}
+        What the readings are. ``raw``: the sensors' field, as the physics
+        model gives it. ``board``: the field a V4x PC-control firmware
+        reports (:mod:`maglev_ros.physics.board_processing`): the power-up
+        baseline (magnet absent, coils off) and the coils' feedthrough on x
+        and y removed, x and y low-pass filtered (``f = 0.2 b + 0.8 f`` per
+        200 us board step, so ``a = 0.8^(Ts / 200 us)`` per sample). The
+        filter's state (one per filtered channel) joins the estimator's
+        states, after the bias states. KF only; chosen, never inferred.
     gate_probability : float
         Per-sensor chi-square gate: a sensor's 3-axis innovation is rejected
         when its NIS exceeds the chi-square(3) quantile of this probability.
@@ -116,6 +127,7 @@ class EstimatorConfig:
     magnet_strength: bool = False
     initial_strength: float = 0.2
     strength_walk: float = 1.0e-7
+    measurement: str = 'raw'
     gate_probability: float = 0.99999
     freeze_samples: int = 4
     nis_window: int = 500
@@ -133,6 +145,15 @@ class EstimatorConfig:
         if self.prediction not in PREDICTIONS:
             raise EstimatorConfigError(
                 f'prediction must be one of {", ".join(PREDICTIONS)}, got {self.prediction!r}'
+            )
+        if self.measurement not in MEASUREMENTS:
+            raise EstimatorConfigError(
+                f'measurement must be one of {", ".join(MEASUREMENTS)}, got {self.measurement!r}'
+            )
+        if self.measurement == 'board' and (self.filter != 'kf' or self.magnet_strength):
+            raise EstimatorConfigError(
+                'measurement board is supported by the kf filter without magnet_strength only, '
+                f'got filter {self.filter!r}, magnet_strength {self.magnet_strength!r}'
             )
         if self.sensor_delay not in (0, 1) or isinstance(self.sensor_delay, bool):
             raise EstimatorConfigError(f'sensor_delay must be 0 or 1, got {self.sensor_delay!r}')

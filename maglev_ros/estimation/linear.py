@@ -57,19 +57,63 @@ class KalmanEstimator(Estimator):
         B[:nr] = gd[:, : self.n_inputs]
         H = np.zeros((self.n_outputs, n))
         H[:, :nr] = lin.C
-        if n > self.bias_start:
-            H[:, self.bias_start :] = np.eye(self.n_outputs)
+        if self.filter_start > self.bias_start:
+            H[:, self.bias_start : self.filter_start] = np.eye(self.n_outputs)
         self.C = np.ascontiguousarray(lin.C, dtype=float)
         self.magnet_field = self.y_eq - self.model.measurement(
             self.x_eq, self.u_eq, with_magnet=False
         )
         if self.strength_index is not None:
             H[:, self.strength_index] = self.magnet_field
+        D = np.array(lin.D, dtype=float)
+        Q = self.process_noise(gd)
+        if self.board is not None:
+            D = self._board_model(F, B, H, D, Q, gd)
         self.F = np.ascontiguousarray(F)
         self.B = np.ascontiguousarray(B)
         self.H = np.ascontiguousarray(H)
-        self.D = np.ascontiguousarray(lin.D)
-        self.Q = np.ascontiguousarray(self.process_noise(gd))
+        self.D = np.ascontiguousarray(D)
+        self.Q = np.ascontiguousarray(0.5 * (Q + Q.T))
+
+    def _board_model(self, F, B, H, D, Q, gd) -> np.ndarray:
+        """Make F, B, H, Q (in place) and D, y_eq model the board's processed field.
+
+        The readings are ``b = raw - baseline - feedthrough i`` (the physics
+        model's own baseline and feedthrough: :class:`BoardProcessing`), and a
+        filtered channel reads ``a f_(k-1) + (1 - a) b_k`` with the filter
+        state ``f_k`` of that sum (:func:`~maglev_ros.physics.board_processing.augment`,
+        in deviations from the equilibrium). The filter's process noise is the
+        coil-current noise through ``(1 - a) D`` (correlated with the magnet's).
+
+        Returns
+        -------
+        ndarray, shape (p, n_s)
+            The processed D (filtered rows scaled by ``1 - a``).
+        """
+        board, nr = self.board, self.n_reduced
+        rows = np.flatnonzero(board.filtered)
+        cols = np.arange(self.filter_start, self.n_states)
+        a = board.host_pole(self.dt)
+        self.filter_pole = a
+        self.y_eq = self.y_eq - board.baseline - board.feedthrough @ self.u_eq
+        d = D - board.feedthrough
+        c = H[rows].copy()  # raw C of the filtered channels
+        F[cols] = 0.0
+        F[np.ix_(cols, np.arange(nr))] = (1 - a) * c[:, :nr]
+        F[np.ix_(cols, cols)] = a * np.eye(rows.size)
+        B[cols] = (1 - a) * d[rows]
+        H[np.ix_(rows, np.arange(nr))] = (1 - a) * c[:, :nr]  # a bias adds after the filter
+        H[np.ix_(rows, cols)] = a * np.eye(rows.size)
+        d[rows] *= 1 - a
+        # the current noise drives the filter states through (1 - a) D as it drives dx
+        g = np.zeros((self.n_states, gd.shape[1]))
+        g[:nr] = gd
+        g[cols, : self.n_inputs] = (1 - a) * (D - board.feedthrough)[rows]
+        std = self.disturbance_std()
+        full = (g * std**2) @ g.T
+        Q[:, cols] = full[:, cols]
+        Q[cols, :] = full[cols, :]
+        return d
 
     def _set_state(self, dx, P) -> None:
         if self._x is None:

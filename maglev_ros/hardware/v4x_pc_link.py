@@ -258,6 +258,25 @@ class V4xPcLink:
         """Request ``05``: the status bytes and the board's uptime."""
         return self._transact(proto.request(proto.STATUS), proto.STATUS)
 
+    def sample(self) -> Cycle:
+        """Read the sensors (``01``) and the currents (``02``) in one round trip.
+
+        Returns
+        -------
+        Cycle
+            Host time at the sensor reply, field, rate and currents (no command sent).
+        """
+        frames = proto.request(proto.READ_SENSORS) + proto.request(proto.READ_CURRENTS)
+        (sensors, currents), stamp_ns = self._exchange(
+            frames, (proto.READ_SENSORS, proto.READ_CURRENTS)
+        )
+        return Cycle(
+            stamp_ns,
+            np.array(sensors.field_mT),
+            np.array(sensors.rate_mT_s),
+            np.array(currents.currents_A),
+        )
+
     def cycle(self, p_x: int, p_y: int) -> Cycle:
         """One control step in one round trip: ``01``, ``02`` and ``03`` sent together.
 

@@ -1,0 +1,255 @@
+"""A board running the V4x PC-control firmware as the control loop's plant.
+
+:class:`V4xPcPlant` is a :class:`~maglev_ros.loop.Plant` on a
+:class:`~maglev_ros.hardware.v4x_pc_link.V4xPcLink` (COBS request/response,
+``docs/boards.md``). The firmware sends nothing by itself: the host asks.
+
+**Timing.** The plant runs on a fixed schedule of ``sample_rate`` samples
+per second (default 1000 Hz, above the 800 Hz of the lab's own host). At each
+period's start :meth:`read` sends ``01`` (sensors) and ``02`` (currents) in
+one write and waits for both replies: one round trip. The sample's stamp is
+the host's time when the sensor reply arrived (``time.time_ns``, as the
+driver stamps), its time the plant clock at that moment since the first
+sample (so the estimator is given the times the samples really came). The
+replies carry no sample counter: the field is the board's latest filtered
+sample (it samples every 200 us), the currents a fresh ADC reading.
+:meth:`write` sends the command (``03``) at once and waits for its
+acknowledgement, so a command drives the coils a fraction of a period after
+its sample (the loop's computing time and half a round trip), not a period
+later. Two round trips per period: :meth:`open` measures the board's
+round-trip rate (``round_trip_rate``, round trips of ``01 02`` per second
+with nothing else to do) and refuses a sample rate the link cannot carry
+(two round trips per period, with 25 % to spare). A period the host starts
+late is not made up: the next sample is taken at once and the schedule
+restarts from it (``late`` counts them).
+
+**Commands.** Coil currents (A, x+ x- y+ y-) pass a
+:class:`~maglev_ros.hardware.command_guard.CommandGuard` with ``pairs=True``:
+the firmware applies pair differences only (x+ gets ``p_x``, x- ``-p_x``),
+so the nearest antisymmetric command is sent, clamped at ``current_limit``
+and scaled to PWM counts by the ``scaling`` (coil resistance and supply).
+
+**Zero current.** The firmware has no watchdog. The link resets the coils
+(``04``) when it opens, after a reply timeout or a bad reply; the plant
+closes the link (``04`` again, best effort) when it stops on an error and in
+:meth:`close`; a link error ends the run (the block is ``crashed`` with the
+reason).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from ..hardware.command_guard import CommandGuard, pair_differences
+from ..hardware.scaling import CurrentScaling
+from ..hardware.serial_link import LinkError
+from ..hardware.v4x_pc_link import V4xPcLink
+from .plant import SampleBlock
+
+__all__ = ['DEFAULT_RATE', 'RATE_MARGIN', 'V4xPcPlant']
+
+#: Samples per second by default, Hz (the lab's host PD runs at 800 Hz).
+DEFAULT_RATE = 1000.0
+#: A sample rate needs this factor more round trips per second than two per period.
+RATE_MARGIN = 1.25
+_RATE_PROBES = 200  # round trips timed by open()
+_LATE_FACTOR = 0.5  # a sample later than this part of a period restarts the schedule
+
+
+class V4xPcPlant:
+    """The V4x PC-control board as a :class:`~maglev_ros.loop.Plant` (module docstring).
+
+    Parameters
+    ----------
+    link : V4xPcLink
+        The board's link (opened by :meth:`open` if it is not).
+    scaling : CurrentScaling
+        Coil current to PWM counts (255 counts at full duty).
+    current_limit : float
+        Largest commanded |current|, A (at most the scaling's full scale).
+    sample_rate : float, optional
+        Samples per second, Hz (default :data:`DEFAULT_RATE`).
+    clock : callable, optional
+        Monotonic time, s (default :func:`time.monotonic`).
+    sleep : callable, optional
+        Waits a number of seconds (default :func:`time.sleep`).
+
+    Attributes
+    ----------
+    round_trip_rate : float
+        Round trips per second measured by :meth:`open` (NaN before).
+    late : int
+        Samples taken more than half a period after their due time.
+    periods : list of float
+        Time between successive samples, s (for the rate reached).
+    """
+
+    lockstep = False
+    n_inputs = 4
+
+    def __init__(
+        self,
+        link: V4xPcLink,
+        scaling: CurrentScaling,
+        current_limit: float,
+        sample_rate: float = DEFAULT_RATE,
+        clock: Callable[[], float] = time.monotonic,
+        sleep: Callable[[float], None] = time.sleep,
+    ) -> None:
+        if not 0 < sample_rate < float('inf'):
+            raise ValueError(f'sample_rate must be a positive number, got {sample_rate!r}')
+        self.link = link
+        self.guard = CommandGuard(scaling, current_limit, 1.0, enabled=True, pairs=True)
+        self.sample_rate = float(sample_rate)
+        self.period = 1.0 / self.sample_rate
+        self.clock = clock
+        self.sleep = sleep
+        self.round_trip_rate = float('nan')
+        self.late = 0
+        self.periods: list[float] = []
+        self.stopped = ''
+        self._k = 0
+        self._due: float | None = None
+        self._t0 = 0.0
+        self._last_t: float | None = None
+
+    # -- handle ---------------------------------------------------------------------------
+
+    def open(self) -> V4xPcPlant:
+        """Open the link (ping, ``04``), measure the round-trip rate, check the sample rate.
+
+        Returns
+        -------
+        V4xPcPlant
+            ``self``.
+
+        Raises
+        ------
+        LinkError
+            If the board does not answer (the message names the port and firmware).
+        ValueError
+            If the board's round trips are too slow for ``sample_rate``; the
+            link is closed (coils reset) first.
+        """
+        if not self.link.is_open:
+            self.link.open()
+        try:
+            start = self.clock()
+            for _ in range(_RATE_PROBES):
+                self.link.sample()
+            self.round_trip_rate = _RATE_PROBES / max(self.clock() - start, 1e-9)
+        except LinkError:
+            self.link.close()
+            raise
+        need = 2 * RATE_MARGIN * self.sample_rate
+        if self.round_trip_rate < need:
+            self.link.close()
+            raise ValueError(
+                f'{self.link.port}: the board answers {self.round_trip_rate:.0f} round trips '
+                f'per second; {self.sample_rate:g} Hz needs {need:.0f} (two per sample, '
+                f'{RATE_MARGIN:g}x to spare): lower the sample rate'
+            )
+        return self
+
+    def close(self) -> None:
+        """Reset the coils (``04``, best effort) and close the link (idempotent)."""
+        self.link.close()
+
+    def __enter__(self) -> V4xPcPlant:
+        return self.open()
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # -- Plant ----------------------------------------------------------------------------
+
+    def read(self) -> SampleBlock:
+        """Wait for the next period, read the sensors and currents; one sample.
+
+        Returns
+        -------
+        SampleBlock
+            One sample (field T, currents A), or an empty ``crashed`` block
+            after a link error (the coils were reset and the link closed).
+        """
+        if self.stopped:
+            return _stopped(self.stopped)
+        now = self.clock()
+        if self._due is None:
+            self._due = now
+        elif self._due > now:
+            self.sleep(self._due - now)
+        elif now - self._due > _LATE_FACTOR * self.period:
+            self.late += 1
+            self._due = now  # a late period is not made up: the schedule restarts here
+        try:
+            sample = self.link.sample()
+            t = self.clock()
+        except LinkError as err:
+            return self._fail(f'link error: {err}')
+        if self._last_t is None:
+            self._t0 = t
+        else:
+            self.periods.append(t - self._last_t)
+        self._last_t = t
+        self._due += self.period
+        k = self._k
+        self._k += 1
+        return SampleBlock(
+            index=np.array([k]),
+            times=np.array([t - self._t0]),
+            stamps_ns=np.array([sample.stamp_ns], dtype=np.int64),
+            readings=(sample.field_mT * 1e-3)[None, :],
+            currents=np.asarray(sample.currents_A, dtype=float)[None, :],
+            valid=np.ones(1, dtype=bool),
+        )
+
+    def write(self, command: np.ndarray, stamp_ns: int) -> None:
+        """Send the command (``03``) now and wait for its acknowledgement.
+
+        Parameters
+        ----------
+        command : ndarray, shape (4,)
+            Coil currents, A, order x+, x-, y+, y-.
+        stamp_ns : int
+            Stamp of the sample the command answers, ns.
+        """
+        if self.stopped:
+            return
+        decision = self.guard.command(command, stamp_ns)
+        if decision.counts is None:
+            self._fail(f'command refused: {decision.warning}')
+            return
+        p_x, p_y = pair_differences(decision.counts)
+        try:
+            self.link.command(p_x, p_y)
+        except LinkError as err:
+            self._fail(f'link error: {err}')
+
+    @property
+    def rate_reached(self) -> float:
+        """Samples per second over the run so far, Hz (NaN before two samples)."""
+        if not self.periods:
+            return float('nan')
+        return len(self.periods) / float(np.sum(self.periods))
+
+    def _fail(self, reason: str) -> SampleBlock:
+        self.stopped = reason
+        self.link.close()  # 04, best effort: no watchdog on the board
+        return _stopped(reason)
+
+
+def _stopped(reason: str) -> SampleBlock:
+    return SampleBlock(
+        index=np.empty(0, dtype=np.int64),
+        times=np.empty(0),
+        stamps_ns=np.empty(0, dtype=np.int64),
+        readings=np.empty((0, 3)),
+        currents=np.empty((0, 4)),
+        valid=np.empty(0, dtype=bool),
+        crashed=True,
+        reason=reason,
+    )
