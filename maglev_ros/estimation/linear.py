@@ -79,38 +79,40 @@ class KalmanEstimator(Estimator):
         """Make F, B, H, Q (in place) and D, y_eq model the board's processed field.
 
         The readings are ``b = raw - baseline - feedthrough i`` (the physics
-        model's own baseline and feedthrough: :class:`BoardProcessing`), and a
-        filtered channel reads ``a f_(k-1) + (1 - a) b_k`` with the filter
-        state ``f_k`` of that sum (:func:`~maglev_ros.physics.board_processing.augment`,
-        in deviations from the equilibrium). The filter's process noise is the
-        coil-current noise through ``(1 - a) D`` (correlated with the magnet's).
+        model's own baseline and feedthrough: :class:`BoardProcessing`); each
+        filtered channel reads its filter state ``f``, which the board updates
+        at each of its 200 us steps inside the host sample:
+        ``f+ = a f + Fx dx + Fw w`` (:meth:`BoardProcessing.host_filter`, with
+        the currents and the disturbances held over the sample, in deviations
+        from the equilibrium). The filter's process noise is that of the
+        disturbances through ``Fw`` (correlated with the magnet's).
 
         Returns
         -------
         ndarray, shape (p, n_s)
-            The processed D (filtered rows scaled by ``1 - a``).
+            The processed D (zero on filtered rows: they read the filter state).
         """
-        board, nr = self.board, self.n_reduced
+        board, nr, m = self.board, self.n_reduced, self.n_inputs
         rows = np.flatnonzero(board.filtered)
         cols = np.arange(self.filter_start, self.n_states)
-        a = board.host_pole(self.dt)
-        self.filter_pole = a
         self.y_eq = self.y_eq - board.baseline - board.feedthrough @ self.u_eq
         d = D - board.feedthrough
-        c = H[rows].copy()  # raw C of the filtered channels
+        g = self.disturbance_matrix()
+        d_all = np.zeros((rows.size, g.shape[1]))
+        d_all[:, :m] = d[rows]
+        fx, fw, a = board.host_filter(self.linear.A, g, self.C[rows], d_all, self.dt)
+        self.filter_pole = a
         F[cols] = 0.0
-        F[np.ix_(cols, np.arange(nr))] = (1 - a) * c[:, :nr]
+        F[np.ix_(cols, np.arange(nr))] = fx
         F[np.ix_(cols, cols)] = a * np.eye(rows.size)
-        B[cols] = (1 - a) * d[rows]
-        H[np.ix_(rows, np.arange(nr))] = (1 - a) * c[:, :nr]  # a bias adds after the filter
-        H[np.ix_(rows, cols)] = a * np.eye(rows.size)
-        d[rows] *= 1 - a
-        # the current noise drives the filter states through (1 - a) D as it drives dx
-        g = np.zeros((self.n_states, gd.shape[1]))
-        g[:nr] = gd
-        g[cols, : self.n_inputs] = (1 - a) * (D - board.feedthrough)[rows]
-        std = self.disturbance_std()
-        full = (g * std**2) @ g.T
+        B[cols] = fw[:, :m]
+        H[np.ix_(rows, np.arange(nr))] = 0.0  # a bias still adds after the filter
+        H[np.ix_(rows, cols)] = np.eye(rows.size)
+        d[rows] = 0.0
+        full_g = np.zeros((self.n_states, g.shape[1]))
+        full_g[:nr] = gd
+        full_g[cols] = fw
+        full = (full_g * self.disturbance_std() ** 2) @ full_g.T
         Q[:, cols] = full[:, cols]
         Q[cols, :] = full[cols, :]
         return d

@@ -65,6 +65,10 @@ class EmulatedPort:
         """Pull the cable: reads and writes fail from now on (the firmware keeps its PWM)."""
         self.unplugged = True
 
+    def plug(self) -> None:
+        """Put the cable back (the same firmware: a board on its own supply)."""
+        self.unplugged = False
+
     def clock(self) -> float:
         """Return the board's time since power-up, s."""
         return self.now_us * 1e-6

@@ -258,18 +258,35 @@ class V4xPcLink:
         """Request ``05``: the status bytes and the board's uptime."""
         return self._transact(proto.request(proto.STATUS), proto.STATUS)
 
-    def sample(self) -> Cycle:
-        """Read the sensors (``01``) and the currents (``02``) in one round trip.
+    def command_and_sample(self, p_x: int, p_y: int) -> Cycle:
+        """Apply a command, then read the sensors and the currents: one round trip.
+
+        ``03``, ``01`` and ``02`` go in one write; the board answers them in
+        order within one loop pass, so the field is its latest sample taken
+        before the command (the command drives the coils from its next
+        sample on) and the currents its ADC reading with the command applied.
+        (:meth:`cycle` sends them the other way round: the currents before
+        the command.)
+
+        Parameters
+        ----------
+        p_x, p_y : int
+            Pair differences to apply, -255 .. 255.
 
         Returns
         -------
         Cycle
-            Host time at the sensor reply, field, rate and currents (no command sent).
+            Host time at the first reply, field, rate and currents.
         """
-        frames = proto.request(proto.READ_SENSORS) + proto.request(proto.READ_CURRENTS)
-        (sensors, currents), stamp_ns = self._exchange(
-            frames, (proto.READ_SENSORS, proto.READ_CURRENTS)
+        frames = (
+            proto.set_pwm_request(p_x, p_y)
+            + proto.request(proto.READ_SENSORS)
+            + proto.request(proto.READ_CURRENTS)
         )
+        (_, sensors, currents), stamp_ns = self._exchange(
+            frames, (proto.SET_PWM, proto.READ_SENSORS, proto.READ_CURRENTS)
+        )
+        self.last_command = (int(p_x), int(p_y))
         return Cycle(
             stamp_ns,
             np.array(sensors.field_mT),

@@ -4,30 +4,35 @@
 :class:`~maglev_ros.hardware.v4x_pc_link.V4xPcLink` (COBS request/response,
 ``docs/boards.md``). The firmware sends nothing by itself: the host asks.
 
-**Timing.** The plant runs on a fixed schedule of ``sample_rate`` samples
-per second (default 1000 Hz, above the 800 Hz of the lab's own host). At each
-period's start :meth:`read` sends ``01`` (sensors) and ``02`` (currents) in
-one write and waits for both replies: one round trip. The sample's stamp is
-the host's time when the sensor reply arrived (``time.time_ns``, as the
-driver stamps), its time the plant clock at that moment since the first
-sample (so the estimator is given the times the samples really came). The
-replies carry no sample counter: the field is the board's latest filtered
-sample (it samples every 200 us), the currents a fresh ADC reading.
-:meth:`write` sends the command (``03``) at once and waits for its
-acknowledgement, so a command drives the coils a fraction of a period after
-its sample (the loop's computing time and half a round trip), not a period
-later. Two round trips per period: :meth:`open` measures the board's
-round-trip rate (``round_trip_rate``, round trips of ``01 02`` per second
-with nothing else to do) and refuses a sample rate the link cannot carry
-(two round trips per period, with 25 % to spare). A period the host starts
-late is not made up: the next sample is taken at once and the schedule
-restarts from it (``late`` counts them).
+**One round trip per sample.** The plant runs on a fixed schedule of
+``sample_rate`` samples per second (default 1000 Hz, above the 800 Hz of the
+lab's own host). At each period's start :meth:`read` sends, in one write,
+the command that :meth:`write` left (``03``), then ``01`` (sensors) and
+``02`` (currents) (:meth:`V4xPcLink.command_and_sample`), and waits for the
+three replies. The board answers them in one loop pass: the field is its
+latest filtered sample, taken before the command; the currents are its ADC
+reading with the command applied. So the command computed from sample k
+drives the coils from sample k+1 (one period of command delay, which the LQR
+design takes as a state), and the currents of sample k are the ones held
+until sample k+1: the discrete model the estimator and the identification
+assume, with no fraction of a period to model.
+
+**Timing.** The replies carry no sample counter. A sample's stamp is the
+host's time when the first reply arrived (``time.time_ns``, as the driver
+stamps); its time is the plant clock at the replies, from the first sample.
+The loop sees ``sample_rate`` as its rate. :meth:`open` measures the board's
+round-trip rate (``round_trip_rate``: one over the median round trip with
+nothing else to do) and refuses a sample rate it cannot carry with 25 % to spare. A
+period the host starts more than half a period late is not made up: the
+sample is taken at once, the schedule restarts from it (``late`` counts
+them), and :attr:`rate_reached` reports the rate the samples came at.
 
 **Commands.** Coil currents (A, x+ x- y+ y-) pass a
 :class:`~maglev_ros.hardware.command_guard.CommandGuard` with ``pairs=True``:
 the firmware applies pair differences only (x+ gets ``p_x``, x- ``-p_x``),
 so the nearest antisymmetric command is sent, clamped at ``current_limit``
 and scaled to PWM counts by the ``scaling`` (coil resistance and supply).
+:meth:`applied` gives the currents a command becomes.
 
 **Zero current.** The firmware has no watchdog. The link resets the coils
 (``04``) when it opens, after a reply timeout or a bad reply; the plant
@@ -53,10 +58,11 @@ __all__ = ['DEFAULT_RATE', 'RATE_MARGIN', 'V4xPcPlant']
 
 #: Samples per second by default, Hz (the lab's host PD runs at 800 Hz).
 DEFAULT_RATE = 1000.0
-#: A sample rate needs this factor more round trips per second than two per period.
+#: A sample rate needs this factor more round trips per second than one per period.
 RATE_MARGIN = 1.25
 _RATE_PROBES = 200  # round trips timed by open()
 _LATE_FACTOR = 0.5  # a sample later than this part of a period restarts the schedule
+_REOPEN_S = 0.05  # s between attempts to reopen a lost link for its reset
 
 
 class V4xPcPlant:
@@ -76,15 +82,23 @@ class V4xPcPlant:
         Monotonic time, s (default :func:`time.monotonic`).
     sleep : callable, optional
         Waits a number of seconds (default :func:`time.sleep`).
+    reset_wait : float, optional
+        s :meth:`close` keeps trying to reset the coils after the link was
+        lost (default 2).
 
     Attributes
     ----------
     round_trip_rate : float
-        Round trips per second measured by :meth:`open` (NaN before).
+        Round trips per second measured by :meth:`open`: one over the median
+        of 200 round trips (NaN before), Hz.
+    round_trip_p99 : float
+        Their 99th percentile, s.
     late : int
         Samples taken more than half a period after their due time.
     periods : list of float
         Time between successive samples, s (for the rate reached).
+    coils_reset : bool
+        A ``04`` was acknowledged after the run stopped or the plant closed.
     """
 
     lockstep = False
@@ -98,6 +112,7 @@ class V4xPcPlant:
         sample_rate: float = DEFAULT_RATE,
         clock: Callable[[], float] = time.monotonic,
         sleep: Callable[[float], None] = time.sleep,
+        reset_wait: float = 2.0,
     ) -> None:
         if not 0 < sample_rate < float('inf'):
             raise ValueError(f'sample_rate must be a positive number, got {sample_rate!r}')
@@ -107,7 +122,11 @@ class V4xPcPlant:
         self.period = 1.0 / self.sample_rate
         self.clock = clock
         self.sleep = sleep
+        self.reset_wait = float(reset_wait)
+        self.coils_reset = False
+        self._resets_seen = 0
         self.round_trip_rate = float('nan')
+        self.round_trip_p99 = float('nan')
         self.late = 0
         self.periods: list[float] = []
         self.stopped = ''
@@ -115,6 +134,7 @@ class V4xPcPlant:
         self._due: float | None = None
         self._t0 = 0.0
         self._last_t: float | None = None
+        self._command = (0, 0)  # pair differences sent with the next read
 
     # -- handle ---------------------------------------------------------------------------
 
@@ -136,27 +156,49 @@ class V4xPcPlant:
         """
         if not self.link.is_open:
             self.link.open()
+        self._resets_seen = self.link.counts.resets - 1  # open's own 04 counts
         try:
-            start = self.clock()
+            times = [self.clock()]
             for _ in range(_RATE_PROBES):
-                self.link.sample()
-            self.round_trip_rate = _RATE_PROBES / max(self.clock() - start, 1e-9)
+                self.link.command_and_sample(0, 0)
+                times.append(self.clock())
+            trips = np.diff(times)
+            self.round_trip_rate = 1.0 / max(float(np.median(trips)), 1e-9)
+            self.round_trip_p99 = float(np.percentile(trips, 99))
         except LinkError:
             self.link.close()
             raise
-        need = 2 * RATE_MARGIN * self.sample_rate
+        need = RATE_MARGIN * self.sample_rate
         if self.round_trip_rate < need:
             self.link.close()
             raise ValueError(
                 f'{self.link.port}: the board answers {self.round_trip_rate:.0f} round trips '
-                f'per second; {self.sample_rate:g} Hz needs {need:.0f} (two per sample, '
-                f'{RATE_MARGIN:g}x to spare): lower the sample rate'
+                f'per second; {self.sample_rate:g} Hz needs {need:.0f} ({RATE_MARGIN:g}x '
+                'to spare): lower the sample rate'
             )
         return self
 
     def close(self) -> None:
-        """Reset the coils (``04``, best effort) and close the link (idempotent)."""
-        self.link.close()
+        """Reset the coils (``04``) and close the link (idempotent).
+
+        After a link error whose ``04`` did not get through (the cable was
+        pulled: the board, on its own supply, keeps its PWM), the plant keeps
+        trying to reopen the port and reset the coils for ``reset_wait`` s
+        (a cable put back meanwhile gets its ``04``); :attr:`coils_reset`
+        says whether a reset was acknowledged.
+        """
+        if self.link.is_open:
+            self.link.close()
+            self.coils_reset = self.coils_reset or self._reset_acknowledged()
+        deadline = self.clock() + self.reset_wait
+        while self.stopped and not self.coils_reset and self.clock() < deadline:
+            try:
+                self.link.open()  # ping, then 04
+            except LinkError:
+                self.sleep(_REOPEN_S)
+                continue
+            self.link.close()
+            self.coils_reset = True
 
     def __enter__(self) -> V4xPcPlant:
         return self.open()
@@ -167,7 +209,7 @@ class V4xPcPlant:
     # -- Plant ----------------------------------------------------------------------------
 
     def read(self) -> SampleBlock:
-        """Wait for the next period, read the sensors and currents; one sample.
+        """Wait for the next period; send the pending command, read sensors and currents.
 
         Returns
         -------
@@ -186,7 +228,7 @@ class V4xPcPlant:
             self.late += 1
             self._due = now  # a late period is not made up: the schedule restarts here
         try:
-            sample = self.link.sample()
+            sample = self.link.command_and_sample(*self._command)
             t = self.clock()
         except LinkError as err:
             return self._fail(f'link error: {err}')
@@ -195,6 +237,7 @@ class V4xPcPlant:
         else:
             self.periods.append(t - self._last_t)
         self._last_t = t
+        self._resets_seen = self.link.counts.resets  # a command went out: 04s from here on
         self._due += self.period
         k = self._k
         self._k += 1
@@ -208,7 +251,7 @@ class V4xPcPlant:
         )
 
     def write(self, command: np.ndarray, stamp_ns: int) -> None:
-        """Send the command (``03``) now and wait for its acknowledgement.
+        """Keep the command for the next :meth:`read` (the start of the next period).
 
         Parameters
         ----------
@@ -223,11 +266,24 @@ class V4xPcPlant:
         if decision.counts is None:
             self._fail(f'command refused: {decision.warning}')
             return
-        p_x, p_y = pair_differences(decision.counts)
-        try:
-            self.link.command(p_x, p_y)
-        except LinkError as err:
-            self._fail(f'link error: {err}')
+        self._command = pair_differences(decision.counts)
+
+    def applied(self, command: np.ndarray) -> np.ndarray:
+        """Return the currents the board applies for ``command`` (pairs, clamp, PWM), A.
+
+        Parameters
+        ----------
+        command : ndarray, shape (4,)
+            Coil currents, A.
+        """
+        c = np.asarray(command, dtype=float)
+        u = np.clip(
+            np.array([c[0] - c[1], c[2] - c[3]]) / 2,
+            -self.guard.current_limit,
+            self.guard.current_limit,
+        )
+        counts = self.guard.scaling.to_counts(np.array([u[0], -u[0], u[1], -u[1]]))
+        return self.guard.scaling.to_current(counts)
 
     @property
     def rate_reached(self) -> float:
@@ -239,7 +295,12 @@ class V4xPcPlant:
     def _fail(self, reason: str) -> SampleBlock:
         self.stopped = reason
         self.link.close()  # 04, best effort: no watchdog on the board
+        self.coils_reset = self._reset_acknowledged()
         return _stopped(reason)
+
+    def _reset_acknowledged(self) -> bool:
+        """Whether a ``04`` was acknowledged after the last command sent."""
+        return self.link.counts.resets > self._resets_seen
 
 
 def _stopped(reason: str) -> SampleBlock:

@@ -22,7 +22,7 @@ from ..hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from .control_loop import ControlLoop
 from .v4x_pc_plant import DEFAULT_RATE, V4xPcPlant
 
-__all__ = ['V4xPcLoopSettings', 'board_model', 'build_v4x_pc_loop']
+__all__ = ['V4xPcLoopSettings', 'V4xPcRun', 'board_model', 'build_v4x_pc_loop', 'run_v4x_pc_loop']
 
 
 @dataclass(frozen=True)
@@ -48,10 +48,13 @@ class V4xPcLoopSettings:
     coil_dynamics : bool
         The coils' L/R lag in the LQR design.
     command_delay : int
-        Samples of command delay in the LQR design (the plant writes each
-        command a fraction of a period after its sample: 0).
+        Samples of command delay in the LQR design (1: the plant sends the
+        command of sample k with the request of sample k+1).
     sensor_noise : float
         T rms per axis the estimator assumes.
+    angular_acceleration_noise : float
+        The estimator's unmodelled torque per inertia, rad/s^2 rms
+        (:class:`~maglev_ros.estimation.EstimatorConfig`).
     """
 
     params: str = 'maggy_v2'
@@ -62,8 +65,9 @@ class V4xPcLoopSettings:
     current_limit: float = 1.0
     bias_states: bool = True
     coil_dynamics: bool = False
-    command_delay: int = 0
+    command_delay: int = 1
     sensor_noise: float = 1.0e-4
+    angular_acceleration_noise: float = 50.0
 
     @property
     def scaling(self) -> CurrentScaling:
@@ -99,7 +103,7 @@ def board_model(params: str, sensor: int):
 
 
 def build_v4x_pc_loop(
-    s: V4xPcLoopSettings, link, observers=(), clock=None, sleep=None
+    s: V4xPcLoopSettings, link, observers=(), excitation=None, clock=None, sleep=None
 ) -> tuple[ControlLoop, V4xPcPlant]:
     """Build the loop and its plant (the plant is not opened: :meth:`V4xPcPlant.open`).
 
@@ -110,6 +114,8 @@ def build_v4x_pc_loop(
         The board's link.
     observers : iterable
         The loop's observers (:class:`~maglev_ros.loop.ControlLoop`).
+    excitation : array_like, shape (N, 4), optional
+        Currents added to the command at sample k < N, A.
     clock, sleep : callable, optional
         The plant's clock (default the wall clock).
 
@@ -147,6 +153,7 @@ def build_v4x_pc_loop(
             sample_rate=s.sample_rate,
             sensor_delay=0,
             sensor_noise=s.sensor_noise,
+            angular_acceleration_noise=s.angular_acceleration_noise,
             bias_states=s.bias_states,
             measurement='board',
         ),
@@ -154,9 +161,117 @@ def build_v4x_pc_loop(
     )
     timing = {k: v for k, v in (('clock', clock), ('sleep', sleep)) if v is not None}
     plant = V4xPcPlant(link, s.scaling, s.current_limit, s.sample_rate, **timing)
-    loop = ControlLoop(plant, controller, estimator, observers=observers)
+    loop = ControlLoop(plant, controller, estimator, excitation=excitation, observers=observers)
     # compile the estimator's and the controller's kernels now, not in the first period
     x_hat = estimator.step(estimator.y_eq, estimator.u_eq)
     controller.command(0.0, x_hat, estimator.u_eq)
     loop.reset()
     return loop, plant
+
+
+@dataclass
+class V4xPcRun:
+    """What :func:`run_v4x_pc_loop` did.
+
+    Attributes
+    ----------
+    samples : int
+        Samples handled.
+    reason : str
+        Why the loop stopped early ('' if it ran them all).
+    round_trip_rate : float
+        The board's round trips per second, measured when the plant opened, Hz.
+    round_trip_p99 : float
+        The 99th percentile of those round trips, s.
+    rate_reached : float
+        Samples per second over the run, Hz.
+    late : int
+        Periods started more than half a period late.
+    log : SampleLog
+        Every sample (for :func:`~maglev_ros.loop.sample_log.write_sample_bag`).
+    started, ended : float
+        The plant clock at the first sample's request and after the last, s.
+    """
+
+    samples: int
+    reason: str
+    round_trip_rate: float
+    round_trip_p99: float
+    rate_reached: float
+    late: int
+    log: object
+    started: float
+    ended: float
+
+
+def run_v4x_pc_loop(
+    s: V4xPcLoopSettings,
+    link,
+    samples: int,
+    excitation=None,
+    clock=None,
+    sleep=None,
+    progress=None,
+) -> V4xPcRun:
+    """Open the board, run the closed loop for ``samples`` samples, zero the coils.
+
+    Parameters
+    ----------
+    s : V4xPcLoopSettings
+    link : V4xPcLink
+        The board's link (closed).
+    samples : int
+        Samples to run.
+    excitation : CommandExcitation, optional
+        Added to the command from the first sample (identification).
+    clock, sleep : callable, optional
+        The plant's clock (default the wall clock).
+    progress : callable, optional
+        ``progress(done)`` after each second of samples.
+
+    Returns
+    -------
+    V4xPcRun
+
+    Raises
+    ------
+    LinkError
+        The board does not answer.
+    ValueError
+        A setting is out of range, or the board's round trips are too slow.
+    """
+    import time as _time
+
+    from .sample_log import SampleLog
+
+    ex = None
+    if excitation is not None and excitation.enabled:
+        from ..control.excitation import ExcitationSchedule
+
+        ex = ExcitationSchedule(excitation, s.sample_rate).sequence(samples)
+    log = SampleLog()
+    loop, plant = build_v4x_pc_loop(s, link, [log], ex, clock, sleep)
+    log.applied_of = plant.applied
+    now = clock or _time.monotonic
+    plant.open()
+    try:
+        started = now()
+        done, chunk = 0, max(1, int(s.sample_rate))
+        while done < samples and not loop.stopped:
+            done += loop.run(min(chunk, samples - done))
+            if progress is not None:
+                progress(done)
+        ended = now()
+    finally:
+        plant.close()  # 04: the board has no watchdog
+    return V4xPcRun(
+        done,
+        loop.reason,
+        plant.round_trip_rate,
+        plant.round_trip_p99,
+        plant.rate_reached,
+        plant.late,
+        log,
+        started,
+        ended,
+    )

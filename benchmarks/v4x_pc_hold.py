@@ -1,0 +1,189 @@
+"""Benchmark: the magnet held in real time against the virtual V4x PC-control board.
+
+The board is ``maglev-virtual-board --firmware v4x_pc --magnet free`` (physics
+plant, sensor noise 0.1 mT and resolution 0.098 mT, the firmware's baseline,
+feedthrough removal and x/y low-pass on) in its own process on a pty; this
+process runs the closed loop on it (:func:`maglev_ros.loop.v4x_pc_setup.run_v4x_pc_loop`:
+one ``03 01 02`` round trip per sample, the KF with the board's measurement
+model, the LQR) with a PRBS excitation on the pairs, then writes the bag and
+runs the identification and the physics check through the board's filter
+(:func:`maglev_ros.sysid.board_check.check_board_bag`).
+
+The truth (the magnet's pose) comes from the board process (``--truth``):
+the largest |x|, |y| over the loop's run is the figure. Printed: the board's
+round-trip rate (measured at open, nothing else to do), the rate the loop
+reached, late periods, the load (``uptime``) before and after, and the
+identification table. The baseline of the rate is the board's own round trip
+measured in the same run.
+
+Run::
+
+    python benchmarks/v4x_pc_hold.py --duration 60 --out /tmp/v4x_hold
+
+``--plant-polarization 1.1 --plant-mass 0.9`` runs a board whose magnet is not
+the believed one (a perturbed parameter file for the board; the loop believes
+``--params``): the bag for ``maglev-calibrate --measurement board``.
+Exit status 0 when the magnet stayed within 0.5 mm in x and y, else 1.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from maglev_ros.control.excitation import CommandExcitation
+from maglev_ros.hardware.v4x_pc_link import V4xPcLink
+from maglev_ros.hardware.v4x_pc_poller import REPLY_TIMEOUT_S
+from maglev_ros.loop.sample_log import write_sample_bag
+from maglev_ros.loop.v4x_pc_setup import V4xPcLoopSettings, run_v4x_pc_loop
+from maglev_ros.physics import load_parameters
+
+LIMIT_M = 0.5e-3  # |x|, |y| must stay below this
+
+
+def start_board(args, out: Path) -> tuple[subprocess.Popen, str, Path, str]:
+    """Start the virtual board; return the process, its port, the truth file and its params."""
+    params = args.params
+    if args.plant_polarization != 1.0 or args.plant_mass != 1.0:
+        from maglev_ros.greybox import write_parameters
+
+        p = load_parameters(args.params)
+        magnet = dataclasses.replace(
+            p.magnet,
+            polarization=p.magnet.polarization * args.plant_polarization,
+            mass=p.magnet.mass * args.plant_mass,
+        )
+        params = str(
+            write_parameters(
+                p.replace(magnet=magnet, name='perturbed'),
+                out / 'plant.yaml',
+                [
+                    f'{args.params} with polarization x{args.plant_polarization}, '
+                    f'mass x{args.plant_mass}'
+                ],
+            )
+        )
+    truth = out / 'truth.csv'
+    link = out / 'ttyMAGGY'
+    cmd = [
+        sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
+        '--magnet', 'free', '--params', params, '--link', str(link), '--truth', str(truth),
+        '--seed', str(args.seed),
+    ]  # fmt: skip
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    path = child.stdout.readline().strip()
+    if not path:
+        raise SystemExit('the virtual board did not start')
+    return child, path, truth, params
+
+
+def load() -> str:
+    """Return the load averages (``uptime``)."""
+    return ' '.join(f'{v:.2f}' for v in os.getloadavg())
+
+
+def main() -> int:
+    """Run the benchmark (module docstring)."""
+    p = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    p.add_argument('--duration', type=float, default=60.0, help='s of loop (default 60)')
+    p.add_argument('--rate', type=float, default=1000.0, help='samples per second (Hz)')
+    p.add_argument('--params', default='maggy_v2', help='believed set (and the board plant)')
+    p.add_argument('--amplitude', type=float, default=0.05, help='PRBS per pair, A (0: none)')
+    p.add_argument('--band', type=float, nargs=2, default=(0.0, 0.6), help='of Nyquist')
+    p.add_argument('--seed', type=int, default=0)
+    p.add_argument('--plant-polarization', type=float, default=1.0)
+    p.add_argument('--plant-mass', type=float, default=1.0)
+    p.add_argument('--out', help='directory for bag/, truth.csv (default: a temp dir)')
+    args = p.parse_args()
+    out = Path(args.out or tempfile.mkdtemp(prefix='v4x_hold_'))
+    out.mkdir(parents=True, exist_ok=True)
+    if (out / 'bag').exists():
+        raise SystemExit(f'{out / "bag"} exists: choose another --out')
+    settings = V4xPcLoopSettings(params=args.params, sample_rate=args.rate)
+    samples = int(round(args.duration * args.rate))
+    excitation = None
+    if args.amplitude > 0:
+        excitation = CommandExcitation(
+            'prbs', args.amplitude, tuple(args.band), 'pairs', seed=args.seed, length=samples
+        )
+    print(f'load before: {load()}')
+    child, port, truth_path, plant_params = start_board(args, out)
+    try:
+        link = V4xPcLink(port, timeout=REPLY_TIMEOUT_S, open_timeout=15.0)
+        t0 = time.monotonic()
+
+        def progress(done: int) -> None:
+            if done % (10 * int(args.rate)) == 0:
+                print(f'  {done / args.rate:5.0f} s of {args.duration:g} s', flush=True)
+
+        run = run_v4x_pc_loop(settings, link, samples, excitation, progress=progress)
+        print(f'loop: {run.samples} samples in {time.monotonic() - t0:.1f} s; {run.reason}')
+    finally:
+        child.send_signal(signal.SIGINT)
+        child.wait(timeout=10)
+    print(f'load after: {load()}')
+    truth = np.loadtxt(truth_path, delimiter=',', skiprows=1, ndmin=2)
+    during = truth[(truth[:, 7] >= run.started) & (truth[:, 7] <= run.ended)]
+    crashed = bool(during[:, 6].any()) if during.size else True
+    peak = np.abs(during[:, 1:3]).max(axis=0) if during.size else np.full(2, np.nan)
+    rms = np.sqrt(np.mean(during[:, 1:3] ** 2, axis=0)) if during.size else np.full(2, np.nan)
+    print(
+        f'board round trips (03 01 02, nothing else to do): {run.round_trip_rate:.0f} /s '
+        f'(median; p99 {1e3 * run.round_trip_p99:.2f} ms); '
+        f'loop rate reached {run.rate_reached:.1f} Hz (set {args.rate:g} Hz, ratio '
+        f"{run.round_trip_rate / run.rate_reached:.2f} of the board's), late periods {run.late}"
+    )
+    print(
+        f'magnet over {len(during)} truth rows ({run.ended - run.started:.1f} s): '
+        f'max |x| {1e3 * peak[0]:.3f} mm, max |y| {1e3 * peak[1]:.3f} mm '
+        f'(RMS {1e6 * rms[0]:.0f}, {1e6 * rms[1]:.0f} um); crashed: {crashed}'
+    )
+    bag = write_sample_bag(
+        out / 'bag',
+        run.log,
+        (settings.sensor,),
+        {
+            'magnet': 'free',
+            'params': plant_params,
+            'believed_params': args.params,
+            'firmware': 'v4x_pc',
+            'measurement': 'board',
+            'sample_rate': args.rate,
+            'seed': args.seed,
+        },
+    )
+    print(f'wrote {bag}')
+    ok = not crashed and run.samples == samples and bool(np.all(peak < LIMIT_M))
+    if excitation is not None and run.samples == samples:
+        from maglev_ros.sysid.board_check import check_board_bag
+
+        data, results, checks = check_board_bag(bag, plant_params, settings.sensor)
+        print(f'identification on {data.N} samples, Ts = {data.Ts * 1e3:.4f} ms:')
+        for item in results:
+            for row in item.result.rows:
+                check = checks.get((item.group.name, row.label))
+                text = (
+                    f'{check.max_db:5.2f} dB {check.max_deg:5.1f} deg'
+                    if hasattr(check, 'max_db')
+                    else str(check or '')
+                )
+                fit = float(np.mean(row.fit_validation))
+                print(
+                    f'  {item.group.name:<5} {row.label:<28} fit val. {fit:6.1f} % '
+                    f'{row.status:<10} physics {text}'
+                )
+    print('held' if ok else 'NOT held')
+    return 0 if ok else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
