@@ -17,15 +17,20 @@ design takes as a state), and the currents of sample k are the ones held
 until sample k+1: the discrete model the estimator and the identification
 assume, with no fraction of a period to model.
 
-**Timing.** The replies carry no sample counter. A sample's stamp is the
-host's time when the first reply arrived (``time.time_ns``, as the driver
-stamps); its time is the plant clock at the replies, from the first sample.
-The loop sees ``sample_rate`` as its rate. :meth:`open` measures the board's
-round-trip rate (``round_trip_rate``: one over the median round trip with
-nothing else to do) and refuses a sample rate it cannot carry with 25 % to spare. A
-period the host starts more than half a period late is not made up: the
-sample is taken at once, the schedule restarts from it (``late`` counts
-them), and :attr:`rate_reached` reports the rate the samples came at.
+**Timing.** The replies carry no sample counter, and a host's stamps jitter
+with its wake-ups; the plant stamps each sample with its *scheduled* time:
+the host's system clock (``time.time_ns``, as the driver stamps) at the first
+sample's replies, plus the schedule's time since then (``k / sample_rate``
+while the schedule holds). So stamps are uniform and a late period shows as
+the gap it is. The request goes out when the host wakes, after the
+scheduled time by :attr:`wake_delays` (the board's field is its latest 200 us
+sample then). The loop sees ``sample_rate`` as its rate. :meth:`open`
+measures the board's round-trip rate (``round_trip_rate``: one over the
+median round trip with nothing else to do) and refuses a sample rate it
+cannot carry with 25 % to spare. A period the host starts more than half a
+period late is not made up: the sample is taken at once, the schedule
+restarts from it (``late`` counts them), and :attr:`rate_reached` reports
+the rate the samples came at.
 
 **Commands.** Coil currents (A, x+ x- y+ y-) pass a
 :class:`~maglev_ros.hardware.command_guard.CommandGuard` with ``pairs=True``:
@@ -99,6 +104,8 @@ class V4xPcPlant:
         Time between successive samples, s (for the rate reached).
     coils_reset : bool
         A ``04`` was acknowledged after the run stopped or the plant closed.
+    wake_delays : list of float
+        Per sample, how late after its scheduled time the request went out, s.
     """
 
     lockstep = False
@@ -134,6 +141,8 @@ class V4xPcPlant:
         self._due: float | None = None
         self._t0 = 0.0
         self._last_t: float | None = None
+        self._wall0_ns = 0
+        self.wake_delays: list[float] = []
         self._command = (0, 0)  # pair differences sent with the next read
 
     # -- handle ---------------------------------------------------------------------------
@@ -232,19 +241,23 @@ class V4xPcPlant:
             t = self.clock()
         except LinkError as err:
             return self._fail(f'link error: {err}')
+        due = self._due
         if self._last_t is None:
-            self._t0 = t
+            self._t0 = due
+            self._wall0_ns = sample.stamp_ns
         else:
             self.periods.append(t - self._last_t)
         self._last_t = t
         self._resets_seen = self.link.counts.resets  # a command went out: 04s from here on
+        self.wake_delays.append(t - due)
         self._due += self.period
         k = self._k
         self._k += 1
+        since = due - self._t0
         return SampleBlock(
             index=np.array([k]),
-            times=np.array([t - self._t0]),
-            stamps_ns=np.array([sample.stamp_ns], dtype=np.int64),
+            times=np.array([since]),
+            stamps_ns=np.array([self._wall0_ns + round(since * 1e9)], dtype=np.int64),
             readings=(sample.field_mT * 1e-3)[None, :],
             currents=np.asarray(sample.currents_A, dtype=float)[None, :],
             valid=np.ones(1, dtype=bool),

@@ -77,13 +77,13 @@ class V4xPcLoopSettings:
         )
 
 
-def board_model(params: str, sensor: int):
+def board_model(params, sensor: int):
     """Return the physics model of ``params`` with only the board's sensor.
 
     Parameters
     ----------
-    params : str
-        Preset or YAML path.
+    params : str or MaggyParameters
+        Preset, YAML path or a loaded set.
     sensor : int
         Index of the sensor the board reads.
 
@@ -92,9 +92,9 @@ def board_model(params: str, sensor: int):
     ValueError
         If the set has no such sensor.
     """
-    from ..physics import load_parameters, make_model
+    from ..physics import MaggyParameters, load_parameters, make_model
 
-    p = load_parameters(params)
+    p = params if isinstance(params, MaggyParameters) else load_parameters(params)
     if not 0 <= sensor < len(p.sensors):
         raise ValueError(
             f'sensor must be 0 to {len(p.sensors) - 1} for {params!r}, got {sensor!r}'

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'BoardProcessing', 'augment']
+__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'BoardProcessing', 'augment', 'augment_exact']
 
 #: The firmware's loop period, s (5 kHz).
 BOARD_PERIOD = 2e-4
@@ -235,3 +235,58 @@ def augment(
     c2[rows] = np.hstack([(1 - a) * cf, a * np.eye(q)])
     d2[rows] = (1 - a) * df
     return ad2, bd2, c2, d2
+
+
+def augment_exact(
+    A: np.ndarray,
+    B: np.ndarray,
+    c: np.ndarray,
+    d: np.ndarray,
+    board: BoardProcessing,
+    filtered: np.ndarray,
+    Ts: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sample ``dx/dt = A x + B u, b = c x + d u`` with the board's filter, exactly.
+
+    The inputs are held over each host sample; the board filters ``b`` at
+    each of its steps (:meth:`BoardProcessing.host_filter`). The filter
+    output ``f_k`` of each filtered channel joins the state and is that
+    channel's reading (no direct term); unfiltered channels read ``c x + d u``.
+
+    Parameters
+    ----------
+    A, B : ndarray
+        Continuous model, shapes (n, n), (n, m).
+    c, d : ndarray
+        Processed output (feedthrough removed), shapes (p, n), (p, m).
+    board : BoardProcessing
+        The board's processing (its weight and period).
+    filtered : ndarray of bool, shape (p,)
+        Channels with the low-pass.
+    Ts : float
+        Host sample time, s.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``Ad, Bd, C, D`` of the sampled model, ``n + (filtered channels)`` states.
+    """
+    from scipy.linalg import expm
+
+    rows = np.flatnonzero(filtered)
+    n, m, q = A.shape[0], B.shape[1], rows.size
+    fx, fu, a = board.host_filter(A, B, c[rows], d[rows], Ts)
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = A, B
+    e = expm(big * board.board_steps(Ts) * board.board_period)
+    ad = np.zeros((n + q, n + q))
+    ad[:n, :n] = e[:n, :n]
+    ad[n:, :n] = fx
+    ad[n:, n:] = a * np.eye(q)
+    bd = np.vstack([e[:n, n:], fu])
+    c2 = np.hstack([c, np.zeros((c.shape[0], q))])
+    d2 = np.array(d, dtype=float)
+    c2[rows] = 0.0
+    c2[rows, n + np.arange(q)] = 1.0
+    d2[rows] = 0.0
+    return ad, bd, c2, d2

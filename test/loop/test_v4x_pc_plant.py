@@ -25,15 +25,21 @@ from maglev_ros.physics import SensorEffects
 SETTINGS = V4xPcLoopSettings()
 
 
-def emulated_board(seed: int = 0):
-    """The free magnet on the emulated V4x PC-control board: (plant, firmware, port, link)."""
+def emulated_board(seed: int = 0, params=None):
+    """The free magnet on the emulated V4x PC-control board: (plant, firmware, port, link).
+
+    ``params``: the board's parameter set (default the one the loop believes).
+    """
     scaling = SETTINGS.scaling
+    params = params or SETTINGS.params
     sensor = SensorEffects(noise_rms=1e-4, quantization=0.098e-3)
-    plant = make_simulator_plant('free', SETTINGS.params, scaling, sensor, seed)
-    setup = make_simulator_plant('absent', SETTINGS.params, scaling, sensor, seed + 1)
+    plant = make_simulator_plant('free', params, scaling, sensor, seed)
+    setup = make_simulator_plant('absent', params, scaling, sensor, seed + 1)
     firmware = V4xPcFirmware(plant, scaling=scaling, setup_plant=setup)
     port = EmulatedPort(firmware)
-    return plant, firmware, port, V4xPcLink('emulated', serial_link=port, timeout=0.25)
+    # the link's deadlines are the machine's clock: a loaded machine may stall a read
+    # for a while between two of the emulator's steps, so the reply timeout is long
+    return plant, firmware, port, V4xPcLink('emulated', serial_link=port, timeout=2.0)
 
 
 def test_the_magnet_levitates_and_the_coils_end_at_zero():
@@ -90,7 +96,7 @@ def test_a_board_that_stops_answering_stops_the_loop_at_zero_current():
     _, firmware, port, loop, plant = _running()
     firmware.tamper_next_burst(lambda data: b'')  # the replies of one request are lost
     loop.run(100)
-    assert loop.stopped and 'no reply to request 03 01 02' in loop.reason
+    assert loop.stopped and 'no reply to request 03 01 02 within 2 s' in loop.reason
     assert 'coils reset' in loop.reason
     assert firmware.pwm.tolist() == [0, 0, 0, 0] and plant.coils_reset
     plant.close()
