@@ -13,12 +13,13 @@ Topics (relative names resolve in the node's namespace; ``/clock`` and
 
 * ``maglev/sensor_<k>/field`` (MagneticField, T): driver, simulator;
 * ``maglev/currents`` (JointState, A): driver, simulator;
-* ``maglev/currents/command`` (Float64MultiArray, A): controller, excitation;
+* ``maglev/currents/command`` (JointState, A, stamped with the sample it answers):
+  controller, excitation, loop;
 * ``maglev/state/true`` (Odometry: m, rad, m/s, rad/s): simulator;
 * ``maglev/markers`` (MarkerArray): simulator;
 * ``maglev/state/estimate`` (Odometry with covariance): estimator;
 * ``maglev/reference`` (PoseStamped, m): user, scripts;
-* ``maglev/currents/excitation`` (Float64MultiArray, A): controller;
+* ``maglev/currents/excitation`` (JointState, A, as the command): controller, loop;
 * ``maglev/identifier/model`` (Float64MultiArray, ARX coefficients): identifier;
 * ``maglev/identifier/prediction_error`` (Float64MultiArray, one-step prediction
   error per output, output units): identifier;
@@ -130,12 +131,12 @@ def sensor_frame(k: int) -> str:
 #: Message type (``pkg/msg/Type``) of each fixed topic of the contract.
 MESSAGE_TYPES: dict[str, str] = {
     CURRENTS_TOPIC: 'sensor_msgs/msg/JointState',
-    COMMAND_TOPIC: 'std_msgs/msg/Float64MultiArray',
+    COMMAND_TOPIC: 'sensor_msgs/msg/JointState',
     TRUE_STATE_TOPIC: 'nav_msgs/msg/Odometry',
     MARKERS_TOPIC: 'visualization_msgs/msg/MarkerArray',
     ESTIMATE_TOPIC: 'nav_msgs/msg/Odometry',
     REFERENCE_TOPIC: 'geometry_msgs/msg/PoseStamped',
-    EXCITATION_TOPIC: 'std_msgs/msg/Float64MultiArray',
+    EXCITATION_TOPIC: 'sensor_msgs/msg/JointState',
     IDENTIFIER_MODEL_TOPIC: 'std_msgs/msg/Float64MultiArray',
     IDENTIFIER_PREDICTION_ERROR_TOPIC: 'std_msgs/msg/Float64MultiArray',
     IDENTIFIER_FIT_TOPIC: 'std_msgs/msg/Float64MultiArray',
@@ -180,7 +181,7 @@ def current_channel(coil: int) -> str:
 
 
 def command_channel(coil: int) -> str:
-    """Channel spec of coil ``coil``'s commanded current (A), e.g. ``...command:data[0]``.
+    """Channel spec of coil ``coil``'s commanded current (A), e.g. ``...command:effort[0]``.
 
     Parameters
     ----------
@@ -191,11 +192,11 @@ def command_channel(coil: int) -> str:
     -------
     str
     """
-    return f'{COMMAND_TOPIC}:data[{coil}]'
+    return f'{COMMAND_TOPIC}:effort[{coil}]'
 
 
 def excitation_channel(coil: int) -> str:
-    """Channel spec of coil ``coil``'s excitation part (A), e.g. ``...excitation:data[0]``.
+    """Channel spec of coil ``coil``'s excitation part (A), e.g. ``...excitation:effort[0]``.
 
     Parameters
     ----------
@@ -206,7 +207,7 @@ def excitation_channel(coil: int) -> str:
     -------
     str
     """
-    return f'{EXCITATION_TOPIC}:data[{coil}]'
+    return f'{EXCITATION_TOPIC}:effort[{coil}]'
 
 
 def _absolute_pattern(topic: str) -> str:
@@ -217,7 +218,9 @@ def _absolute_pattern(topic: str) -> str:
 CHANNEL_UNITS: tuple[tuple[str, str, str], ...] = (
     (_absolute_pattern(field_topic(r'\d+')), 'magnetic_field.', 'T'),
     (_absolute_pattern(CURRENTS_TOPIC), 'effort[', 'A'),
-    (_absolute_pattern(COMMAND_TOPIC), 'data[', 'A'),
+    (_absolute_pattern(COMMAND_TOPIC), 'effort[', 'A'),
+    (_absolute_pattern(EXCITATION_TOPIC), 'effort[', 'A'),
+    (_absolute_pattern(COMMAND_TOPIC), 'data[', 'A'),  # Float64MultiArray, older bags
     (_absolute_pattern(EXCITATION_TOPIC), 'data[', 'A'),
     *(
         (f'({_absolute_pattern(TRUE_STATE_TOPIC)}|{_absolute_pattern(ESTIMATE_TOPIC)})', p, u)

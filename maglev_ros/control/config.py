@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, fields
 from pathlib import Path
+
+from ..parameters import NodeParameterError, check_settings, choice, integer, number, setting
 
 __all__ = [
     'MAX_COMMAND_DELAY',
@@ -21,6 +22,17 @@ MAX_COMMAND_DELAY = 20  # samples of command delay the LQR design takes as state
 
 class ControllerConfigError(ValueError):
     """A controller setting is unknown or out of range."""
+
+
+def _command_delay(name: str, value: int) -> int:
+    if isinstance(value, bool) or value not in range(MAX_COMMAND_DELAY + 1):
+        raise NodeParameterError(
+            f'{name} must be an integer from 0 to {MAX_COMMAND_DELAY}, got {value!r}'
+        )
+    return value
+
+
+_command_delay.rule = f'0 .. {MAX_COMMAND_DELAY}'
 
 
 @dataclass(frozen=True)
@@ -89,75 +101,57 @@ class ControllerConfig:
         this, T (the firmware's magnet-present test).
     """
 
-    mode: str = 'lqr'
-    sample_rate: float = 5000.0
-    command_delay: int = 1
-    sensor_delay: int = 1
-    coil_dynamics: bool = True
-    current_limit: float = 1.0
-    position_scale: float = 1.0e-4
-    angle_scale: float = 0.003
-    velocity_scale: float = 0.02
-    rate_scale: float = 0.5
-    current_scale: float = 1.0
-    integral: bool = False
-    integral_scale: float = 2.0e-5
-    input_timeout: float = 0.005
-    rearm_samples: int = 10
-    loss_distance: float = 3.0e-3
-    pd_kp: float = 15000.0
-    pd_kd: float = 250.0
-    pd_cutoff: float = 30.0
-    pd_sensor: int = 0
-    pd_feedthrough: bool = True
-    magnet_threshold: float = 2.0e-3
+    mode: str = setting(
+        'lqr',
+        'lqr (state feedback on the estimate) or pd (firmware PD on the field)',
+        choice(*MODES),
+    )
+    sample_rate: float = setting(
+        5000.0, 'control rate, Hz (one command per sample)', number(0, above=True)
+    )
+    command_delay: int = setting(
+        1,
+        f'samples before a command drives the coils (0 to {MAX_COMMAND_DELAY}; 1: the board; '
+        'the LQR designs for it)',
+        _command_delay,
+    )
+    sensor_delay: int = setting(1, 'samples of reading delay (0 or 1)', integer(0, 1))
+    coil_dynamics: bool = setting(True, "LQR models the coils' L/R lag")
+    current_limit: float = setting(1.0, 'largest command per coil, A', number(0, above=True))
+    position_scale: float = setting(1.0e-4, 'Bryson scale of x y z, m', number(0, above=True))
+    angle_scale: float = setting(0.003, 'Bryson scale of alpha beta, rad', number(0, above=True))
+    velocity_scale: float = setting(
+        0.02, 'Bryson scale of the velocity, m/s', number(0, above=True)
+    )
+    rate_scale: float = setting(0.5, 'Bryson scale of wx wy, rad/s', number(0, above=True))
+    current_scale: float = setting(1.0, 'Bryson scale of the commands, A', number(0, above=True))
+    integral: bool = setting(False, 'integral action on x y z (anti-windup at the limit)')
+    integral_scale: float = setting(
+        2.0e-5, 'Bryson scale of the integrated error, m s', number(0, above=True)
+    )
+    input_timeout: float = setting(
+        0.005, 's without input -> zero currents, ERROR', number(0, above=True)
+    )
+    rearm_samples: int = setting(
+        10, 'fresh inputs in a row that re-arm after a timeout', integer(1)
+    )
+    loss_distance: float = setting(
+        3.0e-3,
+        'LQR: estimate this far from the equilibrium = magnet lost: zero currents, '
+        'ERROR, latched until enabled again, m',
+        number(0, above=True),
+    )
+    pd_kp: float = setting(15000.0, 'PD proportional gain, A/T', number(0))
+    pd_kd: float = setting(250.0, 'PD derivative gain, A/(T/s)', number(0))
+    pd_cutoff: float = setting(30.0, 'PD field filter cut-off, Hz', number(0, above=True))
+    pd_sensor: int = setting(0, 'sensor the PD reads', integer(0))
+    pd_feedthrough: bool = setting(True, "PD removes the coils' direct field")
+    magnet_threshold: float = setting(
+        2.0e-3, 'PD active while |Bz - Bz without magnet| exceeds it, T', number(0)
+    )
 
     def __post_init__(self):
-        if self.mode not in MODES:
-            raise ControllerConfigError(
-                f'mode must be one of {", ".join(MODES)}, got {self.mode!r}'
-            )
-        value = self.command_delay
-        if isinstance(value, bool) or value not in range(MAX_COMMAND_DELAY + 1):
-            raise ControllerConfigError(
-                f'command_delay must be an integer from 0 to {MAX_COMMAND_DELAY}, got {value!r}'
-            )
-        value = self.sensor_delay
-        if isinstance(value, bool) or value not in (0, 1):
-            raise ControllerConfigError(f'sensor_delay must be 0 or 1, got {value!r}')
-        for name in ('coil_dynamics', 'integral', 'pd_feedthrough'):
-            if not isinstance(getattr(self, name), bool):
-                raise ControllerConfigError(
-                    f'{name} must be true or false, got {getattr(self, name)!r}'
-                )
-        for name in ('rearm_samples', 'pd_sensor'):
-            value = getattr(self, name)
-            low = 1 if name == 'rearm_samples' else 0
-            if isinstance(value, bool) or not isinstance(value, int) or value < low:
-                raise ControllerConfigError(f'{name} must be an integer >= {low}, got {value!r}')
-        positive = (
-            'sample_rate',
-            'current_limit',
-            'position_scale',
-            'angle_scale',
-            'velocity_scale',
-            'rate_scale',
-            'current_scale',
-            'integral_scale',
-            'input_timeout',
-            'loss_distance',
-            'pd_cutoff',
-        )
-        non_negative = ('pd_kp', 'pd_kd', 'magnet_threshold')
-        for name in positive + non_negative:
-            value = getattr(self, name)
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-            ok = ok and math.isfinite(value) and (value > 0 if name in positive else value >= 0)
-            if not ok:
-                need = 'positive' if name in positive else '>= 0'
-                raise ControllerConfigError(
-                    f'{name} must be a finite number {need}, got {value!r}'
-                )
+        check_settings(self, ControllerConfigError)
         if self.pd_cutoff >= self.sample_rate / 2:
             raise ControllerConfigError(
                 f'pd_cutoff must be below the Nyquist frequency {self.sample_rate / 2} Hz, '

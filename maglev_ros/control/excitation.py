@@ -37,12 +37,16 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..excitation import PATTERNS, SIGNALS, apply_pattern, excitation, pattern_signals
+from ..parameters import Param, choice, integer, number
+from ..topics import EXCITATION_TOPIC
 
 __all__ = [
+    'EXCITATION_PARAMETERS',
     'EXCITATION_SIGNALS',
     'CommandExcitation',
     'ExcitationSchedule',
     'LoopExcitationError',
+    'excitation_from_parameters',
 ]
 
 #: ``none`` (no excitation) or a signal of :mod:`maglev_ros.excitation`.
@@ -208,3 +212,50 @@ class ExcitationSchedule:
             Number of samples.
         """
         return np.array([self.value(k) for k in range(int(n))]).reshape(int(n), -1)
+
+
+_EX = CommandExcitation()
+#: The excitation's settings as node parameters (``excitation_`` + each field).
+EXCITATION_PARAMETERS = {
+    'excitation_signal': Param(
+        'none',
+        f'excitation added to the command: {", ".join(EXCITATION_SIGNALS)} (published '
+        f'apart on {EXCITATION_TOPIC})',
+        check=choice(*EXCITATION_SIGNALS),
+    ),
+    'excitation_amplitude': Param(
+        _EX.amplitude, 'excitation: peak of each signal, A', check=number(0)
+    ),
+    'excitation_band': Param(list(_EX.band), 'excitation: band (low, high), fractions of Nyquist'),
+    'excitation_pattern': Param(
+        _EX.pattern,
+        'excitation: coil pattern (pairs: x+ = r_x, x- = -r_x, y+ = r_y, y- = -r_y)',
+        check=choice(*PATTERNS),
+    ),
+    'excitation_seed': Param(0, 'excitation: seed of the signals', check=integer(0)),
+    'excitation_length': Param(_EX.length, 'excitation: samples per period', check=integer(1)),
+    'excitation_cycles': Param(0, 'excitation: periods (0: forever)', check=integer(0)),
+    'excitation_start': Param(
+        0.0, 'excitation: s after the first sample it starts at', check=number(0)
+    ),
+}
+
+
+def excitation_from_parameters(values: dict) -> CommandExcitation:
+    """Pop the ``excitation_*`` parameters from ``values`` into a :class:`CommandExcitation`.
+
+    Parameters
+    ----------
+    values : dict
+        Node parameter values; the :data:`EXCITATION_PARAMETERS` are removed.
+
+    Raises
+    ------
+    LoopExcitationError
+        Naming the parameter (``excitation_amplitude must ...``).
+    """
+    settings = {name[len('excitation_') :]: values.pop(name) for name in EXCITATION_PARAMETERS}
+    try:
+        return CommandExcitation(**settings)
+    except LoopExcitationError as err:
+        raise LoopExcitationError(f'excitation_{err}') from err

@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 
+from ..parameters import NodeParameterError, check_settings, choice, integer, setting
+
 __all__ = ['FILTERS', 'MEASUREMENTS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
 
 #: Filter kinds: linear KF about the equilibrium, EKF and UKF on the nonlinear model.
@@ -17,6 +19,35 @@ MEASUREMENTS = ('raw', 'board')
 
 class EstimatorConfigError(ValueError):
     """A setting of :class:`EstimatorConfig` is out of range."""
+
+
+def _finite(positive: bool = False):
+    """Return the rule of a finite number, positive or >= 0."""
+    need = 'positive' if positive else '>= 0'
+
+    def check(name: str, value: float) -> float:
+        if not (math.isfinite(value) and (value > 0 if positive else value >= 0)):
+            raise NodeParameterError(f'{name} must be a finite number {need}, got {value!r}')
+        return value
+
+    check.rule = '> 0' if positive else '>= 0'
+    return check
+
+
+def _zero_or_one(name: str, value: int) -> int:
+    if isinstance(value, bool) or value not in (0, 1):
+        raise NodeParameterError(f'{name} must be 0 or 1, got {value!r}')
+    return value
+
+
+def _gate(name: str, value: float) -> float:
+    if not (0.5 < value <= 1.0):
+        raise NodeParameterError(f'{name} must be in (0.5, 1], got {value!r}')
+    return value
+
+
+_zero_or_one.rule = '0 or 1'
+_gate.rule = '(0.5, 1]'
 
 
 @dataclass(frozen=True)
@@ -112,92 +143,66 @@ class EstimatorConfig:
         Initial standard deviations: m, rad, m/s, rad/s.
     """
 
-    filter: str = 'kf'
-    prediction: str = 'fast'
-    sample_rate: float = 5000.0
-    sensor_delay: int = 1
-    sensor_noise: float = 1.0e-4
-    quantization: float = 0.098e-3
-    current_noise: float = 0.003
-    acceleration_noise: float = 0.1
-    angular_acceleration_noise: float = 50.0
-    bias_states: bool = False
-    bias_walk: float = 1.0e-8
-    initial_bias: float = 1.0e-3
-    magnet_strength: bool = False
-    initial_strength: float = 0.2
-    strength_walk: float = 1.0e-7
-    measurement: str = 'raw'
-    gate_probability: float = 0.99999
-    freeze_samples: int = 4
-    nis_window: int = 500
-    lost_samples: int = 500
-    initial_position: float = 1.0e-3
-    initial_angle: float = 0.03
-    initial_velocity: float = 0.02
-    initial_rate: float = 2.0
+    filter: str = setting('kf', 'kf (linear, default), ekf or ukf', choice(*FILTERS))
+    prediction: str = setting(
+        'fast',
+        'EKF/UKF process model: fast (one step per sample) or full (RK4)',
+        choice(*PREDICTIONS),
+    )
+    sample_rate: float = setting(5000.0, 'samples per second, Hz', _finite(positive=True))
+    sensor_delay: int = setting(1, 'samples of reading delay (the board: 1)', _zero_or_one)
+    sensor_noise: float = setting(1.0e-4, 'Hall noise, T rms per axis', _finite(positive=True))
+    quantization: float = setting(0.098e-3, 'Hall resolution, T per LSB', _finite())
+    current_noise: float = setting(0.003, 'current held over a sample, A rms', _finite())
+    acceleration_noise: float = setting(0.1, 'unmodelled force per mass, m/s^2 rms', _finite())
+    angular_acceleration_noise: float = setting(
+        50.0, 'unmodelled torque per inertia, rad/s^2 rms', _finite()
+    )
+    bias_states: bool = setting(False, 'estimate a field offset per sensor axis')
+    bias_walk: float = setting(
+        1.0e-8, 'random walk of the bias states, T rms per sample', _finite()
+    )
+    initial_bias: float = setting(
+        1.0e-3, 'initial std of the bias states, T', _finite(positive=True)
+    )
+    magnet_strength: bool = setting(False, "estimate the magnet's strength as one state (kf only)")
+    initial_strength: float = setting(
+        0.2, 'initial std of the strength state, relative', _finite(positive=True)
+    )
+    strength_walk: float = setting(
+        1.0e-7, 'random walk of the strength state, relative rms per sample', _finite()
+    )
+    measurement: str = setting(
+        'raw',
+        "what the readings are: raw (the sensors) or board (a V4x PC-control board's "
+        'processed field; kf only)',
+        choice(*MEASUREMENTS),
+    )
+    gate_probability: float = setting(0.99999, 'per-sensor chi-square gate probability', _gate)
+    freeze_samples: int = setting(
+        4, 'identical readings in a row that mark a sensor frozen', integer(2)
+    )
+    nis_window: int = setting(500, 'samples of the diagnostics NIS window', integer(2))
+    lost_samples: int = setting(
+        500,
+        'samples without an accepted reading before the filter restarts from its prior',
+        integer(2),
+    )
+    initial_position: float = setting(1.0e-3, 'initial position std, m', _finite(positive=True))
+    initial_angle: float = setting(0.03, 'initial angle std, rad', _finite(positive=True))
+    initial_velocity: float = setting(0.02, 'initial velocity std, m/s', _finite(positive=True))
+    initial_rate: float = setting(2.0, 'initial body-rate std, rad/s', _finite(positive=True))
 
     def __post_init__(self):
-        if self.filter not in FILTERS:
-            raise EstimatorConfigError(
-                f'filter must be one of {", ".join(FILTERS)}, got {self.filter!r}'
-            )
-        if self.prediction not in PREDICTIONS:
-            raise EstimatorConfigError(
-                f'prediction must be one of {", ".join(PREDICTIONS)}, got {self.prediction!r}'
-            )
-        if self.measurement not in MEASUREMENTS:
-            raise EstimatorConfigError(
-                f'measurement must be one of {", ".join(MEASUREMENTS)}, got {self.measurement!r}'
-            )
+        check_settings(self, EstimatorConfigError)
         if self.measurement == 'board' and (self.filter != 'kf' or self.magnet_strength):
             raise EstimatorConfigError(
                 'measurement board is supported by the kf filter without magnet_strength only, '
                 f'got filter {self.filter!r}, magnet_strength {self.magnet_strength!r}'
             )
-        if self.sensor_delay not in (0, 1) or isinstance(self.sensor_delay, bool):
-            raise EstimatorConfigError(f'sensor_delay must be 0 or 1, got {self.sensor_delay!r}')
-        for name in ('bias_states', 'magnet_strength'):
-            if not isinstance(getattr(self, name), bool):
-                raise EstimatorConfigError(
-                    f'{name} must be true or false, got {getattr(self, name)!r}'
-                )
         if self.magnet_strength and self.filter != 'kf':
             raise EstimatorConfigError(
                 f'magnet_strength is supported by the kf filter only, got filter {self.filter!r}'
-            )
-        for name in ('freeze_samples', 'nis_window', 'lost_samples'):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 2:
-                raise EstimatorConfigError(f'{name} must be an integer >= 2, got {value!r}')
-        positive = (
-            'sample_rate',
-            'sensor_noise',
-            'initial_position',
-            'initial_angle',
-            'initial_velocity',
-            'initial_rate',
-            'initial_bias',
-            'initial_strength',
-        )
-        non_negative = (
-            'quantization',
-            'current_noise',
-            'acceleration_noise',
-            'angular_acceleration_noise',
-            'bias_walk',
-            'strength_walk',
-        )
-        for name in positive + non_negative:
-            value = getattr(self, name)
-            ok = isinstance(value, (int, float)) and not isinstance(value, bool)
-            ok = ok and math.isfinite(value) and (value > 0 if name in positive else value >= 0)
-            if not ok:
-                need = 'positive' if name in positive else '>= 0'
-                raise EstimatorConfigError(f'{name} must be a finite number {need}, got {value!r}')
-        if not (0.5 < self.gate_probability <= 1.0):
-            raise EstimatorConfigError(
-                f'gate_probability must be in (0.5, 1], got {self.gate_probability!r}'
             )
 
     @classmethod

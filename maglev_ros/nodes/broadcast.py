@@ -15,10 +15,9 @@ from dataclasses import dataclass
 import numpy as np
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 
 from maglev_ros.loop import LoopSample, ObserverThread
-from maglev_ros.nodes.messages import split_stamp
+from maglev_ros.nodes.messages import command_message, split_stamp
 from maglev_ros.nodes.qos import SENSOR_QOS
 from maglev_ros.nodes.state_messages import EstimateEncoder
 from maglev_ros.physics.sample_encoder import SampleEncoder
@@ -71,12 +70,11 @@ class LoopBroadcaster(ObserverThread):
             node.create_publisher(types[t], t, SENSOR_QOS) for t in self._encoder.topics
         ]
         self._estimate_pub = node.create_publisher(Odometry, ESTIMATE_TOPIC, SENSOR_QOS)
-        self._command_pub = node.create_publisher(Float64MultiArray, COMMAND_TOPIC, SENSOR_QOS)
+        self._command_pub = node.create_publisher(JointState, COMMAND_TOPIC, SENSOR_QOS)
         self._clock_pub = node.create_publisher(Clock, CLOCK_TOPIC, SENSOR_QOS)
         self._estimates = EstimateEncoder()
         self._estimates.encode(0, np.zeros(12), np.eye(10))  # its kernel loads now, not later
         self._clock = Clock()
-        self._command = Float64MultiArray()
         self._wanted = [True] * (len(self._sample_pubs) + 3)
         self._count = 0
         self.published = 0
@@ -107,8 +105,7 @@ class LoopBroadcaster(ObserverThread):
             )
         if wanted[n + 1] and s.command is not None:
             total = s.command if s.excitation is None else s.command + s.excitation
-            self._command.data = total.tolist()
-            self._command_pub.publish(self._command)
+            self._command_pub.publish(command_message(s.stamp_ns, total))
         if wanted[n + 2]:
             self._clock.clock.sec, self._clock.clock.nanosec = split_stamp(s.stamp_ns)
             self._clock_pub.publish(self._clock)

@@ -16,7 +16,7 @@ simulator node:
 * ``maglev/currents`` (sensor_msgs/JointState, names x+ x- y+ y-): effort
   = coil current in A; V2x: the current implied by the applied PWM through
   the scaling below; V4x: the measured current.
-* subscribes ``maglev/currents/command`` (std_msgs/Float64MultiArray, 4
+* subscribes ``maglev/currents/command`` (sensor_msgs/JointState, effort: 4
   currents in A) and sends each valid command as one packet (V2x only; V4x
   is read-only and ignores commands);
 * service ``maglev/enable`` (std_srvs/SetBool): disabled means zero
@@ -87,7 +87,6 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 
 from maglev_ros.cdr import currents_layout, field_layout
@@ -117,6 +116,7 @@ from maglev_ros.nodes.contract import (  # shared with the simulator
     diagnostic_array,
     run_nodes,
 )
+from maglev_ros.nodes.messages import CommandMessageError, command_currents
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer
 from maglev_ros.topics import (
     COMMAND_TOPIC,
@@ -407,7 +407,7 @@ class DriverNode(Node):
         self._publish_calls: dict[int, list] = {}  # per burst length: bound publish_raw calls
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
         self._command_sub = self.create_subscription(
-            Float64MultiArray, COMMAND_TOPIC, self._on_command, COMMAND_QOS
+            JointState, COMMAND_TOPIC, self._on_command, COMMAND_QOS
         )
         self.samples_source: intra_process.Channel | None = None
         self._intra: list = []
@@ -508,8 +508,13 @@ class DriverNode(Node):
         """Zero the coils (V2x: zero packet; V4x PC control: 04); caller holds the lock."""
         self.link.send_zero(self.guard.zero)
 
-    def _on_command(self, msg: Float64MultiArray) -> None:
-        self._take_command(msg.data)
+    def _on_command(self, msg: JointState) -> None:
+        try:
+            currents = command_currents(msg)
+        except CommandMessageError as err:
+            self.get_logger().warning(f'rejected command: {err}', throttle_duration_sec=1.0)
+            return
+        self._take_command(currents)
 
     def _take_command(self, values) -> None:
         """Pass one command (currents, A) through the guard; send what it allows."""

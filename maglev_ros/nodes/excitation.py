@@ -1,7 +1,7 @@
 """Excitation node: ``ros2 run maglev_ros excitation``.
 
 Publishes identification inputs on ``maglev/currents/command``
-(std_msgs/Float64MultiArray, 4 currents in A, x+ x- y+ y-): PRBS, random
+(sensor_msgs/JointState, 4 currents in A, x+ x- y+ y-, stamped with the node's clock): PRBS, random
 binary, multisine or chirp (:mod:`maglev_ros.excitation`), with amplitude,
 band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
 -u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
@@ -31,7 +31,6 @@ from dataclasses import dataclass
 import numpy as np
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 
 from maglev_ros.excitation import (
     PATTERNS,
@@ -40,6 +39,7 @@ from maglev_ros.excitation import (
     excitation,
     pattern_signals,
 )
+from maglev_ros.nodes.messages import command_message
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -228,8 +228,7 @@ class ExcitationNode(Node):
         self._rest = [float(v) for v in cfg.offset]
         self._rows = self.commands.tolist()
         self.sent = 0
-        self._msg = Float64MultiArray()
-        self._pub = self.create_publisher(Float64MultiArray, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
+        self._pub = self.create_publisher(JointState, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         if cfg.trigger == 'sample':
             self.create_subscription(
                 JointState, CURRENTS_TOPIC, self._on_sample, SENSOR_QOS, raw=True
@@ -270,8 +269,7 @@ class ExcitationNode(Node):
             data = self._rest
         else:
             data = self._rows[self.sent % self.config.length]
-        self._msg.data = data
-        self._pub.publish(self._msg)
+        self._pub.publish(command_message(self.get_clock().now().nanoseconds, data))
         self.sent += 1
 
     def _on_sample(self, _raw: bytes) -> None:

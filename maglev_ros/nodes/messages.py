@@ -18,6 +18,9 @@ from sensor_msgs.msg import JointState, MagneticField
 from maglev_ros.topics import BASE_FRAME, COIL_NAMES, MAGNET_FRAME, sensor_frame
 
 __all__ = [
+    'CommandMessageError',
+    'command_currents',
+    'command_message',
     'currents_message',
     'diagnostic_array',
     'field_message',
@@ -103,6 +106,53 @@ def currents_message(t_ns: int, currents: Sequence[float]) -> JointState:
     msg = JointState(name=list(COIL_NAMES))
     _set_effort(msg, currents)
     return _stamp(msg, t_ns)
+
+
+class CommandMessageError(ValueError):
+    """A command message does not name the coils in the contract's order."""
+
+
+def command_message(t_ns: int, currents: Sequence[float]) -> JointState:
+    """Return a coil command (``maglev/currents/command``, ``.../excitation``): JointState, A.
+
+    Parameters
+    ----------
+    t_ns : int
+        Stamp of the sample the command answers, ns.
+    currents : sequence of float, shape (4,)
+        Commanded currents x+ x- y+ y-, A (``effort``).
+    """
+    return currents_message(t_ns, currents)
+
+
+def command_currents(msg: JointState) -> np.ndarray:
+    """Return a command's currents, A, in :data:`~maglev_ros.topics.COIL_NAMES` order.
+
+    Their count and values are the consumer's to check (the board's command
+    guard and the simulator count what they refuse).
+
+    Parameters
+    ----------
+    msg : JointState
+        A command (:func:`command_message`). Without names, or with the
+        coils' names in the contract's order, the efforts are taken as they
+        are; other names must be the coils' in another order (one per effort).
+
+    Raises
+    ------
+    CommandMessageError
+        If the names are not the coils'.
+    """
+    effort = np.asarray(msg.effort, dtype=float)
+    names = list(msg.name)
+    if not names or names == list(COIL_NAMES):
+        return effort
+    if sorted(names) != sorted(COIL_NAMES) or len(names) != effort.size:
+        raise CommandMessageError(
+            f'a command names the coils {list(COIL_NAMES)}, one effort each; got names '
+            f'{names} and {effort.size} efforts'
+        )
+    return effort[[names.index(c) for c in COIL_NAMES]]
 
 
 def odometry_message(t_ns: int, x: np.ndarray) -> Odometry:

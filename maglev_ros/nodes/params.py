@@ -1,363 +1,43 @@
-"""One parameter spec per node: declaration, validation, on-set rules and ``--help``.
+"""A node's parameter table on ROS: declaration and the on-set rules.
 
-A node writes each parameter once, as a :class:`Param` in a
-:class:`ParameterTable`; from that table come
-
-* the declaration (:meth:`ParameterTable.declare`): typed default,
-  ``ParameterDescriptor`` with description, read-only flag and range;
-* the type rules (:meth:`ParameterTable.validate`), the same at start-up and at
-  run time: an integer is accepted where a double is expected (``-p
-  sample_rate:=5000``), any other type is refused in one line naming the
-  parameter;
-* the per-parameter value rules (the ``check`` of each :class:`Param`:
-  :func:`choice`, :func:`number`, :func:`integer` or the node's own);
-* the on-set callback of the mutable parameters (:meth:`ParameterTable.on_set`),
-  which rebuilds the node's frozen config with the same ``build_config`` as
-  start-up;
-* the ``--help`` text (:meth:`ParameterTable.help_text`, :func:`help_requested`).
-
-Every parameter is declared with a value, so ``ros2 param dump`` lists all of
-them: a parameter whose default means "unset" (an initial state, a sensor
-list) has an empty list. Parameters are declared with dynamic typing and the
-table enforces its own type, because rclpy refuses an integer override of a
-double-typed parameter before any node code runs.
-
-This module does not import rclpy at import time (the table, the checks and
-the help are unit-testable without ROS).
+The table, its rules and ``--help`` are ROS-free (:mod:`maglev_ros.parameters`,
+where the core configs declare their fields); this subclass adds what needs a
+node: declaring every parameter with its descriptor, refusing removed ones, and
+the run-time on-set callback.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from typing import Any, NamedTuple
+from collections.abc import Callable
+
+from maglev_ros import parameters as _core
+from maglev_ros.parameters import (
+    PARAMS,
+    NodeParameterError,
+    Param,
+    choice,
+    config_params,
+    help_requested,
+    integer,
+    number,
+)
 
 __all__ = [
-    'KINDS',
+    'PARAMS',
     'NodeParameterError',
     'Param',
     'ParameterTable',
     'choice',
-    'coerce',
+    'config_params',
     'help_requested',
     'integer',
     'number',
 ]
 
 
-class NodeParameterError(ValueError):
-    """A node parameter has an invalid value or type (the message names both)."""
+class ParameterTable(_core.ParameterTable):
+    """A node's parameters (:class:`maglev_ros.parameters.ParameterTable`) on ROS."""
 
-
-#: Parameter kinds and their ``rcl_interfaces/ParameterType`` names.
-KINDS = {
-    'bool': 'PARAMETER_BOOL',
-    'integer': 'PARAMETER_INTEGER',
-    'double': 'PARAMETER_DOUBLE',
-    'string': 'PARAMETER_STRING',
-    'bool_array': 'PARAMETER_BOOL_ARRAY',
-    'integer_array': 'PARAMETER_INTEGER_ARRAY',
-    'double_array': 'PARAMETER_DOUBLE_ARRAY',
-    'string_array': 'PARAMETER_STRING_ARRAY',
-}
-_SCALAR_KIND = {bool: 'bool', int: 'integer', float: 'double', str: 'string'}
-_TYPE_WORDS = {
-    'bool': 'true or false',
-    'integer': 'an integer',
-    'double': 'a number',
-    'string': 'a string',
-    'bool_array': 'a list of true/false values',
-    'integer_array': 'a list of integers',
-    'double_array': 'a list of numbers',
-    'string_array': 'a list of strings',
-}
-
-Check = Callable[[str, Any], Any]
-
-
-class Param(NamedTuple):
-    """One node parameter.
-
-    Attributes
-    ----------
-    default : object
-        Default value; its Python type fixes the kind (a list for arrays).
-    description : str
-        One line for ``ros2 param describe`` and ``--help`` (units included).
-    kind : str, optional
-        One of :data:`KINDS`; needed only for an empty-list default.
-    check : callable, optional
-        ``check(name, value) -> value``: the value rule after the type rule
-        (raises :class:`NodeParameterError`); returns the value to keep.
-    mutable : bool
-        Whether it may change at run time (else read-only).
-    """
-
-    default: Any
-    description: str
-    kind: str | None = None
-    check: Check | None = None
-    mutable: bool = False
-
-    @property
-    def type_kind(self) -> str:
-        """The parameter's kind (:data:`KINDS` key)."""
-        if self.kind is not None:
-            return self.kind
-        default = self.default
-        if isinstance(default, (list, tuple)):
-            if not default:
-                raise ValueError('an empty-list default needs an explicit kind')
-            return _SCALAR_KIND[type(default[0])] + '_array'
-        return _SCALAR_KIND[type(default)]
-
-    @property
-    def constraints(self) -> str:
-        """The type and value rule in words (``ros2 param describe``, ``--help``)."""
-        rule = getattr(self.check, 'rule', '')
-        return f'{self.type_kind}{", " + rule if rule else ""}'
-
-
-def _type_error(name: str, kind: str, value: object) -> NodeParameterError:
-    return NodeParameterError(f'{name} must be {_TYPE_WORDS[kind]}, got {value!r}')
-
-
-def _scalar(name: str, kind: str, value: object) -> object:
-    if kind == 'double':
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise _type_error(name, 'double', value)
-        return float(value)
-    if kind == 'integer':
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise _type_error(name, 'integer', value)
-        return value
-    if kind == 'bool':
-        if not isinstance(value, bool):
-            raise _type_error(name, 'bool', value)
-        return value
-    if not isinstance(value, str):
-        raise _type_error(name, 'string', value)
-    return value
-
-
-def coerce(name: str, kind: str, value: object) -> object:
-    """Apply the type rule of ``kind`` to ``value``.
-
-    Parameters
-    ----------
-    name : str
-        Parameter name (for the message).
-    kind : str
-        One of :data:`KINDS`.
-    value : object
-        The value as rclpy holds it (arrays as list or array.array; None or
-        an empty array of any type for an empty array).
-
-    Returns
-    -------
-    object
-        ``float`` for a double (an integer accepted), tuple for an array.
-
-    Raises
-    ------
-    NodeParameterError
-        If the value is not of the kind.
-    """
-    if kind.endswith('_array'):
-        if value is None:
-            return ()
-        if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__'):
-            raise _type_error(name, kind, value)
-        items = list(value)
-        try:
-            return tuple(_scalar(name, kind[:-6], v) for v in items)
-        except NodeParameterError:
-            raise _type_error(name, kind, items) from None
-    return _scalar(name, kind, value)
-
-
-# --------------------------------------------------------------------------- value rules
-def choice(*allowed: str) -> Check:
-    """Check: the value is one of ``allowed`` ("must be one of a, b, got 'c'").
-
-    Parameters
-    ----------
-    *allowed : str
-        The accepted values.
-
-    Returns
-    -------
-    callable
-    """
-
-    def check(name: str, value: str) -> str:
-        if value not in allowed:
-            raise NodeParameterError(f'{name} must be one of {", ".join(allowed)}, got {value!r}')
-        return value
-
-    check.rule = f'one of {", ".join(allowed)}'
-    return check
-
-
-def number(low: float | None = None, *, above: bool = False, high: float | None = None) -> Check:
-    """Check: a finite number ``>= low`` (``> low`` if ``above``) and ``<= high``.
-
-    Parameters
-    ----------
-    low : float, optional
-        Lower bound (none if None).
-    above : bool
-        Exclude ``low`` itself.
-    high : float, optional
-        Upper bound, included (none if None).
-
-    Returns
-    -------
-    callable
-    """
-    bounds = []
-    if low is not None:
-        bounds.append(f'{">" if above else ">="} {low:g}')
-    if high is not None:
-        bounds.append(f'<= {high:g}')
-    text = ''.join(' ' + b for b in bounds[:1]) + ''.join(' and ' + b for b in bounds[1:])
-
-    def check(name: str, value: float) -> float:
-        ok = math.isfinite(value)
-        if ok and low is not None:
-            ok = value > low if above else value >= low
-        if ok and high is not None:
-            ok = value <= high
-        if not ok:
-            raise NodeParameterError(f'{name} must be a finite number{text}, got {value!r}')
-        return value
-
-    check.rule = text.strip()
-    return check
-
-
-def integer(low: int, high: int | None = None) -> Check:
-    """Check: an integer ``>= low`` (and ``<= high``).
-
-    Parameters
-    ----------
-    low : int
-        Lower bound, included.
-    high : int, optional
-        Upper bound, included.
-
-    Returns
-    -------
-    callable
-    """
-
-    def check(name: str, value: int) -> int:
-        if value < low or (high is not None and value > high):
-            if high is None:
-                raise NodeParameterError(f'{name} must be an integer >= {low}, got {value!r}')
-            raise NodeParameterError(f'{name} must be in {low} .. {high}, got {value!r}')
-        return value
-
-    check.rule = f'>= {low}' if high is None else f'{low} .. {high}'
-    return check
-
-
-# --------------------------------------------------------------------------- the table
-class ParameterTable(Mapping[str, Param]):
-    """A node's parameters, in declaration order.
-
-    Parameters
-    ----------
-    node_name : str
-        The node's default name (for ``--help``).
-    error : type
-        The node's error class (a :class:`NodeParameterError` subclass); rule
-        failures are raised as it.
-    params : mapping
-        ``name -> Param``.
-    """
-
-    def __init__(
-        self, node_name: str, error: type[NodeParameterError], params: Mapping[str, Param]
-    ) -> None:
-        if not issubclass(error, NodeParameterError):
-            raise TypeError(f'{error.__name__} must subclass NodeParameterError')
-        self.node_name = node_name
-        self.error = error
-        self._params = dict(params)
-        for name, param in self._params.items():
-            kind = param.type_kind
-            if kind not in KINDS:
-                raise ValueError(f'{name}: unknown parameter kind {kind!r}')
-
-    def __getitem__(self, name: str) -> Param:
-        return self._params[name]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._params)
-
-    def __len__(self) -> int:
-        return len(self._params)
-
-    @property
-    def mutable(self) -> tuple[str, ...]:
-        """Names of the parameters that may change at run time."""
-        return tuple(name for name, p in self._params.items() if p.mutable)
-
-    # -- rules -------------------------------------------------------------------
-    def check_value(self, name: str, value: object) -> object:
-        """Apply the type rule and the value rule of parameter ``name``.
-
-        Parameters
-        ----------
-        name : str
-            A parameter of the table.
-        value : object
-            Raw value.
-
-        Returns
-        -------
-        object
-            The value to keep (doubles as float, arrays as tuples).
-
-        Raises
-        ------
-        NodeParameterError
-            As the table's error class.
-        """
-        param = self._params[name]
-        try:
-            value = coerce(name, param.type_kind, value)
-            return value if param.check is None else param.check(name, value)
-        except NodeParameterError as err:
-            if isinstance(err, self.error):
-                raise
-            raise self.error(str(err)) from None
-
-    def validate(self, values: Mapping[str, object]) -> dict[str, object]:
-        """Apply every parameter's rules to ``values`` (a missing one takes its default).
-
-        Parameters
-        ----------
-        values : mapping
-            ``name -> raw value``.
-
-        Returns
-        -------
-        dict
-            ``name -> value`` in table order.
-
-        Raises
-        ------
-        NodeParameterError
-            As the table's error class, naming the first invalid parameter.
-        """
-        return {
-            name: self.check_value(name, values.get(name, param.default))
-            for name, param in self._params.items()
-        }
-
-    # -- ROS -------------------------------------------------------------------------
     def declare(self, node) -> dict[str, object]:
         """Declare every parameter on ``node`` and return the raw values.
 
@@ -371,9 +51,22 @@ class ParameterTable(Mapping[str, Param]):
         dict
             ``name -> value`` as rclpy holds it (to :meth:`validate`, or the
             node's ``build_config``).
+
+        Raises
+        ------
+        NodeParameterError
+            If a removed parameter was given a value.
         """
         from rcl_interfaces.msg import ParameterDescriptor
 
+        for name in self.removed:
+            # declared untyped to see whether an override names it, then undeclared
+            given = node.declare_parameter(
+                name, None, ParameterDescriptor(dynamic_typing=True)
+            ).value
+            node.undeclare_parameter(name)
+            if given is not None:
+                self.refuse_removed(name)
         values = {}
         for name, param in self._params.items():
             # Ranges go into the text, not the descriptor's range fields: rclpy
@@ -426,58 +119,3 @@ class ParameterTable(Mapping[str, Param]):
             return SetParametersResult(successful=True)
 
         return callback
-
-    # -- help ------------------------------------------------------------------------
-    def help_text(self, prog: str | None = None) -> str:
-        """Return the node's ``--help``: how to set parameters, then one line each.
-
-        Parameters
-        ----------
-        prog : str, optional
-            Executable name (default the node name).
-
-        Returns
-        -------
-        str
-        """
-        prog = prog or self.node_name
-        lines = [
-            f'usage: ros2 run maglev_ros {prog} [--ros-args -p NAME:=VALUE ...]',
-            '',
-            f'ROS 2 node {self.node_name}. Parameters (read-only unless marked '
-            '"settable at run time"):',
-        ]
-        width = max(len(name) for name in self._params)
-        for name, param in self._params.items():
-            default = param.default
-            shown = '[]' if isinstance(default, (list, tuple)) and not default else repr(default)
-            if isinstance(default, bool):
-                shown = str(default).lower()
-            extra = ', settable at run time' if param.mutable else ''
-            lines.append(
-                f'  {name:<{width}}  {param.constraints}, default {shown}{extra}: '
-                f'{param.description}'
-            )
-        return '\n'.join(lines) + '\n'
-
-
-def help_requested(args: Sequence[str] | None) -> bool:
-    """Whether the command line asks for ``--help`` (``-h``) before any ``--ros-args``.
-
-    Parameters
-    ----------
-    args : sequence of str or None
-        The full command line (``sys.argv``), or None for ``sys.argv``.
-
-    Returns
-    -------
-    bool
-    """
-    import sys
-
-    argv = list(sys.argv if args is None else args)
-    if '--ros-args' in argv:
-        argv = argv[: argv.index('--ros-args')]
-    if argv and not argv[0].startswith('-'):
-        argv = argv[1:]  # the program
-    return any(a in ('-h', '--help') for a in argv)

@@ -133,7 +133,7 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         Logger name for parameter errors.
     errors : tuple of exception types
         Parameter errors: logged in one line, exit status 2.
-    parameters : maglev_ros.nodes.params.ParameterTable, optional
+    parameters : maglev_ros.parameters.ParameterTable, optional
         The node's parameters: ``--help`` (``-h``) before ``--ros-args``
         prints them and returns 0 without starting ROS.
 

@@ -21,7 +21,7 @@ nodes from the board driver:
 * ``/diagnostics``: mode, run state, simulated time, real-time factor,
   commands, late commands, held samples, timeouts, crash reason/time/state.
 
-It subscribes ``maglev/currents/command`` (std_msgs/Float64MultiArray, 4
+It subscribes ``maglev/currents/command`` (sensor_msgs/JointState, effort: 4
 currents in A). With ``coil_dynamics`` a command drives the coil model as the
 board does: voltage = coil resistance x commanded current, clipped at the
 supply, then the coils' L/R dynamics. Services: ``maglev/simulator/reset``
@@ -70,12 +70,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
 from maglev_ros.nodes import contract, intra_process
 from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
+from maglev_ros.nodes.messages import CommandMessageError, command_currents
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -327,7 +327,7 @@ class SimulatorNode(Node):
             contract.LOCKSTEP_COMMAND_QOS if cfg.mode == 'lockstep' else contract.COMMAND_QOS
         )
         self._command_sub = self.create_subscription(
-            Float64MultiArray, contract.COMMAND_TOPIC, self._on_command, command_qos
+            JointState, contract.COMMAND_TOPIC, self._on_command, command_qos
         )
         self.create_service(Trigger, SIMULATOR_RESET_SERVICE, self._on_reset)
         self.create_service(SetBool, SIMULATOR_PAUSE_SERVICE, self._on_pause)
@@ -554,8 +554,13 @@ class SimulatorNode(Node):
 
     # -- stepping ---------------------------------------------------------------
 
-    def _on_command(self, msg: Float64MultiArray) -> None:
-        self._take_command(msg.data)
+    def _on_command(self, msg: JointState) -> None:
+        try:
+            currents = command_currents(msg)
+        except CommandMessageError as err:
+            self.get_logger().warning(f'rejected command: {err}', throttle_duration_sec=1.0)
+            return
+        self._take_command(currents)
 
     def _command_source_attached(self, name: str) -> None:
         """Drop the command subscription: a controller of this process sends them directly."""

@@ -4,7 +4,7 @@ import threading
 
 import pytest
 from rclpy.node import Node
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import JointState
 
 from maglev_ros.nodes.bringup import Bringup
 from maglev_ros.nodes.contract import LOCKSTEP_COMMAND_QOS
@@ -20,9 +20,7 @@ class Listener(Node):
         super().__init__(name, **kwargs)
         self.destroyed = destroyed
         self.received = 0
-        self.create_subscription(
-            Float64MultiArray, COMMAND_TOPIC, self._on_command, LOCKSTEP_COMMAND_QOS
-        )
+        self.create_subscription(JointState, COMMAND_TOPIC, self._on_command, LOCKSTEP_COMMAND_QOS)
 
     def _on_command(self, _msg):
         self.received += 1

@@ -12,11 +12,10 @@ response every command is zero.
 """
 
 import numpy as np
-import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import JointState
 from waiting import wait_for
 
 from maglev_ros import topics
@@ -47,7 +46,7 @@ def _x0():
     return [5e-4, 0.0, z_eq] + [0.0] * 9
 
 
-def _graph(ctx, command_timeout, mode='lqr', intra_process=False):
+def _graph(ctx, command_timeout, mode='lqr'):
     sim = SimulatorNode(
         context=ctx,
         parameter_overrides=params(
@@ -67,7 +66,7 @@ def _graph(ctx, command_timeout, mode='lqr', intra_process=False):
     )
     est = EstimatorNode(
         context=ctx,
-        parameter_overrides=params(diagnostics_period=0.2, intra_process=intra_process),
+        parameter_overrides=params(diagnostics_period=0.2),
     )
     ctrl = ControllerNode(
         context=ctx,
@@ -98,9 +97,9 @@ class _Peer:
             SENSOR_QOS,
         )
         n.create_subscription(
-            Float64MultiArray,
+            JointState,
             topics.COMMAND_TOPIC,
-            lambda m: self.commands.append(list(m.data)),
+            lambda m: self.commands.append(list(m.effort)),
             LOCKSTEP_COMMAND_QOS,
         )
         n.create_subscription(
@@ -113,9 +112,8 @@ class _Peer:
 
 def _start(sim, spinner_nodes, ctx, est=None, ctrl=None):
     spinner = Spinner(ctx, spinner_nodes)
-    # the controller and the estimator (unless it takes the samples in-process)
-    currents = 1 if est is not None and est.source is not None else 2
-    wait_for(lambda: sim._current_pub.get_subscription_count() >= currents, what='discovery')
+    # the controller and the estimator
+    wait_for(lambda: sim._current_pub.get_subscription_count() >= 2, what='discovery')
     # the peer hears every estimate and every command from the first on
     if est is not None:
         wait_for(lambda: est._pub.get_subscription_count() >= 2, what='estimate discovery')
@@ -125,15 +123,12 @@ def _start(sim, spinner_nodes, ctx, est=None, ctrl=None):
     return spinner
 
 
-@pytest.mark.parametrize('intra_process', [False, True])
-def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx, intra_process):
+def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx):
     # s of simulated time: the settling; the 60 s hold runs on the ROS-free loop
-    # (test/controller), which these nodes equal sample by sample; intra_process: the
-    # estimator takes the simulator's samples in this process, with the same numbers
+    # (test/controller), which these nodes equal sample by sample
     duration = 1.0
     n = int(duration * RATE)
-    sim, est, ctrl = _graph(ctx, command_timeout=120.0, intra_process=intra_process)
-    assert (est.source is not None) == intra_process and (est.streams is None) == intra_process
+    sim, est, ctrl = _graph(ctx, command_timeout=120.0)
     peer = _Peer(ctx)
     spinner = _start(sim, [sim, est, ctrl, peer.node], ctx, est, ctrl)
     try:
@@ -194,8 +189,6 @@ def test_cut_estimator_input_gives_zero_currents_and_an_error(ctx):
         wait_for(lambda: len(peer.estimates) >= 1000, timeout=60.0, what='1000 estimates')
         assert ctrl.controller.status().level == 'OK'
         spinner.executor.remove_node(est)  # the estimator's input is cut
-        if est.streams is not None:  # its sample streams' own thread too
-            est.streams.close()
         sim.session.command_timeout = 0.002  # the simulator holds the command and goes on
         n_cmd = len(peer.commands)
         wait_for(

@@ -12,7 +12,7 @@ the magnet within 0.5 mm of its set-point while excited.
 import numpy as np
 from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64MultiArray
+from sensor_msgs.msg import JointState
 from waiting import wait_for
 
 from maglev_ros import topics
@@ -107,9 +107,9 @@ def test_the_excitation_is_added_and_published_as_the_core_adds_it(ctx):
     ):
         subscriptions.append(
             peer.create_subscription(
-                Float64MultiArray,
+                JointState,
                 topic,
-                lambda m, received=received: received.append(list(m.data)),
+                lambda m, received=received: received.append(list(m.effort)),
                 LOCKSTEP_COMMAND_QOS,
             )
         )

@@ -16,7 +16,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 from waiting import wait_for
 
@@ -26,6 +25,7 @@ from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.v2x_stream import record_size
 from maglev_ros.hardware.virtual_board import VirtualBoard, VirtualBoardError
 from maglev_ros.nodes.driver import DriverNode, DriverParameterError, build_config
+from maglev_ros.nodes.messages import command_message
 
 TIMEOUT = 15.0  # s, generous: the machine is shared
 RELIABLE_DEEP = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
@@ -58,9 +58,7 @@ class Harness:
         self.peer.create_subscription(
             DiagnosticArray, '/diagnostics', self._sink(self.diagnostics), 10
         )
-        self.commands = self.peer.create_publisher(
-            Float64MultiArray, 'maglev/currents/command', 100
-        )
+        self.commands = self.peer.create_publisher(JointState, 'maglev/currents/command', 100)
         self.enable_client = self.peer.create_client(SetBool, 'maglev/enable')
         self.executors = []
         for node in (self.driver, self.peer):
@@ -78,7 +76,7 @@ class Harness:
         return store
 
     def command(self, currents):
-        self.commands.publish(Float64MultiArray(data=[float(c) for c in currents]))
+        self.commands.publish(command_message(0, [float(c) for c in currents]))
 
     def command_until(self, currents, board, expected):
         """Publish until the board applied ``expected`` (the first messages after
@@ -497,12 +495,12 @@ def test_shutdown_by_signal_sends_zeros(ctx, domain, signum, repeat):
         )
         try:
             peer = rclpy.create_node('driver_signal_peer', context=ctx)
-            pub = peer.create_publisher(Float64MultiArray, 'maglev/currents/command', 10)
+            pub = peer.create_publisher(JointState, 'maglev/currents/command', 10)
             deadline = time.monotonic() + 30.0
             while last_accepted(board) != (600, 600, 600, 600):
                 assert time.monotonic() < deadline, 'the driver process never applied a command'
                 assert proc.poll() is None, proc.stdout.read()
-                pub.publish(Float64MultiArray(data=[0.6] * 4))
+                pub.publish(command_message(0, [0.6] * 4))
                 time.sleep(0.05)
             time.sleep(0.5)  # records flow
             proc.send_signal(signum)

@@ -19,13 +19,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
 
 from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware
 from maglev_ros.hardware.virtual_board import VirtualBoard
 from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.driver import DriverNode
+from maglev_ros.nodes.messages import command_message
 from maglev_ros.nodes.runtime import Spinner
 from maglev_ros.topics import COMMAND_TOPIC, CURRENTS_TOPIC, field_topic
 
@@ -122,7 +122,7 @@ def test_a_composed_controller_takes_over_the_command_input(ctx, board):
     driver = _driver(ctx, board.path, current_limit=1.0)
     command_topic = driver.resolve_topic_name(COMMAND_TOPIC)
     peer = rclpy.create_node('driver_composed_commands', context=ctx)
-    commands = peer.create_publisher(Float64MultiArray, COMMAND_TOPIC, 10)
+    commands = peer.create_publisher(JointState, COMMAND_TOPIC, 10)
     spinner = Spinner(ctx, [driver, peer])
     try:
         wait_for(lambda: commands.get_subscription_count() > 0, what='the command subscription')
@@ -136,7 +136,7 @@ def test_a_composed_controller_takes_over_the_command_input(ctx, board):
         wait_for(lambda: (250, -500, 1000, 0) in _accepted(board), what='the command')
         assert driver.counters['commands_rejected'] == 1
         assert driver.counters['commands_clamped'] == 1
-        commands.publish(Float64MultiArray(data=[0.1, 0.1, 0.1, 0.1]))  # nobody listens
+        commands.publish(command_message(0, [0.1, 0.1, 0.1, 0.1]))  # nobody listens
         time.sleep(0.3)
     finally:
         spinner.close()

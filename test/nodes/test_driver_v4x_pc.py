@@ -18,7 +18,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool
 from waiting import wait_for
 
@@ -28,6 +27,7 @@ from maglev_ros.hardware.scaling import CurrentScaling
 from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware, adc_current
 from maglev_ros.hardware.virtual_board import VirtualBoard
 from maglev_ros.nodes.driver import BoardNotFoundError, DriverNode
+from maglev_ros.nodes.messages import command_message
 
 TIMEOUT = 20.0  # s, generous: the machine is shared
 SCALING = CurrentScaling.from_supply(12.0, 4.0, full_scale=255)  # 85 counts/A
@@ -116,9 +116,7 @@ class Harness:
         self.peer.create_subscription(
             DiagnosticArray, '/diagnostics', lambda m: self.diagnostics.append(m), 10
         )
-        self.commands = self.peer.create_publisher(
-            Float64MultiArray, 'maglev/currents/command', 100
-        )
+        self.commands = self.peer.create_publisher(JointState, 'maglev/currents/command', 100)
         self.enable_client = self.peer.create_client(SetBool, 'maglev/enable')
         self.executors = []
         for node in (self.driver, self.peer):
@@ -134,7 +132,7 @@ class Harness:
         deadline = time.monotonic() + TIMEOUT
         while fw(board, 'pwm').tolist() != list(pwm):
             assert time.monotonic() < deadline, f'command {currents} never reached the board'
-            self.commands.publish(Float64MultiArray(data=[float(c) for c in currents]))
+            self.commands.publish(command_message(0, [float(c) for c in currents]))
             time.sleep(0.02)
 
     def enable(self, flag):
@@ -245,7 +243,7 @@ def test_disable_resets_the_coils(board, make_harness):
     assert board.wait_until(lambda b: b.firmware.requests[proto.RESET] > before, TIMEOUT)
     assert fw(board, 'pwm').tolist() == [0, 0, 0, 0]
     for _ in range(10):  # disabled: commands give zero
-        h.commands.publish(Float64MultiArray(data=[1.0, -1.0, 0.5, -0.5]))
+        h.commands.publish(command_message(0, [1.0, -1.0, 0.5, -0.5]))
         time.sleep(0.02)
     assert fw(board, 'pwm').tolist() == [0, 0, 0, 0]
 
@@ -312,17 +310,17 @@ def test_signal_resets_the_coils(ctx, domain, board, signum):
     )
     try:
         peer = rclpy.create_node('driver_v4x_pc_signal_peer', context=ctx)
-        pub = peer.create_publisher(Float64MultiArray, 'maglev/currents/command', 10)
+        pub = peer.create_publisher(JointState, 'maglev/currents/command', 10)
         deadline = time.monotonic() + 30.0
         while fw(board, 'pwm').tolist() != [51, -51, -17, 17]:
             assert time.monotonic() < deadline, 'the driver process never applied a command'
             assert proc.poll() is None, proc.stdout.read()
-            pub.publish(Float64MultiArray(data=[0.6, -0.6, -0.2, 0.2]))
+            pub.publish(command_message(0, [0.6, -0.6, -0.2, 0.2]))
             time.sleep(0.05)
         before = resets(board)
         proc.send_signal(signum)  # the command keeps coming: only the shutdown zeroes
         while proc.poll() is None:
-            pub.publish(Float64MultiArray(data=[0.6, -0.6, -0.2, 0.2]))
+            pub.publish(command_message(0, [0.6, -0.6, -0.2, 0.2]))
             time.sleep(0.01)
             assert time.monotonic() < deadline + 15.0
         output = proc.stdout.read()

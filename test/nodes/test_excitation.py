@@ -8,7 +8,6 @@ import pytest
 import rclpy
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
-from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
 
 from maglev_ros.nodes import contract
@@ -55,9 +54,9 @@ def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
     peer = rclpy.create_node('excitation_test_peer', context=ctx)
     commands, currents = [], []
     peer.create_subscription(
-        Float64MultiArray,
+        JointState,
         contract.COMMAND_TOPIC,
-        lambda m: commands.append(list(m.data)),
+        lambda m: commands.append(list(m.effort)),
         contract.LOCKSTEP_COMMAND_QOS,
     )
     peer.create_subscription(
@@ -100,9 +99,9 @@ def test_timer_trigger_publishes_at_its_rate(ctx):
     peer = rclpy.create_node('excitation_timer_peer', context=ctx)
     got = []
     peer.create_subscription(
-        Float64MultiArray,
+        JointState,
         contract.COMMAND_TOPIC,
-        lambda m: got.append(list(m.data)),
+        lambda m: got.append(list(m.effort)),
         contract.COMMAND_QOS,
     )
     spinner = contract.Spinner(ctx, [excite, peer])
@@ -195,7 +194,7 @@ def test_sigterm_ends_the_node_cleanly(ctx):
         node = rclpy.create_node('excitation_signal_peer', context=ctx)
         got = []
         node.create_subscription(
-            Float64MultiArray, contract.COMMAND_TOPIC, got.append, contract.COMMAND_QOS
+            JointState, contract.COMMAND_TOPIC, got.append, contract.COMMAND_QOS
         )
         executor = SingleThreadedExecutor(context=ctx)
         executor.add_node(node)

@@ -10,7 +10,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 
 from maglev_ros.nodes.loop import LoopNode, LoopParameterError
 from maglev_ros.nodes.qos import SENSOR_QOS
@@ -30,7 +29,7 @@ def test_the_loop_node_publishes_samples_estimates_and_commands_in_stamp_order(c
         ('field', MagneticField, 'maglev/sensor_0/field'),
         ('currents', JointState, 'maglev/currents'),
         ('estimate', Odometry, 'maglev/state/estimate'),
-        ('command', Float64MultiArray, 'maglev/currents/command'),
+        ('command', JointState, 'maglev/currents/command'),
         ('true', Odometry, 'maglev/state/true'),
     ]:
         listener.create_subscription(msg_type, topic, keep(key), SENSOR_QOS)
@@ -54,7 +53,7 @@ def test_the_loop_node_publishes_samples_estimates_and_commands_in_stamp_order(c
     s = stamps('currents')
     assert np.all(np.diff(s) > 0) and np.all(np.diff(s) % 200_000 == 0)
     assert set(stamps('estimate')) <= set(s) | set(stamps('true'))
-    assert all(len(m.data) == 4 and max(map(abs, m.data)) <= 1.0 for m in got['command'])
+    assert all(len(m.effort) == 4 and max(map(abs, m.effort)) <= 1.0 for m in got['command'])
     assert got['field'][0].header.frame_id == 'maglev_sensor_0'
     status = got['diag'][-1].status[0]
     assert status.name == 'maglev_loop: loop'

@@ -21,13 +21,13 @@ from nav_msgs.msg import Odometry
 from rclpy.parameter import Parameter
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
 
 from maglev_ros import topics
-from maglev_ros.nodes.controller import READY_AFTER_S, ControllerNode
+from maglev_ros.loop.commander import READY_AFTER_S
+from maglev_ros.nodes.controller import ControllerNode
 from maglev_ros.nodes.estimator import EstimatorNode
-from maglev_ros.nodes.messages import odometry_message
+from maglev_ros.nodes.messages import command_message, odometry_message
 from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import Spinner
 from maglev_ros.nodes.simulator import SimulatorNode
@@ -93,9 +93,7 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
             trigger='estimate', sample_rate=1000.0, input_timeout=0.05, diagnostics_period=10.0
         ),
     )
-    listener, commands = _listener(
-        ctx, Float64MultiArray, topics.COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS
-    )
+    listener, commands = _listener(ctx, JointState, topics.COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
     diags = []
     listener.create_subscription(
         DiagnosticArray, topics.DIAGNOSTICS_TOPIC, lambda m: diags.extend(m.status), 10
@@ -111,18 +109,18 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
         # commands every input_timeout (the simulator's wait_for_controller starts on them)
         wait_for(lambda: len(commands) >= 2, what='the ready commands')
         assert time.monotonic() - heard >= READY_AFTER_S
-        assert all(list(c.data) == [0.0] * 4 for c in commands)
+        assert all(list(c.effort) == [0.0] * 4 for c in commands)
         x = x_eq.copy()
         x[0] += 2e-4  # 0.2 mm off in x: the LQR pushes back
         for k in range(5):
-            ctrl._on_estimate_only(serialize_message(odometry_message((k + 1) * 1_000_000, x)))
+            ctrl._on_estimate_only(odometry_message((k + 1) * 1_000_000, x))
         answers = ctrl.commands  # published so far: the ready ones, then one per estimate
         wait_for(lambda: len(commands) >= answers, what='one command per estimate')
-        pushed = [np.array(c.data) for c in commands[:answers] if any(c.data)]
+        pushed = [np.array(c.effort) for c in commands[:answers] if any(c.effort)]
         assert len(pushed) == 5 and all(np.all(np.abs(c) <= 1.0) for c in pushed)
         # silence: after input_timeout (50 ms of the node's clock) one zero command
         wait_for(lambda: len(commands) >= answers + 1, timeout=60.0, what='the zero command')
-        assert list(commands[answers].data) == [0.0] * 4
+        assert list(commands[answers].effort) == [0.0] * 4
         wait_for(
             lambda: any(s.level == DiagnosticStatus.ERROR for s in diags),
             timeout=60.0,
@@ -130,43 +128,6 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
         )
         time.sleep(0.3)
         assert len(commands) == answers + 1  # once per silence, no more ready commands
-    finally:
-        spinner.close()
-        ctrl.destroy_node()
-
-
-def test_controller_stream_thread_answers_the_newest_estimate_of_a_wake_up(ctx):
-    """Estimates published together reach the stream thread as one wake-up: one answer."""
-    model = make_model('maggy_v2')
-    x_eq = model.hover_state(find_equilibria(model)[0].z)
-    ctrl = ControllerNode(
-        context=ctx,
-        parameter_overrides=_params(trigger='estimate', sample_rate=1000.0, input_timeout=0.5),
-    )
-    listener, commands = _listener(
-        ctx, Float64MultiArray, topics.COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS
-    )
-    spinner = Spinner(ctx, [listener])
-    try:
-        assert ctrl._estimate_streams is not None  # the default: a thread of its own
-        wait_for(lambda: ctrl._pub.get_subscription_count() >= 1, what='discovery')
-        x = x_eq.copy()
-        raws = []
-        for k in range(3):
-            x[0] = x_eq[0] + 1e-4 * (k + 1)  # the newest is the farthest off
-            raws.append(serialize_message(odometry_message((k + 1) * 1_000_000, x)))
-        ctrl._on_estimates([raws])  # one wake-up that took three estimates
-        wait_for(lambda: len(commands) >= 1, what='the command')
-        time.sleep(0.2)
-        assert len(commands) == 1 and ctrl.skipped_estimates == 2
-        want = ctrl.controller.last_command
-        fresh = ControllerNode(
-            context=ctx,
-            parameter_overrides=_params(trigger='estimate', sample_rate=1000.0, input_timeout=0.5),
-        )
-        fresh._on_estimate_only(raws[-1])  # the newest alone gives the same command
-        assert np.array_equal(fresh.controller.last_command, want) and np.any(want != 0)
-        fresh.destroy_node()
     finally:
         spinner.close()
         ctrl.destroy_node()
@@ -184,13 +145,13 @@ def test_realtime_simulator_waits_for_its_controller(ctx):
     spinner = Spinner(ctx, [sim])
     try:
         node = rclpy.create_node('a_controller', context=ctx)
-        pub = node.create_publisher(Float64MultiArray, topics.COMMAND_TOPIC, 10)
+        pub = node.create_publisher(JointState, topics.COMMAND_TOPIC, 10)
         wait_for(lambda: sim.command_publishers >= 1, what='discovery')
         time.sleep(0.5)  # a publisher is not yet a controller: no command, no step
         assert sim.counters['samples'] == 0 and not sim.session.started
 
         def commanded():
-            pub.publish(Float64MultiArray(data=[0.0] * 4))
+            pub.publish(command_message(0, [0.0] * 4))
             return sim.counters['samples'] > 0
 
         wait_for(commanded, timeout=60.0, period=0.05, what='stepping on the first command')
@@ -198,65 +159,3 @@ def test_realtime_simulator_waits_for_its_controller(ctx):
     finally:
         spinner.close()
         sim.destroy_node()
-
-
-def test_composed_loop_in_process_levitates_in_real_time_and_publishes_its_topics(ctx):
-    """intra_process: samples, estimates and commands handed over in the simulator's thread.
-
-    The loop is closed in one thread, so it holds whatever the machine's load
-    (a busy machine slows the simulation, not the loop); the topics still go out.
-    """
-    sim = SimulatorNode(
-        context=ctx,
-        parameter_overrides=_params(
-            mode='realtime',
-            magnet='free',
-            marker_rate=0.0,
-            coil_dynamics=True,
-            sensor_delay=1,
-            sensor_noise=1e-4,
-            sensor_quantization=0.098e-3,
-            wait_for_controller=True,
-            start_subscribers=1,
-        ),
-    )
-    est = EstimatorNode(
-        context=ctx,
-        parameter_overrides=_params(
-            sensor_noise=1e-4, quantization=0.098e-3, publish_rate=1000.0, intra_process=True
-        ),
-    )
-    ctrl = ControllerNode(
-        context=ctx,
-        parameter_overrides=_params(
-            sample_rate=1000.0, trigger='estimate', input_timeout=0.02, intra_process=True
-        ),
-    )
-    assert est.source is sim.samples_source and est.streams is None
-    assert ctrl.estimates is est.estimates and sim._command_sub is None  # one command source
-    assert sim.session.max_batch == sim.session.burst
-    listener, estimates = _listener(ctx, Odometry, topics.ESTIMATE_TOPIC, SENSOR_QOS)
-    commands = []
-    listener.create_subscription(
-        Float64MultiArray, topics.COMMAND_TOPIC, commands.append, LOCKSTEP_COMMAND_QOS
-    )
-    true = []
-    listener.create_subscription(Odometry, topics.TRUE_STATE_TOPIC, true.append, SENSOR_QOS)
-    spinner = Spinner(ctx, [sim, est, ctrl, listener])
-    try:
-        wait_for(lambda: sim.counters['samples'] >= 5000, timeout=120.0, what='1 s simulated')
-    finally:
-        sim.set_paused(True)
-        spinner.close()
-    assert not sim.session.crashed
-    assert ctrl.controller.status().level == 'OK', ctrl.controller.status().message
-    z_eq = find_equilibria(make_model('maggy_v2'))[0].z
-    x = np.array([[m.pose.pose.position.x, m.pose.pose.position.y, m.pose.pose.position.z]
-                  for m in true[-2500:]])  # fmt: skip
-    assert len(true) >= 4000 and np.all(np.abs(x - [0.0, 0.0, z_eq]) < 4e-4)  # held
-    # every estimate answered by a command (and ready zeros before the first), all on
-    # the topics too
-    assert est.published >= 900 and ctrl.commands >= est.published
-    assert len(estimates) >= 900 and len(commands) >= len(estimates)
-    for node in (ctrl, est, sim, listener):
-        node.destroy_node()

@@ -16,7 +16,6 @@ from rclpy.qos import QoSProfile
 from rclpy.serialization import deserialize_message, serialize_message
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 from waiting import wait_for
@@ -25,6 +24,7 @@ from maglev_ros.cdr import odometry_layout
 from maglev_ros.cdr.batch import RawMessageBatch
 from maglev_ros.cdr.typestore import jazzy_typestore
 from maglev_ros.nodes import contract
+from maglev_ros.nodes.messages import command_message
 from maglev_ros.nodes.simulator import (
     SimulatorNode,
     SimulatorParameterError,
@@ -59,7 +59,7 @@ class Peer:
             history=contract.SENSOR_QOS.history,
         )
         self.pub = self.node.create_publisher(
-            Float64MultiArray, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS
+            JointState, contract.COMMAND_TOPIC, contract.LOCKSTEP_COMMAND_QOS
         )
         # streams: the 5 kHz streams besides the currents this peer takes (all by
         # default); each costs the shared executor ~130 us a sample
@@ -107,7 +107,7 @@ class Peer:
     def _on_sample(self, msg):
         self.currents.append(msg)
         if self.commands is not None and self.sent < len(self.commands):
-            self.pub.publish(Float64MultiArray(data=self.commands[self.sent].tolist()))
+            self.pub.publish(command_message(0, self.commands[self.sent].tolist()))
             self.sent += 1
 
     def drain(self, quiet=0.5):
@@ -402,7 +402,7 @@ def test_realtime_follows_commands_and_pauses(make_peer):
     wait_for(
         lambda: (
             any(list(m.effort) == [0.5, -0.5, 0.0, 0.0] for m in peer.currents[-50:])
-            or peer.pub.publish(Float64MultiArray(data=[0.5, -0.5, 0.0, 0.0]))
+            or peer.pub.publish(command_message(0, [0.5, -0.5, 0.0, 0.0]))
         ),
         what='the command applied',
     )

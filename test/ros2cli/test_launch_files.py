@@ -175,7 +175,7 @@ def a_command(listener) -> list[float]:
     estimator falls behind the real-time samples, and the controller then
     commands zero currents, as it must (stale input, ERROR on /diagnostics).
     """
-    data = first_message(heard(listener))['data']
+    data = first_message(heard(listener))['effort']
     assert len(data) == 4 and all(abs(v) <= 1.0 for v in data), data
     return data
 
@@ -250,7 +250,7 @@ def test_separate_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2,
     # listening before the launch (types given: no discovery needed): the simulator
     # starts with its controller, and a magnet lost on a loaded machine stops the samples
     estimates = listen(ros2, '/maglev/state/estimate', 'nav_msgs/msg/Odometry')
-    commands = listen(ros2, '/maglev/currents/command', 'std_msgs/msg/Float64MultiArray')
+    commands = listen(ros2, '/maglev/currents/command', 'sensor_msgs/msg/JointState')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml', 'record:=true',
                         'separate:=true', f'bag:={bag}', 'sample_rate:=1000.0')  # fmt: skip
     launch.wait_for(r'\[maglev_simulator\]: .* realtime at', START_TIMEOUT)
@@ -286,7 +286,7 @@ def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp
     )  # fmt: skip
     port = board.wait_for(r'^(/\S+)$', START_TIMEOUT)[1]
     estimates = listen(ros2, '/maglev/state/estimate', 'nav_msgs/msg/Odometry')
-    commands = listen(ros2, '/maglev/currents/command', 'std_msgs/msg/Float64MultiArray')
+    commands = listen(ros2, '/maglev/currents/command', 'sensor_msgs/msg/JointState')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop_board.launch.xml', f'port:={port}')
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
     launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
@@ -301,7 +301,7 @@ def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp
 
 def _excitation(listener) -> list[float]:
     """The controller's excitation a :func:`listen` heard: 4 currents within its amplitude."""
-    data = first_message(heard(listener))['data']
+    data = first_message(heard(listener))['effort']
     assert len(data) == 4 and all(abs(v) <= 0.1 + 1e-12 for v in data), data
     return data
 
@@ -315,7 +315,7 @@ def test_closed_loop_lab_launch_excites_identifies_records_and_stops_cleanly(ros
     (with the excitation) reads back complete.
     """
     bag = tmp_path / 'lab_bag'
-    excitation = listen(ros2, '/maglev/currents/excitation', 'std_msgs/msg/Float64MultiArray')
+    excitation = listen(ros2, '/maglev/currents/excitation', 'sensor_msgs/msg/JointState')
     model = listen(ros2, '/maglev/identifier/model', 'std_msgs/msg/Float64MultiArray')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop_lab.launch.xml', f'bag:={bag}',
                         'settle:=0.05')  # fmt: skip
@@ -348,7 +348,7 @@ def test_closed_loop_lab_board_launch_excites_records_and_stops_cleanly(ros2, tm
     )  # fmt: skip
     port = board.wait_for(r'^(/\S+)$', START_TIMEOUT)[1]
     bag = tmp_path / 'lab_board_bag'
-    excitation = listen(ros2, '/maglev/currents/excitation', 'std_msgs/msg/Float64MultiArray')
+    excitation = listen(ros2, '/maglev/currents/excitation', 'sensor_msgs/msg/JointState')
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop_lab_board.launch.xml',
                         f'port:={port}', f'bag:={bag}', 'settle:=0.0')  # fmt: skip
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)

@@ -5,7 +5,7 @@ import random
 
 import pytest
 
-from maglev_ros.nodes.sample_assembly import SampleAssembler
+from maglev_ros.loop.sample_assembly import SampleAssembler
 
 WAIT = 10
 

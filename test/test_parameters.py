@@ -1,4 +1,4 @@
-"""The parameter spec (maglev_ros.nodes.params), without ROS."""
+"""The parameter spec (maglev_ros.parameters), without ROS."""
 
 from __future__ import annotations
 
@@ -6,11 +6,11 @@ import importlib
 
 import pytest
 
-from maglev_ros.nodes.params import (
+from maglev_ros.nodes.params import ParameterTable
+from maglev_ros.parameters import (
     KINDS,
     NodeParameterError,
     Param,
-    ParameterTable,
     choice,
     coerce,
     help_requested,
@@ -146,3 +146,35 @@ def test_every_node_has_one_table_and_one_error_base(module):
         assert param.description, name
         assert param.type_kind in KINDS
         coerce(name, param.type_kind, param.default)  # every default has its kind
+
+
+_REMOVED = ParameterTable(
+    'demo',
+    DemoError,
+    {'rate': Param(1.0, 'a rate, Hz')},
+    removed={'intra_process': 'the loop node composes the hot path (ros2 run maglev_ros loop)'},
+)
+
+
+def test_a_removed_parameter_is_refused_with_its_replacement():
+    assert _REMOVED.validate({'rate': 2.0}) == {'rate': 2.0}
+    with pytest.raises(DemoError, match=r'^intra_process was removed: the loop node composes'):
+        _REMOVED.validate({'rate': 2.0, 'intra_process': True})
+
+
+@pytest.mark.parametrize('given', [False, True])
+def test_a_removed_parameter_given_to_a_node_is_refused_and_absent_otherwise(ctx, given):
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+
+    overrides = [Parameter('intra_process', value=True)] if given else []
+    node = Node('demo', context=ctx, parameter_overrides=overrides)
+    try:
+        if given:
+            with pytest.raises(DemoError, match='intra_process was removed: the loop node'):
+                _REMOVED.declare(node)
+        else:
+            assert _REMOVED.declare(node) == {'rate': 1.0}
+            assert not node.has_parameter('intra_process')
+    finally:
+        node.destroy_node()
