@@ -129,7 +129,11 @@ def main() -> int:
         print(f'loop: {run.samples} samples in {time.monotonic() - t0:.1f} s; {run.reason}')
     finally:
         child.send_signal(signal.SIGINT)
-        child.wait(timeout=10)
+        try:
+            child.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            child.kill()
+            child.wait()
     print(f'load after: {load()}')
     truth = np.loadtxt(truth_path, delimiter=',', skiprows=1, ndmin=2)
     during = truth[(truth[:, 7] >= run.started) & (truth[:, 7] <= run.ended)]

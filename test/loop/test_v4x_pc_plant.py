@@ -141,3 +141,54 @@ def test_commands_become_pair_differences_of_pwm_counts():
     assert applied.tolist() == pytest.approx(
         [34 / counts, -34 / counts, 85 / counts, -85 / counts]  # y clamped at 1 A
     )
+
+
+class _OwnSupply:
+    """One firmware across unplug and plug (a board on its own supply keeps its PWM)."""
+
+    def __init__(self):
+        rng = np.random.default_rng(1)
+        self.firmware = V4xPcFirmware(
+            lambda pwm, t: (np.array([0.5, -0.3, 40.0]) + rng.normal(0, 0.01, 3))[None, :],
+            scaling=SETTINGS.scaling,
+            init_delay=0.0,
+        )
+        self.offset_us = 0
+
+    def __call__(self):
+        self.offset_us = self.firmware.now_us
+        return self
+
+    def advance_to(self, t_us):
+        return self.firmware.advance_to(self.offset_us + t_us)
+
+    def __getattr__(self, name):
+        return getattr(self.firmware, name)
+
+
+def test_an_unplug_on_the_virtual_board_ends_at_zero_current_once_plugged_back():
+    import threading
+
+    from maglev_ros.hardware.virtual_board import VirtualBoard
+
+    factory = _OwnSupply()
+    with VirtualBoard(factory) as board:
+        assert board.wait_until(lambda b: b.firmware.running, 30.0)
+        link = V4xPcLink(board.path, timeout=0.25)
+        plant = V4xPcPlant(link, SETTINGS.scaling, 1.0, sample_rate=100.0, reset_wait=20.0)
+        plant.open()
+        plant.write(np.array([0.6, -0.6, 0.2, -0.2]), 0)
+        plant.read()
+        with board.lock:
+            assert factory.firmware.pwm.tolist() == [51, -51, 17, -17]
+        board.unplug()
+        block = plant.read()
+        assert block.crashed and block.reason.startswith('link error: write to')
+        with board.lock:  # no watchdog: the coils stay driven while the cable is out
+            assert factory.firmware.pwm.tolist() == [51, -51, 17, -17]
+        threading.Timer(0.5, board.plug).start()
+        plant.close()  # reopens the port when the cable is back, and sends 04
+        assert plant.coils_reset
+        with board.lock:
+            assert factory.firmware.pwm.tolist() == [0, 0, 0, 0]
+            assert factory.firmware.applied[-1][1:] == (0, 0)
