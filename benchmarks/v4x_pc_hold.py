@@ -20,6 +20,11 @@ Run::
 
     python benchmarks/v4x_pc_hold.py --duration 60 --out /tmp/v4x_hold
 
+``--emulated`` runs the same loop on the emulated firmware in this process on
+simulated time (:class:`maglev_ros.hardware.emulated_port.EmulatedPort`: the
+board's timing exact, as fast as the machine computes): the hold and the
+identification without the machine's load in the figures.
+
 ``--plant-polarization 1.1 --plant-mass 0.9`` runs a board whose magnet is not
 the believed one (a perturbed parameter file for the board; the loop believes
 ``--params``): the bag for ``maglev-calibrate --measurement board``.
@@ -52,26 +57,7 @@ LIMIT_M = 0.5e-3  # |x|, |y| must stay below this
 
 def start_board(args, out: Path) -> tuple[subprocess.Popen, str, Path, str]:
     """Start the virtual board; return the process, its port, the truth file and its params."""
-    params = args.params
-    if args.plant_polarization != 1.0 or args.plant_mass != 1.0:
-        from maglev_ros.greybox import write_parameters
-
-        p = load_parameters(args.params)
-        magnet = dataclasses.replace(
-            p.magnet,
-            polarization=p.magnet.polarization * args.plant_polarization,
-            mass=p.magnet.mass * args.plant_mass,
-        )
-        params = str(
-            write_parameters(
-                p.replace(magnet=magnet, name='perturbed'),
-                out / 'plant.yaml',
-                [
-                    f'{args.params} with polarization x{args.plant_polarization}, '
-                    f'mass x{args.plant_mass}'
-                ],
-            )
-        )
+    params = plant_parameters(args, out)
     truth = out / 'truth.csv'
     link = out / 'ttyMAGGY'
     cmd = [
@@ -86,6 +72,90 @@ def start_board(args, out: Path) -> tuple[subprocess.Popen, str, Path, str]:
     return child, path, truth, params
 
 
+def plant_parameters(args, out: Path):
+    """Return the board's parameter set: ``--params``, or it perturbed (written to out/)."""
+    if args.plant_polarization == 1.0 and args.plant_mass == 1.0:
+        return args.params
+    from maglev_ros.greybox import write_parameters
+
+    p = load_parameters(args.params)
+    magnet = dataclasses.replace(
+        p.magnet,
+        polarization=p.magnet.polarization * args.plant_polarization,
+        mass=p.magnet.mass * args.plant_mass,
+    )
+    note = f'{args.params} with polarization x{args.plant_polarization}, mass x{args.plant_mass}'
+    return str(
+        write_parameters(p.replace(magnet=magnet, name='perturbed'), out / 'plant.yaml', [note])
+    )
+
+
+def run_real_time(args, settings, samples, excitation, out):
+    """Run the loop against maglev-virtual-board on a pty; the truth from its --truth file."""
+    board: dict = {}
+
+    def start() -> None:  # after the loop is built: the free magnet falls from set-up's end
+        board['child'], board['port'], board['truth'], board['params'] = start_board(args, out)
+
+    link = V4xPcLink(str(out / 'ttyMAGGY'), timeout=REPLY_TIMEOUT_S, open_timeout=30.0)
+    t0 = time.monotonic()
+    try:
+        run = run_v4x_pc_loop(
+            settings, link, samples, excitation, progress=_progress(args), ready=start
+        )
+        print(f'loop: {run.samples} samples in {time.monotonic() - t0:.1f} s; {run.reason}')
+    finally:
+        child = board.get('child')
+        if child is not None:
+            child.send_signal(signal.SIGINT)
+            try:
+                child.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                child.kill()
+                child.wait()
+    truth = np.loadtxt(board['truth'], delimiter=',', skiprows=1, ndmin=2)
+    during = truth[(truth[:, 7] >= run.started) & (truth[:, 7] <= run.ended)]
+    return run, during, board['params']
+
+
+def run_emulated(args, settings, samples, excitation, out):
+    """Run the loop on the emulated firmware in this process, on the board's simulated time."""
+    from maglev_ros.hardware.emulated_port import EmulatedPort
+    from maglev_ros.hardware.physics_plant import make_simulator_plant
+    from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
+    from maglev_ros.physics import SensorEffects
+
+    params = plant_parameters(args, out)
+    sensor = SensorEffects(noise_rms=1e-4, quantization=0.098e-3)
+    scaling = settings.scaling
+    plant = make_simulator_plant('free', params, scaling, sensor, args.seed)
+    setup = make_simulator_plant('absent', params, scaling, sensor, args.seed + 1)
+    port = EmulatedPort(V4xPcFirmware(plant, scaling=scaling, setup_plant=setup))
+    link = V4xPcLink('emulated', serial_link=port, timeout=REPLY_TIMEOUT_S, clock=port.clock)
+    rows = []
+
+    def sleep(seconds: float) -> None:
+        port.sleep(seconds)
+        sim = plant.simulator
+        rows.append((port.clock(), *sim.state[:5], float(sim.crashed), port.clock()))
+
+    t0 = time.monotonic()
+    run = run_v4x_pc_loop(
+        settings, link, samples, excitation, clock=port.clock, sleep=sleep,
+        progress=_progress(args),
+    )  # fmt: skip
+    print(f'loop: {run.samples} samples in {time.monotonic() - t0:.1f} s (emulated); {run.reason}')
+    return run, np.array(rows).reshape(-1, 8), params
+
+
+def _progress(args):
+    def progress(done: int) -> None:
+        if done % (10 * int(args.rate)) == 0:
+            print(f'  {done / args.rate:5.0f} s of {args.duration:g} s', flush=True)
+
+    return progress
+
+
 def load() -> str:
     """Return the load averages (``uptime``)."""
     return ' '.join(f'{v:.2f}' for v in os.getloadavg())
@@ -98,11 +168,16 @@ def main() -> int:
     p.add_argument('--rate', type=float, default=1000.0, help='samples per second (Hz)')
     p.add_argument('--params', default='maggy_v2', help='believed set (and the board plant)')
     p.add_argument('--amplitude', type=float, default=0.05, help='PRBS per pair, A (0: none)')
-    p.add_argument('--band', type=float, nargs=2, default=(0.0, 0.6), help='of Nyquist')
+    p.add_argument(
+        '--band', type=float, nargs=2, default=(0.0, 0.05), help='of Nyquist (default 0-25 Hz)'
+    )
     p.add_argument('--seed', type=int, default=0)
     p.add_argument('--plant-polarization', type=float, default=1.0)
     p.add_argument('--plant-mass', type=float, default=1.0)
     p.add_argument('--out', help='directory for bag/, truth.csv (default: a temp dir)')
+    p.add_argument(
+        '--emulated', action='store_true', help='the firmware in this process, simulated time'
+    )
     args = p.parse_args()
     out = Path(args.out or tempfile.mkdtemp(prefix='v4x_hold_'))
     out.mkdir(parents=True, exist_ok=True)
@@ -116,27 +191,11 @@ def main() -> int:
             'prbs', args.amplitude, tuple(args.band), 'pairs', seed=args.seed, length=samples
         )
     print(f'load before: {load()}')
-    child, port, truth_path, plant_params = start_board(args, out)
-    try:
-        link = V4xPcLink(port, timeout=REPLY_TIMEOUT_S, open_timeout=15.0)
-        t0 = time.monotonic()
-
-        def progress(done: int) -> None:
-            if done % (10 * int(args.rate)) == 0:
-                print(f'  {done / args.rate:5.0f} s of {args.duration:g} s', flush=True)
-
-        run = run_v4x_pc_loop(settings, link, samples, excitation, progress=progress)
-        print(f'loop: {run.samples} samples in {time.monotonic() - t0:.1f} s; {run.reason}')
-    finally:
-        child.send_signal(signal.SIGINT)
-        try:
-            child.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            child.kill()
-            child.wait()
+    if args.emulated:
+        run, during, plant_params = run_emulated(args, settings, samples, excitation, out)
+    else:
+        run, during, plant_params = run_real_time(args, settings, samples, excitation, out)
     print(f'load after: {load()}')
-    truth = np.loadtxt(truth_path, delimiter=',', skiprows=1, ndmin=2)
-    during = truth[(truth[:, 7] >= run.started) & (truth[:, 7] <= run.ended)]
     crashed = bool(during[:, 6].any()) if during.size else True
     peak = np.abs(during[:, 1:3]).max(axis=0) if during.size else np.full(2, np.nan)
     rms = np.sqrt(np.mean(during[:, 1:3] ** 2, axis=0)) if during.size else np.full(2, np.nan)

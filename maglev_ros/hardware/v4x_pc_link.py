@@ -123,6 +123,10 @@ class V4xPcLink:
         4.3 s after power-up, and it answers once set-up ends.
     serial_link : SerialLink, optional
         The port handle (default: a ``SerialLink`` at 115200 baud).
+    clock : callable, optional
+        Monotonic time, s, of the timeouts (default :func:`time.monotonic`; an
+        :class:`~maglev_ros.hardware.emulated_port.EmulatedPort`'s clock runs
+        them on the emulated board's time).
 
     Examples
     --------
@@ -138,12 +142,14 @@ class V4xPcLink:
         timeout: float = 0.1,
         open_timeout: float = 6.0,
         serial_link: SerialLink | None = None,
+        clock=time.monotonic,
     ) -> None:
         if not timeout > 0 or not open_timeout > 0:
             raise ValueError(
                 f'timeout and open_timeout must be > 0 s, got {timeout!r}, {open_timeout!r}'
             )
         self.port = port
+        self._clock = clock
         self.timeout = float(timeout)
         self.open_timeout = float(open_timeout)
         self._serial = serial_link or SerialLink(port, V4X_PC_BAUD, read_timeout=_POLL_S)
@@ -219,8 +225,8 @@ class V4xPcLink:
             True when ``EE`` came back.
         """
         self._serial.write(proto.request(proto.PING))
-        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
-        while time.monotonic() < deadline:
+        deadline = self._clock() + (self.timeout if timeout is None else timeout)
+        while self._clock() < deadline:
             data = self._serial.read()
             if data == bytes([proto.PING_REPLY]):
                 return True
@@ -339,7 +345,7 @@ class V4xPcLink:
         try:
             self._serial.write(frames)
             payloads, problem, stamp_ns = self._read_frames(
-                time.monotonic() + self.timeout, len(codes)
+                self._clock() + self.timeout, len(codes)
             )
         except LinkError:
             self._safe_reset()  # the port may be gone: best effort
@@ -381,7 +387,7 @@ class V4xPcLink:
         got = bytearray()
         stamp_ns = 0
         while True:
-            if time.monotonic() > deadline:
+            if self._clock() > deadline:
                 self.counts.dropped_bytes += len(got)
                 return [bytes(got)], _TIMEOUT, 0
             data = self._serial.read()
@@ -408,24 +414,24 @@ class V4xPcLink:
         A board with another firmware may never be quiet (a V2x board streams):
         the deadline ends the drain, and the ping then fails.
         """
-        quiet_until = time.monotonic() + _QUIET_S
-        while time.monotonic() < min(quiet_until, deadline):
+        quiet_until = self._clock() + _QUIET_S
+        while self._clock() < min(quiet_until, deadline):
             data = self._serial.read()
             if data:
                 self.counts.dropped_bytes += len(data)
-                quiet_until = time.monotonic() + _QUIET_S
+                quiet_until = self._clock() + _QUIET_S
 
     def _resync(self, timeout: float) -> None:
         """End a half frame, drop stale bytes, ping until ``EE``; LinkError on no answer."""
         self.counts.resyncs += 1
-        deadline = time.monotonic() + timeout
+        deadline = self._clock() + timeout
         self._serial.write(DELIMITER)
         while True:
             self._drain(deadline)
-            if self.ping(min(0.25, max(deadline - time.monotonic(), 0.01))):
+            if self.ping(min(0.25, max(deadline - self._clock(), 0.01))):
                 self._drain(deadline + _QUIET_S)  # bytes after EE (none from a sound board)
                 return
-            if time.monotonic() > deadline:
+            if self._clock() > deadline:
                 raise LinkError(
                     f'{self.port}: no answer to the ping (AA -> EE) within {timeout:g} s; '
                     f'expected a Maggy V4x board running the {FIRMWARE_NAME} '
@@ -444,7 +450,7 @@ class V4xPcLink:
         """Send ``04`` and wait briefly for its reply; never raise."""
         try:
             self._serial.write(proto.request(proto.RESET))
-            payloads, problem, _ = self._read_frames(time.monotonic() + self.timeout, 1)
+            payloads, problem, _ = self._read_frames(self._clock() + self.timeout, 1)
         except LinkError:
             return
         if not problem and payloads == [bytes([proto.RESET])]:

@@ -212,6 +212,7 @@ def run_v4x_pc_loop(
     clock=None,
     sleep=None,
     progress=None,
+    ready=None,
 ) -> V4xPcRun:
     """Open the board, run the closed loop for ``samples`` samples, zero the coils.
 
@@ -228,6 +229,10 @@ def run_v4x_pc_loop(
         The plant's clock (default the wall clock).
     progress : callable, optional
         ``progress(done)`` after each second of samples.
+    ready : callable, optional
+        Called once the loop is built (seconds of model set-up and compiling)
+        and before the board is opened: e.g. to start a virtual board, whose
+        free magnet falls from the end of its set-up unless the loop runs.
 
     Returns
     -------
@@ -253,6 +258,8 @@ def run_v4x_pc_loop(
     loop, plant = build_v4x_pc_loop(s, link, [log], ex, clock, sleep)
     log.applied_of = plant.applied
     now = clock or _time.monotonic
+    if ready is not None:
+        ready()
     plant.open()
     try:
         started = now()

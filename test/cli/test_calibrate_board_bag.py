@@ -38,7 +38,7 @@ def board_bag(tmp_path_factory):
         mass=nominal.magnet.mass * MASS,
     )
     plant, _, port, link = emulated_board(params=nominal.replace(magnet=magnet))
-    excitation = CommandExcitation('prbs', 0.05, (0.0, 0.6), 'pairs', length=SAMPLES)
+    excitation = CommandExcitation('prbs', 0.05, (0.0, 0.05), 'pairs', length=SAMPLES)
     run = run_v4x_pc_loop(SETTINGS, link, SAMPLES, excitation, clock=port.clock, sleep=port.sleep)
     assert run.samples == SAMPLES and not plant.crashed, run.reason
     bag = tmp_path_factory.mktemp('board') / 'bag'
