@@ -17,6 +17,9 @@ CLI_TOOLS = {
     'calibrate': 'maglev_ros.cli.calibrate:main',
     'study': 'maglev_ros.cli.study:main',
 }
+# The documentation site (mkdocs.yml): MkDocs, the Material theme, the API from the
+# numpy docstrings. The test suite builds it strictly, so the test extra has them too.
+DOCS = ['mkdocs>=1.6', 'mkdocs-material>=9.5', 'mkdocstrings[python]>=0.26']
 # ROS nodes, named plainly for ``ros2 run maglev_ros <node>``.
 NODES: dict[str, str] = {
     'virtual_board': 'maglev_ros.cli.virtual_board:main',
@@ -76,7 +79,9 @@ setup(
             'ros-jazzy-rclpy[fastrtps]',
             'ros-jazzy-common-interfaces',
         ],
+        'docs': DOCS,
         'test': [
+            *DOCS,
             'pytest>=7',
             'pytest-timeout>=2',
             'pyarrow>=14',

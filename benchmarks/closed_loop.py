@@ -72,7 +72,7 @@ from pathlib import Path
 import numpy as np
 from process_cpu import Processes, benchmark_environment, cpu_seconds, thread_cpu_seconds
 
-from maglev_ros.nodes.closed_loop_lab import IDENTIFIER_CHANNELS
+from maglev_ros.cli.closed_loop_lab import IDENTIFIER_CHANNELS
 from maglev_ros.topics import (
     CLOCK_TOPIC,
     COMMAND_TOPIC,

@@ -289,7 +289,7 @@ def measure_simulator_rtf(seconds: float, topics: str) -> dict:
         spinner = contract.Spinner(ctx, [sim])
         try:
             deadline = time.monotonic() + 60.0
-            while sim._field_pubs[0].get_subscription_count() == 0:
+            while sim.currents_subscribers == 0:
                 if time.monotonic() > deadline:
                     raise RuntimeError('the recorder process never subscribed')
                 time.sleep(0.05)

@@ -419,7 +419,7 @@ class ParameterTable(Mapping[str, Param]):
         width = max(len(name) for name in self._params)
         for name, param in self._params.items():
             default = param.default
-            shown = '[]' if isinstance(default, (list, tuple)) and not default else repr(default)
+            shown = repr(list(default)) if isinstance(default, (list, tuple)) else repr(default)
             if isinstance(default, bool):
                 shown = str(default).lower()
             extra = ', settable at run time' if param.mutable else ''

@@ -204,3 +204,15 @@ def seed_numba_cache(source: Path, installed: Path) -> int:
         shutil.copy2(cached, target)
         copied += 1
     return copied
+
+
+@pytest.fixture(scope='session')
+def main_job(tmp_path_factory: pytest.TempPathFactory):
+    """README command 1 (the main job), run once per session for the README and the pages.
+
+    Returns a ``doc_blocks.MainJob``: the directory it ran in (``lab/`` inside) and
+    what it printed.
+    """
+    from doc_blocks import run_main_job
+
+    return run_main_job(tmp_path_factory.mktemp('main_job'), next_domain_id())

@@ -1,8 +1,9 @@
 """The launch files name only installed executables and declared parameters.
 
-Checked without the launch package: the XML is parsed with ``xml.etree``; an
-executable is a console script of this distribution, its node module's
-``PARAMETERS`` are the parameters it declares.
+The XML is parsed with ``xml.etree`` (an executable is a console script of
+this distribution, its node module's ``PARAMETERS`` are the parameters it
+declares), and each file's conditions are evaluated by the launch package for
+each plant (:func:`launched`), without starting anything.
 """
 
 import importlib
@@ -46,25 +47,100 @@ def test_nodes_executables_and_parameters_exist(path):
                 assert name in args, f'{path.name}: undeclared launch argument {name!r}'
 
 
-@pytest.mark.parametrize('name', ['lab.launch.xml', 'lab_board.launch.xml'])
-def test_lab_launch_exists(name):
-    assert (LAUNCH / name).is_file()
+def launched(name: str, **args: str) -> dict[str, dict[str, str]]:
+    """Evaluate a launch file's conditions with ``args``: ``{executable: {param: value}}``.
+
+    Parsed and evaluated by the launch package (its XML front end and
+    conditions), without starting anything.
+    """
+    import os
+    import sys
+
+    from launch.actions import DeclareLaunchArgument, GroupAction
+    from launch.frontend import Parser
+    from launch.utilities import perform_substitutions
+    from launch_ros.actions import Node
+
+    from launch import LaunchContext
+
+    os.environ.setdefault('AMENT_PREFIX_PATH', sys.prefix)  # the launch grammar's share
+    root, parser = Parser.load(str(LAUNCH / name))
+    context = LaunchContext()
+    context.launch_configurations.update(args)
+    nodes: dict[str, dict[str, str]] = {}
+
+    def walk(entities) -> None:
+        for entity in entities:
+            if isinstance(entity, DeclareLaunchArgument):
+                if entity.choices is not None and entity.name in args:
+                    assert args[entity.name] in entity.choices, entity.choices
+                if entity.name not in context.launch_configurations:
+                    value = perform_substitutions(context, entity.default_value)
+                    context.launch_configurations[entity.name] = value
+            elif entity.condition is not None and not entity.condition.evaluate(context):
+                continue
+            elif isinstance(entity, GroupAction):
+                walk(entity.get_sub_entities())
+            elif isinstance(entity, Node):
+                executable = perform_substitutions(context, entity.node_executable)
+                xml = [n for n in ET.parse(LAUNCH / name).getroot().iter('node')]
+                params = {}
+                for element in xml:
+                    if element.get('exec') == executable:
+                        for param in element.findall('param'):
+                            params[param.get('name')] = param.get('value')
+                nodes[executable] = params
+
+    walk(parser.parse_description(root).entities)
+    return nodes
+
+
+def test_three_launch_files_each_for_the_simulator_or_a_board():
+    assert sorted(p.name for p in LAUNCH.glob('*.launch.xml')) == [
+        'closed_loop.launch.xml', 'closed_loop_lab.launch.xml', 'lab.launch.xml',
+    ]  # fmt: skip
+    for name in ('lab.launch.xml', 'closed_loop.launch.xml', 'closed_loop_lab.launch.xml'):
+        root = ET.parse(LAUNCH / name).getroot()
+        plant = [a for a in root.findall('arg') if a.get('name') == 'plant']
+        assert plant and plant[0].get('default') == 'simulator', name
+        assert [c.get('value') for c in plant[0].findall('choice')] == ['simulator', 'board']
 
 
 @pytest.mark.parametrize(
-    'name, source',
+    ('name', 'args', 'executables'),
     [
-        ('closed_loop.launch.xml', 'simulator'),
-        ('closed_loop_board.launch.xml', 'driver'),
-        ('closed_loop_lab.launch.xml', 'simulator'),
-        ('closed_loop_lab_board.launch.xml', 'driver'),
+        ('lab.launch.xml', {}, ['simulator', 'excitation', 'recorder']),
+        ('lab.launch.xml', {'plant': 'board'}, ['driver', 'excitation', 'recorder']),
+        ('closed_loop.launch.xml', {}, ['loop']),
+        ('closed_loop.launch.xml', {'record': 'true'}, ['loop', 'recorder']),
+        ('closed_loop.launch.xml', {'plant': 'board'}, ['loop']),
+        ('closed_loop.launch.xml', {'separate': 'true'}, ['simulator', 'estimator', 'controller']),
+        (
+            'closed_loop.launch.xml',
+            {'separate': 'true', 'plant': 'board', 'record': 'true'},
+            ['driver', 'estimator', 'controller', 'recorder'],
+        ),
+        (
+            'closed_loop_lab.launch.xml',
+            {},
+            ['simulator', 'estimator', 'controller', 'identifier', 'recorder'],
+        ),
+        (
+            'closed_loop_lab.launch.xml',
+            {'plant': 'board'},
+            ['driver', 'estimator', 'controller', 'identifier', 'recorder'],
+        ),
     ],
 )
-def test_closed_loop_launch_files_run_source_estimator_and_controller(name, source):
-    root = ET.parse(LAUNCH / name).getroot()
-    executables = [node.get('exec') for node in root.findall('.//node')]
-    assert {source, 'estimator', 'controller'} <= set(executables), executables
-    assert executables.count('controller') == 1  # the only command publisher
+def test_each_plant_starts_its_nodes(name, args, executables):
+    assert list(launched(name, **args)) == executables
+
+
+@pytest.mark.parametrize('plant', ['simulator', 'board'])
+def test_closed_loop_lab_excites_identifies_and_records_the_excitation(plant):
+    nodes = launched('closed_loop_lab.launch.xml', plant=plant)
+    assert nodes['controller']['excitation_signal'] == '$(var signal)'
+    assert 'maglev/currents/excitation' in nodes['recorder']['topics']
 
 
 CONFIG = LAUNCH.parent / 'config'
@@ -93,26 +169,8 @@ def test_parameter_files_name_declared_parameters_with_their_types(path):
                 assert value == default, f'{path.name}: {name} = {value!r}, default {default!r}'
 
 
-@pytest.mark.parametrize(
-    'name', ['closed_loop_lab.launch.xml', 'closed_loop_lab_board.launch.xml']
-)
-def test_closed_loop_lab_launch_files_excite_identify_and_record(name):
-    root = ET.parse(LAUNCH / name).getroot()
-    nodes = {node.get('exec'): node for node in root.findall('.//node')}
-    assert {'estimator', 'controller', 'identifier', 'recorder'} <= set(nodes), sorted(nodes)
-    params = {p.get('name'): p.get('value') for p in nodes['controller'].findall('param')}
-    assert params['excitation_signal'] == '$(var signal)'
-    recorded = {p.get('name'): p.get('value') for p in nodes['recorder'].findall('param')}
-    assert 'maglev/currents/excitation' in recorded['topics']
-
-
 def test_closed_loop_launch_composes_the_loop_unless_separate():
     root = ET.parse(LAUNCH / 'closed_loop.launch.xml').getroot()
-    composed = [g for g in root.findall('group') if g.get('unless') == '$(var separate)']
-    assert [n.get('exec') for n in composed[0].findall('node')] == ['loop', 'recorder']
-    separate = [g for g in root.findall('group') if g.get('if') == '$(var separate)']
-    assert [n.get('exec') for n in separate[0].findall('node')] == [
-        'simulator', 'estimator', 'controller', 'recorder',
-    ]  # fmt: skip
     defaults = {a.get('name'): a.get('default') for a in root.findall('arg')}
     assert defaults['separate'] == 'false'
+    assert launched('closed_loop.launch.xml', record='true')['loop']['plant'] == '$(var plant)'

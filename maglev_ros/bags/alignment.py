@@ -2,8 +2,10 @@
 
 Stamps
     A message's time is its ``header.stamp`` if the message has a header (and
-    the stamps are not all zero), else the bag's log (receive) time: commands
-    (``std_msgs/Float64MultiArray``) carry no header.
+    the stamps are not all zero), else the bag's log (receive) time. Commands
+    are ``sensor_msgs/JointState`` stamped with the sample they answer, so they
+    align with it exactly; bags recorded before carry them as header-less
+    ``std_msgs/Float64MultiArray``, placed by the time the recorder logged them.
 
 The rule
     The first output topic defines the time base.  ``Ts`` is given or estimated

@@ -29,11 +29,20 @@ from dataclasses import dataclass
 from rosbags.interfaces import Nodetype
 from rosbags.typesys.store import Typestore
 
-from ..topics import CHANNEL_UNITS, current_channel
+from ..topics import CHANNEL_UNITS, COMMAND_TOPIC, EXCITATION_TOPIC, current_channel
 from .errors import BagError
 from .names import normalize_topic
 
-__all__ = ['Channel', 'FieldRef', 'check_field', 'parse_channel', 'parse_field_path', 'unit_of']
+__all__ = [
+    'COMMAND_TOPICS',
+    'Channel',
+    'FieldRef',
+    'check_field',
+    'command_alias',
+    'parse_channel',
+    'parse_field_path',
+    'unit_of',
+]
 
 _NUMBER = r'(?:\d+(?:\.\d*)?|\.\d+)(?:[eE][+-]?\d+)?'
 _TOPIC = r'/?[A-Za-z_~][A-Za-z0-9_/]*'
@@ -188,6 +197,32 @@ def parse_channel(spec: str) -> Channel:
     return Channel(name or text.replace(' ', ''), tuple(terms), str(spec).strip())
 
 
+#: Topics of coil commands, whose currents are ``data[i]`` (Float64MultiArray) or
+#: ``effort[i]`` (JointState): see :mod:`~maglev_ros.bags.command_fields`.
+COMMAND_TOPICS = frozenset(normalize_topic(t) for t in (COMMAND_TOPIC, EXCITATION_TOPIC))
+
+
+def command_alias(ref: FieldRef) -> FieldRef | None:
+    """Return the other spelling of a command current (``data[i]`` <-> ``effort[i]``).
+
+    Parameters
+    ----------
+    ref : FieldRef
+        A field reference.
+
+    Returns
+    -------
+    FieldRef or None
+        The reference in the other message type, or None if ``ref`` is not
+        ``data[i]`` / ``effort[i]`` of a command topic.
+    """
+    path = ref.path
+    if ref.topic not in COMMAND_TOPICS or len(path) != 2 or not isinstance(path[1], int):
+        return None
+    other = {'data': 'effort', 'effort': 'data'}.get(path[0])
+    return None if other is None else FieldRef(ref.topic, (other, path[1]))
+
+
 def _fields(typestore: Typestore, msgtype: str) -> list[tuple[str, tuple]]:
     return list(typestore.fielddefs[msgtype][1])
 
@@ -262,10 +297,12 @@ def unit_of(channel: Channel) -> str:
     """
     units = set()
     for _, ref in channel.terms:
-        path = format_field_path(ref.path)
+        alias = command_alias(ref)  # a command's data[i] is its effort[i]
+        paths = [format_field_path(r.path) for r in (ref, alias) if r is not None]
         unit = next(
             (
                 u
+                for path in paths
                 for pattern, prefix, u in CHANNEL_UNITS
                 if re.fullmatch(pattern, ref.topic) and path.startswith(prefix)
             ),

@@ -22,6 +22,7 @@ import numpy as np
 from maglev_ros.cdr.layout import cdr_layout, decode_columns
 
 from .channels import FieldRef, check_field, format_field_path
+from .command_fields import resolve_ref
 from .errors import BagError
 from .reader import BagReader
 
@@ -188,7 +189,9 @@ def read_topics(
         An open bag.
     refs : mapping of str to sequence of FieldRef
         Per topic, the fields to extract (each is checked against the message
-        definition before anything is read).
+        definition before anything is read; a command's ``data[i]`` or
+        ``effort[i]`` reads the array the recorded type has, see
+        :mod:`~maglev_ros.bags.command_fields`).
     fast : bool
         Decode topics whose messages share one byte layout by strided numpy
         reads (:mod:`~maglev_ros.cdr.layout`); False always deserialises
@@ -205,6 +208,8 @@ def read_topics(
         Unknown topic or field, no messages, a truncated storage file.
     """
     infos = {topic: reader.topic(topic) for topic in refs}  # all missing topics first
+    # a command's current as the recorded type holds it (data[i] <-> effort[i])
+    refs = {t: [resolve_ref(ref, infos[t].msgtype) for ref in refs[t]] for t in refs}
     for topic, info in infos.items():
         for ref in refs[topic]:
             check_field(reader.typestore, info.msgtype, ref)

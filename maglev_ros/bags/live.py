@@ -16,14 +16,18 @@ Pairing.  The default trigger is the topic of the first input channel (else
 the first output's).  In a lockstep simulation with a controller, the
 controller's ``maglev/currents/command`` for sample ``t`` is the last message
 of that sample, so triggering on it pairs ``y[t]`` with ``u[t]`` exactly as the
-bag converter does (the command is logged at the sample's time): the online
-and batch estimates are of the same samples.  Messages are any objects with
-the fields (rclpy messages or rosbags dataclasses); nothing here imports rclpy.
+bag converter does: the online and batch estimates are of the same samples.
+:class:`StampAligner` completes samples by their stamps first, and pairs
+stamped commands by theirs whatever the order of arrival
+(:mod:`~maglev_ros.bags.online_identification` puts them together).  Messages
+are any objects with the fields (rclpy messages or rosbags dataclasses);
+nothing here imports rclpy.
 """
 
 from __future__ import annotations
 
 import math
+from collections import deque
 from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
@@ -250,18 +254,29 @@ class StampAligner:
     would be paired with the previous burst's command. The newest completed
     set waits for the next sample (one sample of latency).
 
+    ``held_stamped``: inputs held by zero-order hold that carry the stamp of the
+    sample they answer (commands as ``sensor_msgs/JointState``). A completed
+    set then also waits until each such topic has delivered a message stamped
+    at or after it; the held messages stamped at or before it are released
+    first, so the sample's input is the newest command stamped at or before
+    it: the bag converter's zero-order hold, whatever the order in which the
+    topics' messages arrive. At most ``depth`` completed sets wait (then the
+    oldest goes with the inputs there are).
+
     Parameters
     ----------
     topics : sequence of str
         Every topic the channels read (absolute names).
     stamped : collection of str
-        Those whose messages carry a header stamp.
+        Those whose messages carry a header stamp and make up a sample.
     trigger : str
         The sampler's trigger topic (released last in a stamp's set).
     depth : int
         Incomplete stamps kept at most.
     complete_on_next : bool
         Hold a completed set until a newer stamp's first message (see above).
+    held_stamped : collection of str
+        Held inputs stamped with the sample they answer (see above).
     """
 
     def __init__(
@@ -271,11 +286,13 @@ class StampAligner:
         trigger: str,
         depth: int = 64,
         complete_on_next: bool = False,
+        held_stamped: Collection[str] = (),
     ) -> None:
-        stamped = set(stamped)
+        stamped, held_stamped = set(stamped), set(held_stamped)
         self.stamped = tuple(t for t in topics if t in stamped and t != trigger)
         if trigger in stamped:
             self.stamped += (trigger,)  # released last
+        self.held_stamped = tuple(t for t in topics if t in held_stamped and t not in stamped)
         self.depth = int(depth)
         self.complete_on_next = bool(complete_on_next)
         self.reset()
@@ -284,8 +301,30 @@ class StampAligner:
         """Forget the pending and held messages and the count of dropped stamps."""
         self._pending: dict[int, dict[str, object]] = {}
         self._held: list[tuple[str, object]] = []
+        self._held_stamp: int | None = None
         self._last: int | None = None
+        self._ready: deque[tuple[int, list[tuple[str, object]]]] = deque()
+        self._inputs = {t: deque() for t in self.held_stamped}  # (stamp, message) not released
+        self._newest_input = dict.fromkeys(self.held_stamped)  # stamp of each one's newest
         self.dropped = 0
+
+    def _release(self, sets: list[tuple[int, list[tuple[str, object]]]]) -> list:
+        """Return the completed ``(stamp, pairs)`` sets to release now, with their inputs."""
+        if not self.held_stamped:
+            return [pair for _, pairs in sets for pair in pairs]
+        self._ready.extend(sets)
+        out: list[tuple[str, object]] = []
+        while self._ready:
+            stamp, pairs = self._ready[0]
+            waiting = any(n is None or n < stamp for n in self._newest_input.values())
+            if waiting and len(self._ready) <= self.depth:
+                break
+            self._ready.popleft()
+            for topic, queue in self._inputs.items():
+                while queue and queue[0][0] <= stamp:
+                    out.append((topic, queue.popleft()[1]))
+            out += pairs
+        return out
 
     def add(self, topic: str, stamp_ns: int | None, message: object) -> list[tuple[str, object]]:
         """Take one message; return the ``(topic, message)`` pairs to give the sampler now.
@@ -308,19 +347,25 @@ class StampAligner:
             comes with the first message of a newer stamp instead, before
             what that message releases.
         """
+        if topic in self.held_stamped and stamp_ns is not None:
+            self._inputs[topic].append((stamp_ns, message))
+            newest = self._newest_input[topic]
+            self._newest_input[topic] = stamp_ns if newest is None else max(newest, stamp_ns)
+            return self._release([])
         if topic not in self.stamped or stamp_ns is None:
             return [(topic, message)]
         if self._last is not None and stamp_ns <= self._last:
             self.dropped += 1  # late: its stamp was completed or dropped already
             return []
-        released, self._held = self._held, []  # a newer stamp: the held set goes first
+        sets = [(self._held_stamp, self._held)] if self._held else []  # it goes first
+        self._held = []
         group = self._pending.setdefault(stamp_ns, {})
         group[topic] = message
         if len(group) < len(self.stamped):
-            while len(self._pending) > self.depth:
-                del self._pending[min(self._pending)]
+            while len(self._pending) > self.depth:  # the oldest first (stamps come in order)
+                del self._pending[next(iter(self._pending))]
                 self.dropped += 1
-            return released
+            return self._release(sets)
         for old in [s for s in self._pending if s <= stamp_ns]:
             if old != stamp_ns:
                 self.dropped += 1
@@ -328,9 +373,9 @@ class StampAligner:
         self._last = stamp_ns
         complete = [(t, group[t]) for t in self.stamped]
         if self.complete_on_next:
-            self._held = complete
-            return released
-        return released + complete
+            self._held, self._held_stamp = complete, stamp_ns
+            return self._release(sets)
+        return self._release([*sets, (stamp_ns, complete)])
 
 
 class ChannelIdentifier:

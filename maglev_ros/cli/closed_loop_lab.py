@@ -2,10 +2,13 @@
 
 The steps (``maglev-lab`` with the magnet ``free``, the default):
 
-1. :func:`~maglev_ros.nodes.closed_loop_lab.run_closed_loop_lab`: simulator
-   (lockstep), estimator, controller with its excitation, identifier and
-   recorder in this process; the magnet levitates and settles, then exactly
-   ``--samples`` samples are recorded;
+1. the lab session (:func:`~maglev_ros.loop.run_session` on the
+   :class:`~maglev_ros.loop.ControlLoop` of :func:`~maglev_ros.loop.build_lab_loop`):
+   the simulator (lockstep, or paced by the wall clock with ``--realtime``),
+   the estimator and the LQR with its excitation; the magnet levitates and
+   settles, then exactly ``--samples`` samples go to the bag
+   (:class:`~maglev_ros.loop.BagRecorder`) and the online identifier
+   (:class:`~maglev_ros.loop.OnlineIdentifier`);
 2. the bag is converted (:func:`maglev_ros.bags.read_bag`): the x and y field
    of sensor 0, the pair inputs ``u_x``, ``u_y`` (the total command,
    ``0.5 (c+ - c-)``), the excitation ``r_x``, ``r_y`` (the IV's instruments)
@@ -17,20 +20,21 @@ The steps (``maglev-lab`` with the magnet ``free``, the default):
    and ``models.json``.
 
 Against a board (``--board PATH`` or ``--virtual-board``, with ``--magnet
-free``): step 1 is :func:`~maglev_ros.nodes.board_lab.run_board_closed_loop_lab`
-(the driver in place of the simulator, a virtual board in a child process),
-the inputs are the pair currents the board applied (``maglev/currents``, each
-record's PWM), there is no true state (the settling and the excursion are the
-estimate's) and the physics check allows for a record reading its field at
-the end of the sample its PWM drives.
+free``): the plant of step 1 is a :class:`~maglev_ros.loop.BoardPlant` (a
+virtual board in a child process), the inputs are the pair currents the board
+applied (``maglev/currents``, each record's PWM), there is no true state (the
+settling and the excursion are the estimate's) and the physics check allows
+for a record reading its field at the end of the sample its PWM drives.
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import json
 import signal
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -38,21 +42,119 @@ import numpy as np
 from maglev_ros.cli.progress import progress_bar
 from maglev_ros.topics import (
     TRUE_STATE_TOPIC,
+    command_channel,
     current_channel,
     excitation_channel,
     field_channel,
 )
 
-__all__ = ['CHECK_BAND', 'graph_settings', 'load_closed_loop_data', 'run_session']
+__all__ = [
+    'CHECK_BAND',
+    'IDENTIFIER_CHANNELS',
+    'LabRun',
+    'lab_settings',
+    'load_closed_loop_data',
+    'pair_channel',
+    'run_session',
+]
 
 PROG = 'maglev-lab'
 CHECK_BAND = (10.0, 300.0)  # Hz, the physics check's band (see test/sysid/test_iv_physics.py)
-VIRTUAL_BOARD_STARTUP_S = 0.5  # s from the port's opening (all nodes are up) to the first sample
+VIRTUAL_BOARD_STARTUP_S = 0.5  # s from the port's opening (the loop is up) to the first sample
 RELATIVE = 1e-300  # guards the relative difference of exactly zero coefficients
+GIL_SWITCH_S = 0.0005  # s, the interpreter's switch interval while a real-time loop runs
+OBSERVER_DEPTH = 200_000  # samples a real-time observer's queue holds (40 s at 5 kHz)
 
 
-def graph_settings(args: argparse.Namespace):
-    """Return the :class:`~maglev_ros.nodes.closed_loop_lab.LabGraphSettings` of the arguments.
+def pair_channel(pair: str, channel=command_channel) -> str:
+    """Channel spec of an antisymmetric pair's input ``0.5 (c+ - c-)``, named ``u_<pair>``.
+
+    Parameters
+    ----------
+    pair : {'x', 'y'}
+        The coil pair (x+ x- or y+ y-).
+    channel : callable
+        Coil index to channel spec: :func:`~maglev_ros.topics.command_channel`
+        (the total command, named ``u_<pair>``),
+        :func:`~maglev_ros.topics.current_channel` (the currents applied, a
+        board's input, also ``u_<pair>``) or
+        :func:`~maglev_ros.topics.excitation_channel` (the excitation, ``r_<pair>``).
+
+    Returns
+    -------
+    str
+        E.g. ``u_x=0.5*maglev/currents/command:data[0]-0.5*maglev/currents/command:data[1]``.
+    """
+    plus = {'x': 0, 'y': 2}[pair]
+    name = 'r' if channel is excitation_channel else 'u'
+    return f'{name}_{pair}=0.5*{channel(plus)}-0.5*{channel(plus + 1)}'
+
+
+#: The online identifier's channels: the x and y field of sensor 0 against the pair inputs.
+IDENTIFIER_CHANNELS = (
+    (f'Bx_0={field_channel(0, "x")}', f'By_0={field_channel(0, "y")}'),
+    (pair_channel('x'), pair_channel('y')),
+)
+
+
+@dataclass(frozen=True)
+class LabRun:
+    """What the closed-loop session did.
+
+    Attributes
+    ----------
+    samples : int
+        Samples recorded after settling.
+    settle_s : float
+        Plant time before the recording, s.
+    settle_rms : ndarray, shape (3,)
+        RMS of the position error over the settling's last 0.1 s, m.
+    settled : bool
+        Below the bound on every axis.
+    simulated_s : float
+        Plant time of the recording, s.
+    wall_s : float
+        Wall time of the recording, s.
+    timeouts : int
+        Command timeouts. Simulation: the controller's (its input went stale,
+        zero current commanded; lockstep: none, every sample is answered);
+        board: the command guard's (coils zeroed for want of a command).
+    crashed : bool
+    crash_reason : str
+    controller : dict
+        The controller's ``level``, ``message``, ``saturated``, ``timeouts``
+        and the ``commands`` written while recording.
+    identifier : OnlineEstimate or None
+        None if it got no sample.
+    overruns : int
+        Real time: times the simulation fell behind and skipped ahead.
+    positions : ndarray, shape (n, 3), optional
+        A board run: the estimated positions over the window, m.
+    dropped : dict of str to int
+        Samples each observer dropped (real time: behind its queue).
+    board : dict
+        A board run: the plant's counters.
+    """
+
+    samples: int
+    settle_s: float
+    settle_rms: np.ndarray
+    settled: bool
+    simulated_s: float
+    wall_s: float
+    timeouts: int
+    crashed: bool
+    crash_reason: str
+    controller: dict
+    identifier: object
+    overruns: int = 0
+    positions: np.ndarray | None = None
+    dropped: dict | None = None
+    board: dict | None = None
+
+
+def lab_settings(args: argparse.Namespace):
+    """Return the :class:`~maglev_ros.loop.LabSettings` of the arguments.
 
     Parameters
     ----------
@@ -60,9 +162,9 @@ def graph_settings(args: argparse.Namespace):
         ``maglev-lab``'s checked arguments.
     """
     from maglev_ros.control.excitation import CommandExcitation
-    from maglev_ros.nodes.closed_loop_lab import LabGraphSettings
+    from maglev_ros.loop import LabSettings
 
-    return LabGraphSettings(
+    return LabSettings(
         params=args.params,
         samples=args.samples,
         settle=args.settle,
@@ -109,7 +211,6 @@ def load_closed_loop_data(bag: Path, board: bool = False):
         excitation), A.
     """
     from maglev_ros.bags import read_bag
-    from maglev_ros.nodes.closed_loop_lab import pair_channel
 
     outputs = [f'Bx_0={field_channel(0, "x")}', f'By_0={field_channel(0, "y")}']
     excitation = [pair_channel(p, excitation_channel) for p in 'xy']
@@ -168,7 +269,7 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     from maglev_ros.cli.lab_board import on_board
     from maglev_ros.stop_signals import StopSignals
 
-    settings = graph_settings(args)
+    settings = lab_settings(args)
     e = settings.excitation
     board = on_board(args)
     clock = (
@@ -200,36 +301,38 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
 
     with StopSignals() as stop:
         try:
-            run = _run_graph(args, settings, bag, stop, progress)
-        except KeyboardInterrupt:
-            name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
-            print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
-            return stop.exit_status or 130
-        except RuntimeError as err:  # the graph did not come up or stopped answering
+            run = _run_loop(args, settings, bag, stop, progress)
+        except (RuntimeError, OSError, ValueError) as err:  # the plant did not come up
             print(f'{PROG}: error: {err} (bag, if any, finalised in {bag})', file=sys.stderr)
             return 1
         finally:
             for bar in bars.values():
                 bar.close()
+        if run is None:
+            name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
+            print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
+            return stop.exit_status or 130
     rms_um = ', '.join(f'{1e6 * v:.0f}' for v in run.settle_rms)
     print(
         f'{"settled" if run.settled else "NOT settled"} after {run.settle_s:g} s: RMS of x, y, z '
         f'{"(estimated) " if run.positions is not None else ""}'
         f'over the last 0.1 s {rms_um} um'
     )
-    rate = run.samples / args.sample_rate / max(run.wall_s, 1e-9)
-    misses = (
-        f'{run.overruns} overruns' if settings.realtime else f'{run.timeouts} command timeouts'
-    )
+    rate = run.simulated_s / max(run.wall_s, 1e-9)
+    drops = sum((run.dropped or {}).values())
     if board:
         print(
-            f'recorded {run.samples} board records ({run.wall_s:.1f} s; the driver zeroed the '
-            f'coils {run.timeouts} times for want of a command) -> {bag}'
+            f'recorded {run.samples} board records ({run.wall_s:.1f} s; the command guard zeroed '
+            f'the coils {run.timeouts} times for want of a command; {drops} samples dropped by '
+            f'the observers) -> {bag}'
         )
     else:
+        misses = f'{run.timeouts} command timeouts'
+        if settings.realtime:
+            misses = f'{run.overruns} overruns, {drops} samples dropped by the observers'
         print(
-            f'recorded {run.samples} samples ({run.samples / args.sample_rate:.3f} s simulated '
-            f'in {run.wall_s:.1f} s, {rate:.2f} x real time; {misses}) -> {bag}'
+            f'recorded {run.samples} samples ({run.simulated_s:.3f} s simulated in '
+            f'{run.wall_s:.1f} s, {rate:.2f} x real time; {misses}) -> {bag}'
         )
     if run.crashed:
         print(
@@ -240,30 +343,110 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     return _identify_and_report(args, out, bag, run)
 
 
-def _run_graph(args: argparse.Namespace, settings, bag: Path, stop, progress):
-    """Run the session's graph: on the simulator, or on a board (a virtual one started here)."""
+def _run_loop(args: argparse.Namespace, settings, bag: Path, stop, progress) -> LabRun | None:
+    """Run the session on the simulator or on a board (a virtual one started here).
+
+    Returns None when a stop signal ended it (the bag finalised).
+    """
     from maglev_ros.cli.lab_board import (
         board_sensors,
         on_board,
         start_virtual_board,
         stop_child,
     )
-    from maglev_ros.nodes.board_lab import run_board_closed_loop_lab
-    from maglev_ros.nodes.closed_loop_lab import run_closed_loop_lab
+    from maglev_ros.loop import BoardPlant
 
     if not on_board(args):
-        return run_closed_loop_lab(settings, bag, stop, progress)
+        return _session(settings, bag, stop, progress)
     n_sensors = board_sensors(args)
-    if args.board:
-        return run_board_closed_loop_lab(settings, bag, args.board, n_sensors, stop, progress)
-    sensor = ('--noise', f'{args.noise!r}', '--quantization', f'{args.quantization!r}')
-    sensor += ('--sensor-delay', str(args.delay), '--seed', str(args.seed))
-    # the driver opens the port once every node is up; the first sample follows
-    child, port = start_virtual_board(args.params, 'free', sensor, VIRTUAL_BOARD_STARTUP_S)
+    burst = max(1, int(round(args.sample_rate / args.control_rate)))
+    child = None
+    port = args.board
+    if not port:
+        sensor = ('--noise', f'{args.noise!r}', '--quantization', f'{args.quantization!r}')
+        sensor += ('--sensor-delay', str(args.delay), '--seed', str(args.seed))
+        # the board's first sample comes this long after the loop opens the port
+        child, port = start_virtual_board(args.params, 'free', sensor, VIRTUAL_BOARD_STARTUP_S)
     try:
-        return run_board_closed_loop_lab(settings, bag, port, n_sensors, stop, progress)
+        plant = BoardPlant(port, n_sensors, burst=burst, command_timeout=0.1)
+        return _session(settings, bag, stop, progress, plant)
     finally:
-        stop_child(child)
+        if child is not None:
+            stop_child(child)
+
+
+def _session(settings, bag: Path, stop, progress, plant=None) -> LabRun | None:
+    """Build the loop and its observers, run the session, close the observers."""
+    from maglev_ros.loop import (
+        BagRecorder,
+        ObserverThread,
+        OnlineIdentifier,
+        build_lab_loop,
+        lab_plan,
+        run_session,
+    )
+    from maglev_ros.loop.lab import loop_metadata, simulator_metadata
+
+    s = settings
+    board = plant is not None
+    loop = build_lab_loop(s, plant)
+    metadata = plant.metadata() if board else simulator_metadata(s)
+    metadata.update(loop_metadata(s, loop))
+    recorder = BagRecorder(
+        bag, s.sensors, s.storage, metadata, true_state=not board, clock=not s.realtime
+    )
+    orders = s.identifier_orders
+    identifier = OnlineIdentifier(
+        source='currents' if board else 'command',
+        na=np.reshape(orders[0], (2, 2)),
+        nb=np.reshape(orders[1], (2, 2)),
+        nk=np.reshape(orders[2], (2, 2)),
+        initial_covariance=s.initial_covariance,
+    )
+    paced = s.realtime or board
+    observers = {'recorder': recorder, 'identifier': identifier}
+    if paced:  # the loop only queues; a thread of each writes or identifies
+        observers = {
+            name: ObserverThread(o, OBSERVER_DEPTH, f'maglev-lab-{name}')
+            for name, o in observers.items()
+        }
+    switch = sys.getswitchinterval()
+    try:
+        if paced:
+            if board:
+                plant.open()
+            gc.freeze()  # start-up's objects stay out of the collector's way (0.1 s stalls)
+            sys.setswitchinterval(GIL_SWITCH_S)  # the observers' threads hand the GIL back soon
+        result = run_session(loop, lab_plan(s, board), observers, progress, lambda: stop.requested)
+    finally:
+        sys.setswitchinterval(switch)
+        for o in observers.values():
+            if isinstance(o, ObserverThread):
+                o.close(timeout=120.0)
+        recorder.set_metadata({'session.stopped': bool(stop.requested)})
+        recorder.close()
+    if result.stopped:
+        return None
+    plant_ = loop.plant
+    # on a board a lost magnet is the controller's verdict (its estimate): coils at zero
+    lost = board and result.controller['level'] == 'ERROR'
+    return LabRun(
+        samples=result.samples,
+        settle_s=s.settle_samples / s.sample_rate,
+        settle_rms=result.settle_rms,
+        settled=result.settled,
+        simulated_s=result.recorded_s,
+        wall_s=result.wall_s,
+        timeouts=plant_.counters['timeouts'] if board else result.controller['timeouts'],
+        crashed=result.crashed or lost,
+        crash_reason=result.reason or (result.controller['message'] if lost else ''),
+        controller={**result.controller, 'commands': result.commands},
+        identifier=identifier.estimate(1.0 / s.sample_rate),
+        overruns=int(getattr(plant_, 'overruns', 0)),
+        positions=result.positions if board else None,
+        dropped=result.dropped,
+        board=plant_.counters if board else None,
+    )
 
 
 def _identify_and_report(args: argparse.Namespace, out: Path, bag: Path, run) -> int:
@@ -507,6 +690,8 @@ def _summary(args, run, dataset, results, checks, band, excursion, rms) -> dict:
             'crash_reason': run.crash_reason,
             'controller': run.controller,
             'largest_excursion_m': excursion,
+            'dropped': run.dropped,
+            'board': run.board,
             'rms_excursion_m': rms,
         },
         'args': dict(vars(args)),

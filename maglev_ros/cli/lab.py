@@ -1,8 +1,9 @@
 """``maglev-lab``: the lab session as one command (pip-only friendly).
 
 Closed loop (the magnet ``free``, the default; :mod:`maglev_ros.cli.closed_loop_lab`):
-the simulator (lockstep), estimator, controller with its excitation, the
-online identifier and the recorder run in this process; the magnet levitates
+the lab session (:func:`maglev_ros.loop.run_session`) runs the control loop
+(simulator in lockstep, estimator, controller with its excitation) with the
+online identifier and the bag writer as its observers; the magnet levitates
 and settles, exactly ``--samples`` samples are recorded and the seed's models
 (x, y and MIMO: ARX, IV on the excitation, ARMAX) are identified, checked
 against the physics and compared with the online identifier::
@@ -18,21 +19,23 @@ prints the fit on estimation and validation data and writes the plots::
 
     maglev-lab --duration 5 --params maggy_v2 --magnet fixed --excitation prbs --out lab/
 
-Against a board (real time: the board sets the pace, ``--duration`` is wall-clock
-seconds): ``--board PATH`` runs the driver node on a serial device instead of the
-simulator; ``--virtual-board`` starts ``maglev-virtual-board --plant physics``
-(``--params``, ``--magnet``) in a child process and uses it. The excitation then
-runs on a wall-clock timer (``--command-rate``), the inputs are the currents the
-driver reports as applied (``maglev/currents:effort[coil]``, header stamps) and the
-default ARX delay is 0 (a record's field and PWM are simultaneous)::
+Against a board (real time: the board sets the pace, ``--duration`` is seconds of
+board samples): ``--board PATH`` runs the lab session on a serial device
+(:class:`~maglev_ros.loop.BoardPlant`) instead of the simulator;
+``--virtual-board`` starts ``maglev-virtual-board --plant physics``
+(``--params``, ``--magnet``) in a child process and uses it. The excitation is
+then one command each ``--command-rate`` period of board samples, the inputs are
+the currents the board reports as applied (``maglev/currents:effort[coil]``,
+header stamps) and the default ARX delay is 0 (a record's field and PWM are
+simultaneous)::
 
     maglev-lab --virtual-board --magnet fixed --duration 3 --amplitude 0.2 --out lab/
 
 The closed loop against a board (``--board PATH --magnet free``, or
 ``--virtual-board --magnet free``: its physics plant with the magnet free,
 ``--noise``, ``--quantization``, ``--delay``, ``--seed``):
-:mod:`maglev_ros.nodes.board_lab`, the driver in place of the simulator, all
-composed in this process; exactly ``--samples`` board records are recorded
+the same session with a :class:`~maglev_ros.loop.BoardPlant` in place of the
+simulator, in this process; exactly ``--samples`` board records are recorded
 after the settling::
 
     maglev-lab --virtual-board --magnet free --out lab_board/
@@ -128,7 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=positive_float,
         default=None,
         help='seconds to record instead: simulated (--samples = duration x --sample-rate), '
-        'or wall-clock seconds against a board (default 5)',
+        "or of the board's samples against a board (default 5)",
     )
     p.add_argument(
         '--params', default='maggy_v2', help='parameter set (maggy_v2, maggy_v4, or a YAML path)'
@@ -273,7 +276,7 @@ def build_parser() -> argparse.ArgumentParser:
         '--command-rate',
         type=positive_float,
         default=1000.0,
-        help='board: excitation commands per wall-clock second, Hz (default 1000)',
+        help="board: excitation commands per second of the board's samples, Hz (default 1000)",
     )
     return p
 
@@ -641,10 +644,13 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
 def run_board_experiment(
     args: argparse.Namespace, bag: Path, port: str, n_sensors: int, stop=None
 ) -> dict:
-    """Run the driver (on ``port``), excitation (timer) and recorder on one executor.
+    """Record the board (on ``port``) driven by the excitation: the open-loop lab session.
 
-    Real time: the board sets the pace; recording lasts ``args.duration``
-    wall-clock seconds from the first sample after the graph is up.
+    The lab session (:func:`~maglev_ros.loop.run_session`) on a
+    :class:`~maglev_ros.loop.BoardPlant` with the :class:`~maglev_ros.loop.OpenLoop`
+    controller: one excitation command each ``--command-rate`` period of
+    board samples, ``--duration`` s of board samples recorded from the
+    first command on (the board sets the pace).
 
     Parameters
     ----------
@@ -662,102 +668,75 @@ def run_board_experiment(
     Returns
     -------
     dict
-        ``samples`` (currents messages recorded), ``simulated_s`` (their board
-        time), ``wall_s``, ``timeouts``, ``crashed`` (False), ``crash_reason``,
-        ``driver`` (the driver's counters).
-
-    Raises
-    ------
-    KeyboardInterrupt
-        On a stop signal (the bag is finalised first).
+        ``samples`` (in the bag), ``simulated_s`` (their board time),
+        ``wall_s``, ``timeouts``, ``crashed``, ``crash_reason``, ``driver``
+        (the board plant's counters), ``stopped``.
     """
-    from maglev_ros.nodes.driver import DriverNode
-    from maglev_ros.nodes.excitation import ExcitationNode
-    from maglev_ros.nodes.recorder import RecorderNode
+    from maglev_ros.control.excitation import CommandExcitation, ExcitationSchedule
+    from maglev_ros.loop import (
+        BagRecorder,
+        BoardPlant,
+        ControlLoop,
+        ObserverThread,
+        OpenLoop,
+        SessionPlan,
+        run_session,
+    )
 
-    topics = [field_topic(k) for k in args.sensors] + [
-        CURRENTS_TOPIC,
-        COMMAND_TOPIC,
-    ]
-    currents_topic = '/' + CURRENTS_TOPIC
-    with _lab_bringup() as lab:
-        ctx = lab.context
-        recorder = RecorderNode(
-            context=ctx,
-            parameter_overrides=overrides(
-                path=str(bag), storage=args.storage, topics=topics, metadata_node='maglev_driver'
-            ),
-        )
-        lab.add(recorder)  # destroyed last: finalises the bag
-        # an open-loop recording: latency does not matter, so the driver reads the port
-        # every 2 ms (two bursts per read), which roughly halves its CPU time
-        driver = DriverNode(
-            context=ctx,
-            parameter_overrides=overrides(
-                port=port,
-                n_sensors=n_sensors,
-                start_enabled=True,
-                command_timeout=1.0,
-                read_interval=BOARD_READ_INTERVAL,
-            ),
-        )
-        lab.add(driver)
-        lab.start()
-        lab.wait_until(
-            lambda: (
-                len(recorder.subscribed) == len(topics) - 1
-                and recorder.metadata_complete
-                and driver.link_state == 'connected'
-                # the board streams: a virtual board's physics plant may take seconds
-                # to compile after the port opens, and the recording clock starts now
-                and driver.counters['records'] > 0
-            ),
-            'the driver, its first board record and the recorder',
-            stop=stop,
-        )
-        # the excitation starts once everything listens: its first command is recorded
-        excite = ExcitationNode(
-            context=ctx,
-            parameter_overrides=overrides(
-                signal=args.excitation,
-                amplitude=args.amplitude,
-                band=list(args.band),
-                pattern=args.pattern,
-                seed=args.seed,
-                length=args.length,
-                trigger='timer',
-                sample_rate=args.command_rate,
-            ),
-        )
-        lab.add(excite)
-        lab.wait_until(
-            lambda: len(recorder.subscribed) == len(topics) and excite.command_subscribers >= 2,
-            'the excitation',
-            stop=stop,
-        )
-        start = recorder.counts[currents_topic]
-        wall = time.monotonic()
-        end = wall + args.duration
-        with progress_bar(args.duration, 'recording', 's', args.quiet) as bar:
+    burst = max(1, int(round(1.0 / (BOARD_TS * args.command_rate))))
+    samples = max(2, int(round(args.duration / BOARD_TS)))
+    try:  # the excitation node's signal, one value a command
+        signal_ = CommandExcitation(
+            args.excitation, args.amplitude, tuple(args.band), args.pattern, args.seed,
+            args.length,
+        )  # fmt: skip
+        periods = samples // burst + 2
+        values = ExcitationSchedule(signal_, args.command_rate).sequence(periods)
+    except ValueError as err:
+        raise UsageError(f'--excitation {args.excitation}: {err}') from None
+    # an open-loop recording: latency does not matter, so the plant reads the port
+    # every 2 ms (two bursts per read), which roughly halves its CPU time
+    plant = BoardPlant(
+        port,
+        n_sensors,
+        burst=burst,
+        command_timeout=1.0,
+        confirm_records=True,
+        read_interval=BOARD_READ_INTERVAL,
+    )
+    loop = ControlLoop(plant, OpenLoop())
+    plan = SessionPlan(
+        samples, 1, settle_window=1, position='estimate', excitation=values.repeat(burst, 0)
+    )
+    recorder = BagRecorder(
+        bag, args.sensors, args.storage, plant.metadata(), true_state=False, clock=False
+    )
+    writer = ObserverThread(recorder, 10 * samples + 1000, 'maglev-lab-recorder')
+    try:
+        with progress_bar(samples, 'recording', 'samples', args.quiet) as bar:
 
-            def done() -> bool:
-                now = time.monotonic()
-                bar.update(min(now - wall, args.duration) - bar.n)
-                return now >= end
+            def progress(stage: str, done: int, total: int) -> None:
+                if stage == 'recording':
+                    bar.update(done - bar.n)
 
-            lab.wait_until(done, 'the recording', timeout=args.duration + 1, stop=stop)
-        recorder.close()  # finalised; the driver zeroes the currents when destroyed
-        wall = time.monotonic() - wall
-        samples = recorder.counts[currents_topic] - start
-        return {
-            'samples': samples,
-            'simulated_s': samples * BOARD_TS,
-            'wall_s': wall,
-            'timeouts': driver.counters['timeouts'],
-            'crashed': False,
-            'crash_reason': '',
-            'driver': dict(driver.counters),
-        }
+            plant.open()
+            result = run_session(
+                loop, plan, {'recorder': writer}, progress, lambda: bool(stop and stop.requested)
+            )
+    finally:
+        writer.close(timeout=120.0)
+        recorder.close()  # finalised; the plant zeroed the coils when the session ended
+    return {
+        'samples': recorder.counts[CURRENTS_TOPIC],
+        'simulated_s': result.recorded_s,
+        'wall_s': result.wall_s,
+        'timeouts': plant.counters['timeouts'],
+        'crashed': result.crashed,
+        'crash_reason': result.reason,
+        'driver': plant.counters,
+        'dropped': writer.dropped,
+        'stopped': result.stopped,
+    }
 
 
 def _run_board(args: argparse.Namespace, bag: Path, stop=None) -> dict:
@@ -835,6 +814,8 @@ def _run(args: argparse.Namespace) -> int:
     with StopSignals() as stop:
         try:
             stats = _run_board(args, bag, stop) if board else run_experiment(args, bag, stop)
+            if stats.get('stopped'):
+                raise KeyboardInterrupt
         except KeyboardInterrupt:
             name = signal.Signals(stop.signum).name if stop.signum else 'interrupted'
             print(f'{PROG}: {name}: stopped; bag finalised in {bag}', file=sys.stderr)
@@ -843,7 +824,7 @@ def _run(args: argparse.Namespace) -> int:
         print(
             f'recorded {stats["samples"]} board samples ({stats["simulated_s"]:.3f} s of '
             f'board time in {stats["wall_s"]:.1f} s; {stats["timeouts"]} command timeouts, '
-            f'{stats["driver"]["resyncs"]} resyncs) -> {bag}'
+            f'{stats["driver"]["resyncs"]} resyncs, {stats["dropped"]} dropped) -> {bag}'
         )
     else:
         rate = stats['simulated_s'] / max(stats['wall_s'], 1e-9)

@@ -7,9 +7,11 @@ uses: +u on x+ and -u on x-.
 """
 
 from .patterns import PATTERNS, apply_pattern, pattern_matrix, pattern_signals
+from .sequence import CommandSequence
 from .signals import SIGNALS, chirp, excitation, multisine, prbs, random_binary
 
 __all__ = [
+    'CommandSequence',
     'PATTERNS',
     'SIGNALS',
     'apply_pattern',

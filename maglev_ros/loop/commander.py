@@ -319,10 +319,10 @@ class Commander:
         self.last_input_ns = now_ns
 
     def describe(self) -> str:
-        """Return one line: mode, rate, limit, timeout, state, excitation."""
+        """Return one line: rate, limit, timeout, state, trigger, excitation."""
         c = self.controller.config
         return (
-            f'{c.mode}, {c.sample_rate:g} Hz, limit {c.current_limit:g} A, input timeout '
+            f'{c.sample_rate:g} Hz, limit {c.current_limit:g} A, input timeout '
             f'{1e3 * c.input_timeout:g} ms, {"enabled" if self.controller.enabled else "disabled"}'
             f', trigger {self.trigger}, {self.schedule.config.describe()}'
         )

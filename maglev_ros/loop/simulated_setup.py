@@ -9,13 +9,12 @@ estimator at the sample rate and the controller at the control rate, as a
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 from .control_loop import ControlLoop
 from .paced import PacedSimulatedPlant
 
-__all__ = ['SimulatedLoopSettings', 'build_simulated_loop']
+__all__ = ['SimulatedLoopSettings', 'build_loop', 'build_simulated_loop', 'plant_health']
 
 
 @dataclass(frozen=True)
@@ -76,7 +75,11 @@ class SimulatedLoopSettings:
 def build_simulated_loop(
     s: SimulatedLoopSettings, observers=(), clock=None, sleep=None
 ) -> tuple[ControlLoop, PacedSimulatedPlant]:
-    """Build the loop and its plant.
+    """Build the loop and its plant (:func:`~maglev_ros.loop.lab.build_lab_loop` builds them).
+
+    The estimator estimates sensor offsets (``bias_states``: a magnet other
+    than the believed one is not taken for a tilt) and a loop far behind the
+    clock skips ahead (overruns counted).
 
     Parameters
     ----------
@@ -96,55 +99,99 @@ def build_simulated_loop(
         If the control rate does not divide the sample rate, or the set
         cannot be loaded or controlled (naming the problem).
     """
-    from ..control import ControllerConfig, make_controller
-    from ..estimation import EstimatorConfig, make_estimator
-    from ..physics import CoilDynamics, SensorEffects, Simulator, linearize, make_model
+    from .lab import LabSettings, build_lab_loop
 
-    burst = s.sample_rate / s.control_rate
-    if abs(burst - round(burst)) > 1e-9 or round(burst) < 1:
-        raise ValueError(
-            f'control_rate must divide sample_rate ({s.sample_rate:g} Hz), '
-            f'got {s.control_rate:g} Hz'
-        )
-    model = make_model(s.params)
-    linear = linearize(model)
-    p = model.params
-    magnet = dataclasses.replace(
-        p.magnet,
-        polarization=p.magnet.polarization * s.plant_polarization,
-        mass=p.magnet.mass * s.plant_mass,
-    )
-    plant_model = make_model(p.replace(magnet=magnet, solenoid_radius_correction=model.correction))
-    simulator = Simulator(
-        plant_model,
-        s.sample_rate,
-        coil=CoilDynamics.from_parameters(plant_model.params) if s.coil_dynamics else None,
-        sensor=SensorEffects(s.sensor_noise, s.sensor_quantization, 0.0, s.sensor_delay),
+    lab = LabSettings(
+        params=s.params,
+        sample_rate=s.sample_rate,
+        control_rate=s.control_rate,
+        noise=s.sensor_noise,
+        quantization=s.sensor_quantization,
+        sensor_delay=s.sensor_delay,
+        coil_dynamics=s.coil_dynamics,
+        field_model='fast',
         seed=s.seed,
+        filter=s.filter,
+        realtime=True,
+        mode=s.mode,
+        bias_states=True,
+        plant_polarization=s.plant_polarization,
+        plant_mass=s.plant_mass,
+        command_delay=s.command_delay,
+        skip_ahead=True,
     )
-    controller = make_controller(
-        model,
-        ControllerConfig(
-            mode=s.mode,
-            sample_rate=s.control_rate,
-            command_delay=s.command_delay,
-            coil_dynamics=s.coil_dynamics,
-        ),
-        linear=linear,
-    )
-    estimator = None
-    if s.mode == 'lqr':
-        config = EstimatorConfig(
-            filter=s.filter,
-            sample_rate=s.sample_rate,
-            sensor_delay=s.sensor_delay,
-            bias_states=True,  # a static field error (mismatch, offsets) is not a tilt
-        )
-        estimator = make_estimator(model, config, linear=linear)
     timing = {k: v for k, v in (('clock', clock), ('sleep', sleep)) if v is not None}
-    plant = PacedSimulatedPlant(simulator, round(burst), **timing)
-    loop = ControlLoop(
-        plant, controller, estimator, command_delay=s.command_delay, observers=observers
+    loop = build_lab_loop(lab, observers=observers, **timing)
+    return loop, loop.plant
+
+
+def build_loop(s: SimulatedLoopSettings, board: dict | None = None):
+    """Build the loop node's loop on the simulator, or on a V2x board.
+
+    Parameters
+    ----------
+    s : SimulatedLoopSettings
+        The loop's settings (the simulator's apply without a board).
+    board : dict, optional
+        ``port``, ``n_sensors``, ``command_timeout`` of a V2x board: its
+        stream paces the loop (``sample_rate / control_rate`` samples a read).
+
+    Returns
+    -------
+    (ControlLoop, plant)
+
+    Raises
+    ------
+    ValueError
+        If the settings cannot be built (named).
+    LinkError
+        If the board's port cannot be opened.
+    """
+    if board is None:
+        return build_simulated_loop(s)
+    from .board import BOARD_SAMPLE_RATE, BoardPlant
+    from .lab import LabSettings, build_lab_loop
+
+    if s.sample_rate != BOARD_SAMPLE_RATE:
+        raise ValueError(
+            f'a V2x board samples at {BOARD_SAMPLE_RATE:g} Hz: sample_rate must be that, '
+            f'got {s.sample_rate:g}'
+        )
+    plant = BoardPlant(
+        board['port'],
+        board['n_sensors'],
+        burst=s.burst,
+        command_timeout=board['command_timeout'],
     )
-    loop.warm_up()
+    lab = LabSettings(
+        params=s.params,
+        sample_rate=s.sample_rate,
+        control_rate=s.control_rate,
+        noise=s.sensor_noise,
+        quantization=s.sensor_quantization,
+        sensor_delay=s.sensor_delay,
+        coil_dynamics=s.coil_dynamics,
+        filter=s.filter,
+        mode=s.mode,
+        bias_states=True,
+    )
+    loop = build_lab_loop(lab, plant=plant)
+    plant.open()
     return loop, plant
+
+
+def plant_health(plant) -> dict[str, object]:
+    """Return the plant's counts for the diagnostics: samples, real-time factor, link counts.
+
+    Parameters
+    ----------
+    plant : PacedSimulatedPlant or BoardPlant
+    """
+    simulator = getattr(plant, 'simulator', None)
+    if simulator is not None:
+        return {
+            'samples': simulator.samples,
+            'real_time_factor': f'{plant.real_time_factor:.3f}',
+            'overruns': plant.overruns,
+        }
+    return dict(plant.counters)

@@ -210,7 +210,7 @@ class ControllerNode(Node):
         self.create_subscription(PoseStamped, REFERENCE_TOPIC, self._on_reference, 10)
         self.create_service(SetBool, CONTROLLER_ENABLE_SERVICE, self._on_enable)
         self.create_timer(cfg.diagnostics_period, self.publish_diagnostics)
-        self.get_logger().info(f'{cfg.params}: {self.core.describe()}')
+        self.get_logger().info(f'{cfg.controller.mode} on {cfg.params}, {self.core.describe()}')
 
     @property
     def commands(self) -> int:

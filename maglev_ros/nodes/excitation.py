@@ -1,23 +1,25 @@
 """Excitation node: ``ros2 run maglev_ros excitation``.
 
 Publishes identification inputs on ``maglev/currents/command``
-(sensor_msgs/JointState, 4 currents in A, x+ x- y+ y-, stamped with the node's clock): PRBS, random
-binary, multisine or chirp (:mod:`maglev_ros.excitation`), with amplitude,
-band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x on x+,
--u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
+(sensor_msgs/JointState, names x+ x- y+ y-, effort = currents in A): PRBS,
+random binary, multisine or chirp (:mod:`maglev_ros.excitation`), with
+amplitude, band (fractions of Nyquist), per-solenoid pattern (``pairs``: +u_x
+on x+, -u_x on x-, +u_y on y+, -u_y on y-, the board's antisymmetric pairs;
 ``x_pair``, ``y_pair``, ``independent``, ``common``), offset and seed.
 
 One period of ``length`` samples is generated at start and repeated
 ``cycles`` times (0: forever); afterwards zero currents plus ``offset`` are
 sent. ``max_commands`` (0: no limit) stops publishing after that many
-commands: a lockstep simulation then takes exactly that many steps. Triggers:
+commands: a lockstep simulation then takes exactly that many steps
+(:class:`~maglev_ros.excitation.CommandSequence`). Triggers:
 
 ``sample`` (default)
     one command per sample received on ``maglev/currents`` (from the
-    simulator or the driver): in lockstep this drives the simulation sample
-    by sample, deterministically.
+    simulator or the driver), stamped with that sample's stamp: in lockstep
+    this drives the simulation sample by sample, deterministically.
 ``timer``
-    one command per 1 / ``sample_rate`` s of wall time.
+    one command per 1 / ``sample_rate`` s of wall time, stamped with the
+    node clock's time (no sample is answered).
 
 QoS: RELIABLE, KEEP_LAST 1000 (matches the simulator's lockstep command
 subscription and the driver's best-effort one).
@@ -35,11 +37,11 @@ from sensor_msgs.msg import JointState
 from maglev_ros.excitation import (
     PATTERNS,
     SIGNALS,
+    CommandSequence,
     apply_pattern,
     excitation,
     pattern_signals,
 )
-from maglev_ros.nodes.messages import command_message
 from maglev_ros.nodes.params import (
     NodeParameterError,
     Param,
@@ -52,15 +54,8 @@ from maglev_ros.nodes.qos import LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.topics import COIL_NAMES, COMMAND_TOPIC, CURRENTS_TOPIC
 
-__all__ = [
-    'PARAMETERS',
-    'ExcitationConfig',
-    'ExcitationNode',
-    'ExcitationParameterError',
-    'build_config',
-    'commands_of',
-    'main',
-]
+__all__ = ['PARAMETERS', 'ExcitationConfig', 'ExcitationNode', 'ExcitationParameterError',
+           'build_config', 'commands_of', 'main']  # fmt: skip
 
 NODE_NAME = 'maglev_excitation'
 TRIGGERS = ('sample', 'timer')
@@ -225,9 +220,7 @@ class ExcitationNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         self.config = cfg = build_config(PARAMETERS.declare(self))
         self.commands = commands_of(cfg)
-        self._rest = [float(v) for v in cfg.offset]
-        self._rows = self.commands.tolist()
-        self.sent = 0
+        self.sequence = CommandSequence(self.commands, cfg.cycles, cfg.offset, cfg.max_commands)
         self._pub = self.create_publisher(JointState, COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
         if cfg.trigger == 'sample':
             self.create_subscription(
@@ -242,18 +235,23 @@ class ExcitationNode(Node):
         )
 
     @property
+    def sent(self) -> int:
+        """Commands published so far."""
+        return self.sequence.sent
+
+    @property
     def finished(self) -> bool:
         """True once all cycles were sent (offset only from then on)."""
-        return bool(self.config.cycles) and self.sent >= self.config.cycles * self.config.length
+        return self.sequence.finished
 
     @property
     def exhausted(self) -> bool:
         """True once ``max_commands`` commands were published (nothing more is sent)."""
-        return bool(self.config.max_commands) and self.sent >= self.config.max_commands
+        return self.sequence.exhausted
 
     @property
     def command_subscribers(self) -> int:
-        """Subscriptions matched to this node's ``maglev/command`` publisher.
+        """Subscriptions matched to this node's ``maglev/currents/command`` publisher.
 
         Counts every matched subscription in the graph (the simulator's or
         driver's, a recorder's, ...): wait on it for discovery before the
@@ -261,19 +259,23 @@ class ExcitationNode(Node):
         """
         return self._pub.get_subscription_count()
 
-    def publish_next(self) -> None:
-        """Publish the next command of the sequence (nothing once ``max_commands`` are sent)."""
-        if self.exhausted:
-            return
-        if self.finished:
-            data = self._rest
-        else:
-            data = self._rows[self.sent % self.config.length]
-        self._pub.publish(command_message(self.get_clock().now().nanoseconds, data))
-        self.sent += 1
+    def publish_next(self, stamp_ns: int | None = None) -> None:
+        """Publish the next command (nothing once ``max_commands`` are sent).
 
-    def _on_sample(self, _raw: bytes) -> None:
-        self.publish_next()
+        Parameters
+        ----------
+        stamp_ns : int, optional
+            Stamp of the sample it answers, ns (default: the node clock's time).
+        """
+        now = self.get_clock().now().nanoseconds if stamp_ns is None else stamp_ns
+        self._publish(self.sequence.message(now))
+
+    def _on_sample(self, raw: bytes) -> None:
+        self._publish(self.sequence.answer(raw))  # stamped with the sample it answers
+
+    def _publish(self, message: bytes | None) -> None:
+        if message is not None:
+            self._pub.publish(message)
 
 
 def main(args: list[str] | None = None) -> int:

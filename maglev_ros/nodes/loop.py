@@ -10,7 +10,9 @@ holds the loop up: by default the newest sample of each control period
 
 Plant: the simulator in real time (``plant: simulator``), with its noise,
 quantisation, sensor delay and coil dynamics, and optionally a magnet other
-than the believed one (``plant_polarization``, ``plant_mass``).
+than the believed one (``plant_polarization``, ``plant_mass``); or a V2x board
+(``plant: board``, ``port``), whose 5 kHz stream paces the loop and whose
+coils are left at zero current when the node stops or the link fails.
 
 Diagnostics: real-time factor, overruns, samples dropped by the broadcaster,
 the controller's level; ERROR once the magnet is lost (the loop then stops).
@@ -25,7 +27,9 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from maglev_ros.estimation.config import FILTERS
-from maglev_ros.loop import SimulatedLoopSettings, build_simulated_loop
+from maglev_ros.hardware.serial_link import LinkError
+from maglev_ros.loop import SimulatedLoopSettings
+from maglev_ros.loop.simulated_setup import build_loop, plant_health
 from maglev_ros.nodes.broadcast import LoopBroadcaster
 from maglev_ros.nodes.messages import diagnostic_array
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, integer
@@ -37,6 +41,7 @@ from maglev_ros.topics import DIAGNOSTICS_TOPIC
 __all__ = ['PARAMETERS', 'LoopNode', 'LoopParameterError', 'main']
 
 NODE_NAME = 'maglev_loop'
+PLANTS = ('simulator', 'board')
 SWITCH_INTERVAL_S = 0.0005  # s: the loop's thread gets the GIL back within this
 
 
@@ -48,7 +53,14 @@ PARAMETERS = ParameterTable(
     NODE_NAME,
     LoopParameterError,
     {
-        'plant': Param('simulator', 'the plant: simulator (real time)', check=choice('simulator')),
+        'plant': Param(
+            'simulator', 'the plant: simulator (real time) or board', check=choice(*PLANTS)
+        ),
+        'port': Param('/dev/ttyACM0', 'board: serial device'),
+        'n_sensors': Param(3, 'board: sensors per record', check=integer(1)),
+        'command_timeout': Param(
+            0.1, 'board: s without a command before the coils go to zero', check=num(0, above=True)
+        ),
         'params': Param('maggy_v2', 'parameter set believed: maggy_v2, maggy_v4 or a YAML path'),
         'sample_rate': Param(5000.0, 'samples per second, Hz', check=num(0, above=True)),
         'control_rate': Param(
@@ -92,17 +104,19 @@ class LoopNode(Node):
 
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        values = PARAMETERS.declare(self)
+        values = PARAMETERS.validate(PARAMETERS.declare(self))
         self.publish_every_sample = values.pop('publish_every_sample')
         period = values.pop('diagnostics_period')
-        values.pop('plant')
+        plant = values.pop('plant')
+        board = {k: values.pop(k) for k in ('port', 'n_sensors', 'command_timeout')}
         self.settings = s = SimulatedLoopSettings(**values)
         try:
-            self.loop, self.plant = build_simulated_loop(s)
-        except (ValueError, OSError) as err:
+            self.loop, self.plant = build_loop(s, board if plant == 'board' else None)
+        except (ValueError, OSError, LinkError) as err:
             raise LoopParameterError(f'{NODE_NAME}: {err}') from err
-        sensors = self.plant.simulator.model.n_outputs // 3
-        self.broadcaster = LoopBroadcaster(self, sensors, true_state=True)
+        simulator = getattr(self.plant, 'simulator', None)
+        sensors = self.plant.n_sensors if simulator is None else simulator.model.n_outputs // 3
+        self.broadcaster = LoopBroadcaster(self, sensors, true_state=simulator is not None)
         every_sample = self.publish_every_sample
         send = self.broadcaster
         self.loop.observers.add(send if every_sample else lambda x: x.command is None or send(x))
@@ -113,9 +127,10 @@ class LoopNode(Node):
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._thread = threading.Thread(target=self._run, name='maglev-loop', daemon=True)
         self._thread.start()
+        where = f'the board on {board["port"]}' if plant == 'board' else 'the simulator'
         self.get_logger().info(
             f'{s.params}: {s.filter if s.mode == "lqr" else "no estimator"} + {s.mode} at '
-            f'{s.control_rate:g} Hz on the simulator at {s.sample_rate:g} Hz (real time), '
+            f'{s.control_rate:g} Hz on {where} at {s.sample_rate:g} Hz (real time), '
             f'noise {s.sensor_noise:g} T, plant polarisation x{s.plant_polarization:g}, '
             f'mass x{s.plant_mass:g}; publishing '
             f'{"every sample" if every_sample else f"at {s.control_rate:g} Hz"}'
@@ -132,16 +147,15 @@ class LoopNode(Node):
         level, message = (2, f'magnet lost: {self.loop.reason}') if self.loop.stopped else (0, '')
         if not level and self.broadcaster.error is not None:
             level, message = 2, f'publishing failed: {self.broadcaster.error!r}'
-        if not level and self.plant.overruns:
+        plant = self.plant
+        if not level and getattr(plant, 'overruns', 0):
             level, message = 1, 'the loop fell behind the plant (overruns)'
-        values = {
-            'samples': self.plant.simulator.samples,
-            'real_time_factor': f'{self.plant.real_time_factor:.3f}',
-            'overruns': self.plant.overruns,
-            'broadcast_dropped': self.broadcaster.dropped,
-            'broadcast_published': self.broadcaster.published,
-            'controller': self.loop.controller.status().level,
-        }
+        values = plant_health(plant)
+        values.update(
+            broadcast_dropped=self.broadcaster.dropped,
+            broadcast_published=self.broadcaster.published,
+            controller=self.loop.controller.status().level,
+        )
         return level, message or 'levitating', values
 
     def publish_diagnostics(self) -> None:
@@ -157,6 +171,7 @@ class LoopNode(Node):
         """Stop the loop, then the broadcaster (what it holds is published first)."""
         self._stop.set()
         self._thread.join(timeout=5.0)
+        self.plant.close()  # a board's coils at zero current
         self.broadcaster.close()
         sys.setswitchinterval(self._switch)
         super().destroy_node()

@@ -116,7 +116,14 @@ class Spinner:
         self.executor.shutdown()
 
 
-def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, parameters=None) -> int:
+def run_nodes(
+    factories,
+    args: list[str] | None,
+    name: str,
+    errors: tuple,
+    parameters=None,
+    environment: dict[str, str] | None = None,
+) -> int:
     """Init rclpy, build nodes, spin them on one executor until SIGINT/SIGTERM/SIGHUP.
 
     A second signal during the clean-up is ignored: the nodes are destroyed
@@ -136,6 +143,9 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
     parameters : maglev_ros.parameters.ParameterTable, optional
         The node's parameters: ``--help`` (``-h``) before ``--ros-args``
         prints them and returns 0 without starting ROS.
+    environment : dict, optional
+        Environment variables the nodes want before ROS starts (e.g. the
+        middleware's publication mode); a variable already set is kept.
 
     Returns
     -------
@@ -151,6 +161,8 @@ def run_nodes(factories, args: list[str] | None, name: str, errors: tuple, param
         )
         print(parameters.help_text(prog), end='')
         return 0
+    for variable, value in (environment or {}).items():
+        os.environ.setdefault(variable, value)
     # SIGINT, SIGTERM and SIGHUP end the spin; one arriving during the clean-up
     # (launch's own SIGINT after a terminal's Ctrl-C) no longer interrupts it:
     # rclpy's handlers are off, so the context stays valid until the nodes are

@@ -145,6 +145,41 @@ class SampleEncoder:
             return []
         return serialiser.serialise(batch.stamps_ns, values)
 
+    def publish(self, batch: SampleBatch, calls: Sequence, clock=None) -> int:
+        """Serialise a batch and hand each message to its topic's publish call.
+
+        ``/clock`` (once per burst) goes first, then the samples' messages
+        sample after sample, in :attr:`topics` order.
+
+        Parameters
+        ----------
+        batch : SampleBatch
+            Samples stepped (none: nothing is published).
+        calls : sequence of callable or None
+            Per topic of :attr:`topics`: a call that publishes bytes, or None
+            when nobody subscribes (the topic is then not even serialised).
+        clock : callable, optional
+            Publishes the ``/clock`` messages (``clock='burst'``).
+
+        Returns
+        -------
+        int
+            Sample messages published.
+        """
+        if not len(batch):
+            return 0
+        if clock is not None:
+            for message in self.clock_messages(batch):
+                clock(message)
+        active = [call is not None for call in calls]
+        wanted = [call for call in calls if call is not None]
+        if not wanted:
+            return 0
+        messages = self.sample_messages(batch, active)
+        for publish, message in zip(wanted * len(batch), messages, strict=True):
+            publish(message)
+        return len(messages)
+
     def _odometry(self, batch: SampleBatch) -> np.ndarray:
         odometry = np.empty((len(batch), 13))
         for i, state in enumerate(batch.states):

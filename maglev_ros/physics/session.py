@@ -51,7 +51,9 @@ from __future__ import annotations
 import math
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
@@ -65,6 +67,8 @@ __all__ = [
     'CommandError',
     'SampleBatch',
     'SimulationSession',
+    'Tick',
+    'timeout_line',
 ]
 
 MODES = ('realtime', 'lockstep')
@@ -119,6 +123,24 @@ class SampleBatch:
 
     def __len__(self) -> int:
         return int(self.indices.shape[0])
+
+
+class Tick(NamedTuple):
+    """What :meth:`SimulationSession.tick` did.
+
+    Attributes
+    ----------
+    batch : SampleBatch or None
+        The samples to publish.
+    note : str
+        A line to log ('' when nothing worth it happened).
+    warning : bool
+        The note reports a problem (a lockstep timeout), not progress.
+    """
+
+    batch: SampleBatch | None
+    note: str = ''
+    warning: bool = False
 
 
 class SimulationSession:
@@ -187,6 +209,8 @@ class SimulationSession:
         self.paused = bool(paused)
         self.started = False
         self.real_time_factor = float('nan')
+        #: samples returned after the one the last stamped command answered (None: none yet)
+        self.command_lag: int | None = None
         self.run_start_ns = 0  # simulated time of the current run's sample 0
         self.last_stamp_ns = -1  # of the last sample returned
         self.waiting_since = 0.0  # lockstep: when the last sample was returned
@@ -301,7 +325,7 @@ class SimulationSession:
 
     # -- commands ---------------------------------------------------------------
 
-    def command(self, values, now: float) -> SampleBatch | None:
+    def command(self, values, now: float, stamp_ns: int | None = None) -> SampleBatch | None:
         """Take a command: 4 coil currents (or drives), A, order x+ x- y+ y-.
 
         Real time: held from the next step on. Lockstep: queued; every queued
@@ -313,6 +337,9 @@ class SimulationSession:
             The command.
         now : float
             Monotonic time, s.
+        stamp_ns : int, optional
+            Stamp of the sample the command answers, ns: its lag behind the
+            newest returned sample becomes :attr:`command_lag` (samples).
 
         Returns
         -------
@@ -331,6 +358,8 @@ class SimulationSession:
                 f'need 4 finite currents (x+, x-, y+, y-), got {values.ravel().tolist()}'
             )
         self.counters['commands'] += 1
+        if stamp_ns is not None:
+            self.command_lag = round((self.last_stamp_ns - stamp_ns) / self.dt_ns)
         if self.mode == 'realtime':
             if self._steps_since_command > 1:
                 self.counters['late_commands'] += 1
@@ -363,6 +392,45 @@ class SimulationSession:
         self.counters['timeouts'] += 1
         self._step(self._command)
         return self._awaiting_from(now)
+
+    def tick(self, now: float, ready: Callable[[], bool]) -> Tick:
+        """Do what is due at ``now``: start, a lockstep timeout, or a real-time burst.
+
+        Call it periodically (real time: every ``pace_period``; lockstep: a
+        fraction of ``command_timeout``). Paused or crashed, nothing is due.
+        Not started, the run starts once ``ready()`` (the caller's peers are
+        there) and, in real time, a first command came. Started, lockstep
+        holds the last command past ``command_timeout`` (:meth:`check_timeout`)
+        and real time steps the samples due (:meth:`pace`).
+
+        Parameters
+        ----------
+        now : float
+            Monotonic time, s.
+        ready : callable
+            Returns whether the peers the run waits for are there; asked
+            only before the start.
+
+        Returns
+        -------
+        Tick
+            The samples to publish, and a line to log: the start (info) or a
+            lockstep timeout (a warning).
+        """
+        if self.paused or self.sim.crashed:
+            self._pace = None  # real-time pacing restarts on resume
+            return Tick(None)
+        if not self.started:
+            if (self.mode == 'realtime' and not self.counters['commands']) or not ready():
+                return Tick(None)
+            return Tick(self.start(now), f'started: stepping in {self.mode}')
+        if self.mode == 'realtime':
+            return Tick(self.pace(now)[0])
+        age = now - self.waiting_since
+        batch = self.check_timeout(now)
+        if batch is None:
+            return Tick(None)
+        return Tick(batch, timeout_line(self, age), warning=True)
 
     def _advance(self, now: float) -> SampleBatch | None:
         """Lockstep: step once per queued command while running."""
@@ -501,3 +569,24 @@ class SimulationSession:
         if crashed:
             self.last_state = self.sim.crash_state
         return SampleBatch(indices, stamps, readings, states, currents, crashed)
+
+
+def timeout_line(session: SimulationSession, age: float) -> str:
+    """Describe a lockstep command timeout in one log line.
+
+    Parameters
+    ----------
+    session : SimulationSession
+        The session that held the last command.
+    age : float
+        s since the previous sample was returned.
+
+    Returns
+    -------
+    str
+        One line.
+    """
+    return (
+        f'no command for {age:.3f} s > {session.command_timeout} s at '
+        f't = {session.sim.time:.6f} s: holding the last command'
+    )

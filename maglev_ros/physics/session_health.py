@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from ..health import ERROR, OK, Health
 from ..topics import SIMULATOR_RESET_SERVICE
-from .session import SimulationSession
+from .session import SimulationSession, timeout_line
 
-__all__ = ['crash_line', 'session_health', 'timeout_line']
+__all__ = ['crash_line', 'session_health', 'timeout_line']  # timeout_line: the session's
 
 
 def session_health(session: SimulationSession, magnet: str) -> Health:
@@ -41,6 +41,7 @@ def session_health(session: SimulationSession, magnet: str) -> Health:
         'parameter set': sim.model.params.name,
         'simulated time (s)': f'{sim.time:.6f}',
         'real-time factor': f'{session.real_time_factor:.3f}',
+        'command lag (samples)': '' if session.command_lag is None else session.command_lag,
         'crash reason': sim.reason,
         'crash time (s)': '' if sim.crash_time is None else f'{sim.crash_time:.6f}',
         'crash state': (
@@ -69,25 +70,4 @@ def crash_line(session: SimulationSession) -> str:
     return (
         f'magnet crashed at t = {sim.crash_time:.4f} s ({sim.reason}); pose {state}; '
         f'integration stopped: call {SIMULATOR_RESET_SERVICE}'
-    )
-
-
-def timeout_line(session: SimulationSession, age: float) -> str:
-    """Describe a lockstep command timeout in one log line.
-
-    Parameters
-    ----------
-    session : SimulationSession
-        The session that held the last command.
-    age : float
-        s since the previous sample was returned.
-
-    Returns
-    -------
-    str
-        One line.
-    """
-    return (
-        f'no command for {age:.3f} s > {session.command_timeout} s at '
-        f't = {session.sim.time:.6f} s: holding the last command'
     )

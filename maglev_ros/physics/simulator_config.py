@@ -8,17 +8,114 @@ with the checks that need the parameter set (sensor indices, initial state).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 from .model import make_model
 from .parameters import ParameterError
 from .simulation import CoilDynamics, SensorEffects, Simulator
 
-__all__ = ['SimulatorConfig', 'SimulatorConfigError', 'make_simulator']
+__all__ = [
+    'SimulatorConfig',
+    'SimulatorConfigError',
+    'check_initial_state',
+    'check_parameter_set',
+    'check_sensor_indices',
+    'make_simulator',
+]
 
 
 class SimulatorConfigError(ValueError):
     """A configuration does not fit its parameter set (the message names the value)."""
+
+
+def check_initial_state(
+    name: str, state: tuple[float, ...], error: type[ValueError] = SimulatorConfigError
+) -> tuple[float, ...] | None:
+    """Check an initial state: 12 finite numbers, or none (the first equilibrium).
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name (for the message).
+    state : tuple of float
+        x y z alpha beta gamma vx vy vz wx wy wz (m, rad, m/s, rad/s), or empty.
+
+    error : type, optional
+        The exception raised (a node raises its own parameter error).
+
+    Returns
+    -------
+    tuple of float or None
+        The state, None when empty.
+
+    Raises
+    ------
+    SimulatorConfigError (or ``error``)
+        Naming the parameter and the value.
+    """
+    if state and (len(state) != 12 or not all(math.isfinite(v) for v in state)):
+        raise error(
+            f'{name} must be 12 finite numbers (x y z alpha beta gamma vx vy vz '
+            f'wx wy wz), got {list(state)}'
+        )
+    return state or None
+
+
+def check_sensor_indices(
+    name: str, sensors: tuple[int, ...], error: type[ValueError] = SimulatorConfigError
+) -> tuple[int, ...]:
+    """Check sensor indices: distinct, >= 0 (the parameter set bounds them later).
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name (for the message).
+    sensors : tuple of int
+        The indices.
+    error : type, optional
+        The exception raised (a node raises its own parameter error).
+
+    Returns
+    -------
+    tuple of int
+
+    Raises
+    ------
+    SimulatorConfigError (or ``error``)
+        Naming the parameter and the value.
+    """
+    if any(k < 0 for k in sensors) or len(set(sensors)) != len(sensors):
+        raise error(f'{name} must be distinct sensor indices >= 0, got {list(sensors)}')
+    return sensors
+
+
+def check_parameter_set(
+    name: str, value: str, error: type[ValueError] = SimulatorConfigError
+) -> str:
+    """Check that a parameter set is named (a built-in set or a YAML path).
+
+    Parameters
+    ----------
+    name : str
+        The parameter's name (for the message).
+    value : str
+        The set.
+    error : type, optional
+        The exception raised (a node raises its own parameter error).
+
+    Returns
+    -------
+    str
+
+    Raises
+    ------
+    SimulatorConfigError (or ``error``)
+        If it is empty.
+    """
+    if not value:
+        raise error(f'{name} must name a parameter set, got an empty string')
+    return value
 
 
 @dataclass(frozen=True)
@@ -95,6 +192,25 @@ class SimulatorConfig:
     marker_rate: float
     diagnostics_period: float
     wait_for_controller: bool = False
+
+    def summary(self, set_name: str, sensors: tuple[int, ...]) -> str:
+        """One line saying what runs (the node logs it at start).
+
+        Parameters
+        ----------
+        set_name : str
+            The parameter set's name.
+        sensors : tuple of int
+            The sensors published (all of the set's when :attr:`sensors` is empty).
+        """
+        return (
+            f'{set_name} ({self.field_model} field), magnet {self.magnet}, {self.mode} at '
+            f'{self.sample_rate:g} Hz, sensors {list(sensors)}, coil dynamics '
+            f'{"on" if self.coil_dynamics else "off"}, sensor delay {self.sensor_delay}, '
+            f'noise {self.sensor_noise:g} T, seed {self.seed}'
+            f'{", paused" if self.start_paused else ""}'
+            f'{", waiting for a first command" if self.wait_for_controller else ""}'
+        )
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:

@@ -51,6 +51,16 @@ def command_msg(u: np.ndarray) -> bytes:
     return serialize_message(msg)
 
 
+def stamped_command_msg(stamp_ns: int, u: np.ndarray) -> bytes:
+    """A command as JointState: effort in A, stamped with the sample it answers."""
+    msg = JointState()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    msg.header.frame_id = 'maglev'
+    msg.name = ['x+', 'x-', 'y+', 'y-']
+    msg.effort = [float(v) for v in u]
+    return serialize_message(msg)
+
+
 @dataclass(frozen=True)
 class Lockstep:
     """What a lockstep run published: sample k at T0 + k Ts on every topic."""
@@ -78,8 +88,12 @@ def write_lockstep_bag(
     command_delay_ns: int = 0,
     metadata: dict | None = None,
     log: dict[str, list] | None = None,
+    stamped_commands: bool = False,
 ) -> Path:
     """Write a lockstep run: sensor and currents stamped, commands by log time.
+
+    ``stamped_commands``: commands as JointState stamped with their sample (logged
+    at the stamp plus ``command_delay_ns``), else Float64MultiArray (older bags).
 
     ``drop`` maps a topic to sample indices not written (dropped samples);
     ``log`` (if given) collects ``(log time, bytes)`` per topic as written.
@@ -96,7 +110,10 @@ def write_lockstep_bag(
     ) as bag:
         sensor = bag.add_topic(SENSOR, 'sensor_msgs/msg/MagneticField')
         currents = bag.add_topic(CURRENTS, 'sensor_msgs/msg/JointState')
-        command = bag.add_topic(COMMAND, 'std_msgs/msg/Float64MultiArray')
+        command_type = (
+            'sensor_msgs/msg/JointState' if stamped_commands else 'std_msgs/msg/Float64MultiArray'
+        )
+        command = bag.add_topic(COMMAND, command_type)
         for k, stamp in enumerate(run.stamps):
             # log time: received a little after the sample time (like a real recorder)
             if k not in drop.get(SENSOR, ()):
@@ -104,5 +121,10 @@ def write_lockstep_bag(
             if k not in drop.get(CURRENTS, ()):
                 write(currents, int(stamp) + 40_000, currents_msg(stamp, run.currents[k]))
             if k not in drop.get(COMMAND, ()):
-                write(command, int(stamp) + command_delay_ns, command_msg(run.command[k]))
+                raw = (
+                    stamped_command_msg(stamp, run.command[k])
+                    if stamped_commands
+                    else command_msg(run.command[k])
+                )
+                write(command, int(stamp) + command_delay_ns, raw)
     return path

@@ -200,3 +200,19 @@ def test_a_plain_directory_is_not_called_a_bag(tmp_path, capsys):
     assert f"'{plain}' is not a bag: it has neither metadata.yaml nor a .mcap" in _error(capsys)
     assert main([str(plain), '--reindex']) == 2
     assert f"'{plain}' is not a bag: it holds no .mcap or .db3 storage file" in _error(capsys)
+
+
+@pytest.mark.parametrize('spelling', ['data', 'effort'])
+def test_commands_of_either_type_convert_alike(bag, run, tmp_path, capsys, spelling):
+    """A bag with JointState commands (stamped) gives the data of one with the older
+    Float64MultiArray commands, whether the channel says data[i] or effort[i]."""
+    joint = str(write_lockstep_bag(tmp_path / 'joint', run, stamped_commands=True))
+    inputs = [IN[0], IN[1], IN[2], f'maglev/currents/command:{spelling}[2]']
+    for path, out in ((bag, 'old.npz'), (joint, 'new.npz')):
+        assert main([path, *OUT, *inputs, '--out', str(tmp_path / out)]) == 0
+    capsys.readouterr()
+    old, new = load_data(tmp_path / 'old.npz'), load_data(tmp_path / 'new.npz')
+    _, u = _expected(run)
+    np.testing.assert_array_equal(new.u, u)  # ux, and the command's current of coil 2
+    np.testing.assert_array_equal(new.u, old.u)
+    np.testing.assert_array_equal(new.y, old.y)

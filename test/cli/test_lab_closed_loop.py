@@ -162,7 +162,8 @@ def test_virtual_board_session_levitates_records_the_window_and_matches_its_onli
         counts = {c.topic: c.msgcount for c in reader.connections}
     assert counts['/' + topics.field_topic(0)] == counts['/' + topics.CURRENTS_TOPIC] == samples
     assert counts['/' + topics.COMMAND_TOPIC] > samples // 10 - 20, counts  # 500 Hz
-    assert summary['metadata']['maglev_driver.intra_process'] is True  # the driver's parameters
+    # the board plant's settings, the current limit in force (the scaling's full scale)
+    assert summary['metadata']['maglev_driver.current_limit'] == pytest.approx(3.0)
     # the identifier took the same records: its ARX is the batch ARX of them
     assert summary['online']['samples'] == samples
     differences = [float(d) for d in re.findall(r'largest difference (\S+) of', printed)]
@@ -171,8 +172,8 @@ def test_virtual_board_session_levitates_records_the_window_and_matches_its_onli
 
 def test_the_online_comparison_survives_data_without_a_batch_arx(capsys):
     """A lost magnet leaves constant data: the batch ARX fails, the rest is still printed."""
-    from maglev_ros.cli.closed_loop_lab import _print_online
-    from maglev_ros.nodes.closed_loop_lab import LabRun, OnlineEstimate
+    from maglev_ros.cli.closed_loop_lab import LabRun, _print_online
+    from maglev_ros.loop import OnlineEstimate
     from maglev_ros.sysid import IdData
     from maglev_ros.sysid.online import OnlineArx
 

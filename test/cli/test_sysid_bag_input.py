@@ -21,9 +21,20 @@ def arx_bag(tmp_path_factory):
     return write_lockstep_bag(tmp_path_factory.mktemp('bag') / 'arx', replace(run, field=field))
 
 
-def test_sysid_identifies_from_a_bag(arx_bag, capsys):
+@pytest.fixture(scope='module')
+def joint_bag(tmp_path_factory):
+    """The same run with the commands as JointState, stamped with their samples."""
+    run = lockstep_data(4000, seed=5)
+    field = run.field.copy()
+    field[:, 0] = lfilter([0.0, 0.5e-3], [1.0, -0.8], run.command[:, 0])
+    path = tmp_path_factory.mktemp('bag') / 'joint'
+    return write_lockstep_bag(path, replace(run, field=field), stamped_commands=True)
+
+
+@pytest.mark.parametrize('which', ['Float64MultiArray', 'JointState'])
+def test_sysid_identifies_from_a_bag(arx_bag, joint_bag, capsys, which):
     argv = [
-        str(arx_bag),
+        str(arx_bag if which == 'Float64MultiArray' else joint_bag),
         '--output',
         f'{SENSOR}:magnetic_field.x',
         '--input',

@@ -17,6 +17,7 @@ from maglev_ros.nodes.excitation import (
     build_config,
     commands_of,
 )
+from maglev_ros.nodes.messages import stamp_ns
 from maglev_ros.nodes.simulator import SimulatorNode
 
 TIMEOUT = 30.0
@@ -52,17 +53,17 @@ def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
         ),
     )
     peer = rclpy.create_node('excitation_test_peer', context=ctx)
-    commands, currents = [], []
+    commands, currents, command_stamps, sample_stamps = [], [], [], []
     peer.create_subscription(
         JointState,
         contract.COMMAND_TOPIC,
-        lambda m: commands.append(list(m.effort)),
+        lambda m: commands.append(list(m.effort)) or command_stamps.append(stamp_ns(m)),
         contract.LOCKSTEP_COMMAND_QOS,
     )
     peer.create_subscription(
         JointState,
         contract.CURRENTS_TOPIC,
-        lambda m: currents.append(list(m.effort)),
+        lambda m: currents.append(list(m.effort)) or sample_stamps.append(stamp_ns(m)),
         contract.SENSOR_QOS,
     )
     spinner = contract.Spinner(ctx, [excite, sim, peer])
@@ -83,6 +84,8 @@ def test_excitation_drives_the_lockstep_simulator_sample_by_sample(ctx):
         np.testing.assert_array_equal(currents[1:201], expected)  # command k -> sample k + 1
         assert expected[:, 0].tolist() == (-expected[:, 1]).tolist()  # antisymmetric pair
         assert sim.counters['timeouts'] == 0
+        assert command_stamps[:250] == sample_stamps[:250]  # each stamped with its sample
+        assert sim.session.command_lag == 0
     finally:
         spinner.close()
         for node in (excite, sim, peer):
@@ -97,17 +100,18 @@ def test_timer_trigger_publishes_at_its_rate(ctx):
         ),
     )
     peer = rclpy.create_node('excitation_timer_peer', context=ctx)
-    got = []
+    got, stamps = [], []
     peer.create_subscription(
         JointState,
         contract.COMMAND_TOPIC,
-        lambda m: got.append(list(m.effort)),
+        lambda m: got.append(list(m.effort)) or stamps.append(stamp_ns(m)),
         contract.COMMAND_QOS,
     )
     spinner = contract.Spinner(ctx, [excite, peer])
     try:
         wait_for(lambda: len(got) > 20, what='timer commands')
         assert all(len(c) == 4 and c[0] == -c[1] for c in got)
+        assert np.all(np.diff(stamps) > 0)  # stamped with the node clock's time
     finally:
         spinner.close()
         excite.destroy_node()

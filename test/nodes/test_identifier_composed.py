@@ -1,25 +1,23 @@
-"""The identifier node's sample window and its intra-process taps (composed real-time loops).
+"""The identifier node's sample window, and the parameters of the removed intra-process taps.
 
 * ``identify_from`` / ``identify_until``: the samples whose stamps fall outside
   are not given to the ARX; the estimate is that of the samples in between.
-* ``intra_process`` with ``complete_on_next``: a publisher of the same
-  process delivers the serialised fields in bursts of 5 samples, each burst
-  followed by the one command computed from it (the real-time simulator's
-  order); the identifier takes them from the taps, with no subscription on
-  those topics, and pairs each burst's last sample with the command after it.
+* ``intra_process`` is refused with what replaced it (the pairing of real-time
+  bursts and long reads it served: ``test/bags/test_online_identification.py``).
 """
+
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
 import rclpy
 from rclpy.parameter import Parameter
-from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState, MagneticField
-from std_msgs.msg import Float64MultiArray
 from waiting import wait_for
 
 from maglev_ros import topics
-from maglev_ros.nodes import intra_process
 from maglev_ros.nodes.identifier import IdentifierNode, IdentifierParameterError
 from maglev_ros.nodes.messages import split_stamp
 from maglev_ros.nodes.qos import SENSOR_QOS
@@ -31,7 +29,6 @@ DT_NS = 1_000_000  # ns between samples
 ORDERS = dict(na=[1], nb=[1], nk=[1])
 P0 = 1e6
 FIELD_TOPIC = '/' + topics.field_topic(0)
-COMMAND_TOPIC = '/' + topics.COMMAND_TOPIC
 
 
 def params(**values):
@@ -122,101 +119,64 @@ def test_a_window_that_ends_before_it_starts_is_refused(ctx):
         ident.destroy_node()
 
 
-def test_intra_process_taps_replace_the_subscriptions_and_pair_bursts(ctx):
-    bursts, per_burst = 6, 5
-    rng = np.random.default_rng(9)
-    y = rng.standard_normal(bursts * per_burst + 1)  # y[k]: sample k (1-based)
-    c = rng.standard_normal(bursts + 1)  # c[0]: before the run; c[b + 1]: after burst b
-    publisher = rclpy.create_node('tap_publisher', context=ctx)
-    taps = {
-        topic: intra_process.tap(ctx, publisher.resolve_topic_name(topic))
-        for topic in (FIELD_TOPIC, COMMAND_TOPIC)
-    }
-    for topic, tap in taps.items():
-        tap.add_publisher(MagneticField if topic == FIELD_TOPIC else Float64MultiArray)
-    ident = None
-    try:
-        ident = IdentifierNode(
-            context=ctx,
-            parameter_overrides=params(
-                outputs=[topics.field_channel(0, 'x')],
-                inputs=[topics.command_channel(0)],
-                trigger=topics.field_topic(0),
-                complete_on_next=True,
-                intra_process=True,
-                initial_covariance=P0,
-                **ORDERS,
-            ),
-        )
-        subscribed = {s.topic_name for s in ident.subscriptions}
-        assert not subscribed & {FIELD_TOPIC, COMMAND_TOPIC}, subscribed
-        assert all(tap.listeners == 1 for tap in taps.values())
-
-        def command(value):
-            return [serialize_message(Float64MultiArray(data=[float(value)]))]
-
-        taps[COMMAND_TOPIC].deliver(command(c[0]))
-        for b in range(bursts):
-            ks = range(b * per_burst + 1, (b + 1) * per_burst + 1)
-            taps[FIELD_TOPIC].deliver([serialize_message(field(k, y[k])) for k in ks])
-            taps[COMMAND_TOPIC].deliver(command(c[b + 1]))
-        ident.publish()  # the executor's side takes the same lock
-    finally:
-        if ident is not None:
-            ident.destroy_node()
-        for tap in taps.values():
-            tap.remove_publisher()
-        publisher.destroy_node()
-    assert all(tap.listeners == 0 for tap in taps.values())  # disconnected
-    # the last sample waits for the next stamp; the others are all identified
-    n = bursts * per_burst
-    assert ident.samples == n - 1 and ident.aligner.dropped == 0
-    # sample k of burst b has the command before the burst, except the burst's last
-    # one, which has the command computed after it (the bag converter's pairing)
-    u = {k: c[(k - 1) // per_burst + (k % per_burst == 0)] for k in range(1, n)}
-    expected = reference_theta((y[k], u[k]) for k in range(1, n))
-    np.testing.assert_allclose(ident.identifier.arx.theta, expected, rtol=1e-9)
+def test_the_removed_intra_process_is_refused_with_what_replaced_it(ctx):
+    with pytest.raises(IdentifierParameterError, match='intra_process was removed: the identi'):
+        IdentifierNode(context=ctx, parameter_overrides=params(intra_process=True))
 
 
-def test_a_long_read_of_two_stamped_topics_loses_no_sample(ctx):
-    """A board driver's read after a stall: 300 samples per topic, fields then currents.
+def test_the_removed_parameter_ends_the_executable_with_status_2(domain):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    command = [sys.executable, '-m', 'maglev_ros.nodes.identifier', '--ros-args', '-p',
+               'intra_process:=true']  # fmt: skip
+    proc = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1 and 'intra_process was removed' in lines[0], lines
 
-    Every stamp of the fields waits for its currents, whatever the read's length
-    (the aligner keeps at least a read's stamps), and is identified.
+
+def test_stamped_commands_of_an_old_config_pair_with_their_samples(ctx, monkeypatch):
+    """The contract's JointState commands read by an old config's ``data[0]``.
+
+    A peer publishes each sample's field, then a command stamped with it
+    (lockstep), on two topics: the middleware may deliver them in any order
+    across the topics, and the pairing is by stamp: the estimate is that of
+    ``(y[k], c[k])``.
     """
-    n = 300
-    rng = np.random.default_rng(6)
-    y, u = rng.standard_normal(n), rng.standard_normal(n)
-    publisher = rclpy.create_node('long_read_publisher', context=ctx)
-    names = {'field': FIELD_TOPIC, 'currents': '/' + topics.CURRENTS_TOPIC}
-    taps = {key: intra_process.tap(ctx, topic) for key, topic in names.items()}
-    taps['field'].add_publisher(MagneticField)
-    taps['currents'].add_publisher(JointState)
-    ident = None
+    monkeypatch.setitem(topics.MESSAGE_TYPES, topics.COMMAND_TOPIC, 'sensor_msgs/msg/JointState')
+    n = 40
+    rng = np.random.default_rng(8)
+    y, c = rng.standard_normal(n), rng.standard_normal(n)
+    ident = IdentifierNode(
+        context=ctx,
+        parameter_overrides=params(
+            outputs=[topics.field_channel(0, 'x')],
+            inputs=[f'{topics.COMMAND_TOPIC}:data[0]'],  # the spelling of older configs
+            initial_covariance=P0,
+            **ORDERS,
+        ),
+    )
+    peer = rclpy.create_node('identifier_command_peer', context=ctx)
+    field_pub = peer.create_publisher(MagneticField, topics.field_topic(0), SENSOR_QOS)
+    command_pub = peer.create_publisher(JointState, topics.COMMAND_TOPIC, SENSOR_QOS)
+    spinner = Spinner(ctx, [ident, peer])
     try:
-        ident = IdentifierNode(
-            context=ctx,
-            parameter_overrides=params(
-                outputs=[topics.field_channel(0, 'x')],
-                inputs=[topics.current_channel(0)],
-                trigger=topics.field_topic(0),
-                intra_process=True,
-                initial_covariance=P0,
-                **ORDERS,
+        wait_for(
+            lambda: (
+                field_pub.get_subscription_count() >= 1
+                and command_pub.get_subscription_count() >= 1
+                and all(s.get_publisher_count() >= 1 for s in ident.subscriptions)
             ),
+            what='discovery',
         )
-        fields = [field(k, y[k]) for k in range(n)]
-        taps['field'].deliver([serialize_message(m) for m in fields])
-        currents = [
-            JointState(header=m.header, effort=[float(u[k])]) for k, m in enumerate(fields)
-        ]
-        taps['currents'].deliver([serialize_message(m) for m in currents])
+        for k in range(n):
+            msg = field(k, y[k])
+            field_pub.publish(msg)
+            command_pub.publish(JointState(header=msg.header, effort=[float(c[k]), 0.0, 0, 0]))
+        wait_for(lambda: ident.samples >= n, what=f'{n} samples')
     finally:
-        if ident is not None:
-            ident.destroy_node()
-        for tap in taps.values():
-            tap.remove_publisher()
-        publisher.destroy_node()
-    assert ident.aligner.dropped == 0 and ident.samples == n
-    expected = reference_theta(zip(y, u, strict=True))
+        spinner.close()
+        for node in (ident, peer):
+            node.destroy_node()
+    assert ident.samples == n and ident.aligner.dropped == 0
+    expected = reference_theta(zip(y, c, strict=True))
     np.testing.assert_allclose(ident.identifier.arx.theta, expected, rtol=1e-9)

@@ -66,3 +66,64 @@ def test_bad_loop_parameters_name_the_problem(ctx):
         LoopNode(context=ctx, parameter_overrides=[Parameter('control_rate', value=3000.0)])
     with pytest.raises(LoopParameterError, match=r'filter must be one of kf, ekf, ukf'):
         LoopNode(context=ctx, parameter_overrides=[Parameter('filter', value='pf')])
+
+
+def test_the_loop_node_runs_on_a_board_and_leaves_its_coils_at_zero(ctx):
+    """plant: board: the board's stream paces the loop; its fields are published, commands
+    reach the board, and the node's end sends zero currents."""
+    from functools import partial
+
+    from waiting import wait_for
+
+    from maglev_ros.hardware.firmware import LinearPlant, V2xFirmware
+    from maglev_ros.hardware.virtual_board import VirtualBoard
+
+    firmware = partial(V2xFirmware, LinearPlant.default(3), 3, startup_delay=0.2)
+    with VirtualBoard(firmware) as board:
+        loop = LoopNode(
+            context=ctx,
+            parameter_overrides=[
+                Parameter('plant', value='board'),
+                Parameter('port', value=board.path),
+                Parameter('n_sensors', value=3),
+                Parameter('diagnostics_period', value=0.2),
+            ],
+        )
+        listener = Node('listener', context=ctx)
+        fields, commands = [], []
+        listener.create_subscription(
+            MagneticField, 'maglev/sensor_2/field', fields.append, SENSOR_QOS
+        )
+        listener.create_subscription(
+            JointState, 'maglev/currents/command', commands.append, SENSOR_QOS
+        )
+        executor = SingleThreadedExecutor(context=ctx)
+        executor.add_node(listener)
+        try:
+
+            def heard() -> bool:
+                executor.spin_once(timeout_sec=0.05)
+                return len(fields) >= 50 and len(commands) >= 50
+
+            wait_for(heard, timeout=WAIT_S, what='the board fields and the commands')
+            assert loop.plant.counters['commands_sent'] > 0
+        finally:
+            loop.destroy_node()
+            listener.destroy_node()
+        with board.lock:
+            last = board.firmware.accepted[-1][1]
+        assert tuple(last) == (0, 0, 0, 0)  # the node's end: zero currents
+    stamps = [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in fields]
+    assert all(b > a for a, b in zip(stamps, stamps[1:], strict=False))
+    assert fields[0].header.frame_id == 'maglev_sensor_2'
+
+
+def test_a_board_that_is_not_there_is_named(ctx, tmp_path):
+    with pytest.raises(LoopParameterError, match=str(tmp_path / 'no_board')):
+        LoopNode(
+            context=ctx,
+            parameter_overrides=[
+                Parameter('plant', value='board'),
+                Parameter('port', value=str(tmp_path / 'no_board')),
+            ],
+        )

@@ -87,7 +87,7 @@ def test_lockstep_experiment_recorded_with_metadata_and_exact_alignment(ctx, tmp
     data = read_bag(
         bag,
         ['maglev/sensor_0/field:magnetic_field.z'],
-        [f'maglev/currents/command:data[{j}]' for j in range(4)],
+        [f'maglev/currents/command:effort[{j}]' for j in range(4)],
     )
     assert data.data.Ts == pytest.approx(2e-4)
     assert data.alignment.gaps == () if hasattr(data.alignment, 'gaps') else True
@@ -300,7 +300,7 @@ def test_a_bag_closed_while_metadata_is_asked_for_keeps_the_answers_so_far(ctx, 
     executor.add_node(recorder)
     try:
         deadline = time.monotonic() + TIMEOUT
-        while 'slow_params.fast' not in recorder._metadata_items:
+        while 'slow_params.fast' not in recorder.metadata.items:
             assert time.monotonic() < deadline, 'the first parameter never came'
             executor.spin_once(timeout_sec=0.05)
         assert not recorder.metadata_complete  # 'slow' still on its way

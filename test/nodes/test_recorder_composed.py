@@ -1,138 +1,153 @@
-"""The recorder composed with a real-time simulator: taps, stamp log times, a window.
+"""The recorder on a real-time loop's topics: stamped commands, stamp log times, a window.
 
-The set-up of ``maglev-lab --realtime``: the simulator steps bursts of 5
-samples on the wall clock and hands each burst's messages to the taps of its
-process; a command source answers each burst in the simulator's thread (as
-the composed controller does) with one command that carries, as its value,
-the stamp of the burst's last sample. The recorder (``intra_process``,
-``log_clock: stamp``, ``record_from``, ``record_until``) must then hold
-exactly the window's samples, each command logged at the sample it answers,
-and the command in force at the window's start logged at its first sample
-(and, if it was logged earlier, the one in force at its last sample logged
-there too: the converter then holds it to the end), with no subscription of
-its own on those topics.
+The order of ``maglev-lab --realtime``: bursts of 5 samples (field and
+currents, stamped with each sample), each followed by the one command computed
+from the burst: a ``sensor_msgs/JointState`` stamped with the burst's last
+sample, carrying that stamp as its value. A peer publishes them over the
+middleware (reliable, so none is lost). The recorder (``log_clock: stamp``,
+``record_from``, ``record_until``, given as parameters or set at run time
+through its parameter service) must hold exactly the window's samples, each
+command logged at the sample it answers, the command in force at the window's
+start logged at its first sample and the one in force at its last sample
+logged there; the bag then converts with every sample's input.
 """
 
-import struct
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
+import rclpy
+from rcl_interfaces.srv import SetParametersAtomically
 from rclpy.parameter import Parameter
-from std_msgs.msg import Float64MultiArray
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import JointState, MagneticField
 from waiting import wait_for
 
 from maglev_ros.bags import BagReader, read_bag
-from maglev_ros.cdr.templates import float_array_prefix
-from maglev_ros.nodes import intra_process
+from maglev_ros.nodes.messages import split_stamp
 from maglev_ros.nodes.recorder import RecorderNode, RecorderParameterError, build_config
 from maglev_ros.nodes.runtime import Spinner
-from maglev_ros.nodes.simulator import SimulatorNode
-from maglev_ros.topics import CLOCK_TOPIC, COMMAND_TOPIC, CURRENTS_TOPIC, field_topic
+from maglev_ros.topics import COIL_NAMES, COMMAND_TOPIC, CURRENTS_TOPIC, field_topic
 
 PERIOD_NS = 200_000  # 5 kHz
-FIRST_S, LAST_S = 0.1, 0.3  # the recorded window: samples 500 .. 1500
+T0_NS = 1_000_000_000
+N, BURST = 1000, 5
+FIRST_K, LAST_K = 303, 702  # the recorded window: samples 303 .. 702 (mid-burst both)
+RELIABLE = QoSProfile(depth=20000, reliability=ReliabilityPolicy.RELIABLE)
 
 
 def _params(**values):
     return [Parameter(k, value=v) for k, v in values.items()]
 
 
-class _BurstAnswerer:
-    """Answers each simulated burst with one command, in the simulator's thread."""
+def _stamped(cls, t_ns, **fields):
+    msg = cls(**fields)
+    msg.header.stamp.sec, msg.header.stamp.nanosec = split_stamp(t_ns)
+    return msg
 
-    def __init__(self, ctx, sim, on_first=None) -> None:
-        self.on_first = on_first  # called with the first burst (in the simulator's thread)
-        self.tap = intra_process.tap(ctx, '/' + COMMAND_TOPIC)
-        self.tap.add_publisher(Float64MultiArray)
-        self.prefix = float_array_prefix(4)
-        self.sent: list[int] = []
-        self.source = sim.samples_source
-        self.source.connect(self.on_batch, 'test_commands')
 
-    def on_batch(self, batch) -> None:
-        if self.on_first is not None:
-            self.on_first, on_first = None, self.on_first
-            on_first()
-        last = int(batch.stamps_ns[-1])
-        self.sent.append(last)
-        self.tap.deliver([self.prefix + struct.pack('<4d', last * 1e-9, 0.0, 0.0, 0.0)])
-
-    def close(self) -> None:
-        self.source.disconnect(self.on_batch)
-        self.tap.remove_publisher()
+def _publish(pubs, ks, answered):
+    field_pub, current_pub, command_pub = pubs
+    for b0 in range(ks.start, ks.stop, BURST):
+        burst = range(b0, min(b0 + BURST, ks.stop))
+        for k in burst:
+            t = T0_NS + k * PERIOD_NS
+            field_pub.publish(_stamped(MagneticField, t))
+            current_pub.publish(_stamped(JointState, t, name=list(COIL_NAMES), effort=[0.0] * 4))
+        last = T0_NS + burst[-1] * PERIOD_NS
+        command = _stamped(JointState, last, name=list(COIL_NAMES), effort=[last * 1e-9, 0, 0, 0])
+        command.header.frame_id = 'maglev'
+        command_pub.publish(command)
+        answered.append(last)
 
 
 @pytest.mark.parametrize('at_run_time', [False, True], ids=['parameters', 'set-at-run-time'])
-def test_composed_recorder_takes_the_taps_and_keeps_exactly_the_window(ctx, tmp_path, at_run_time):
-    """With ``at_run_time`` the recorder starts with an empty window (1 ns at 0) and
-    the window is set while the simulator runs, from its thread, as a board lab does."""
-    sim = SimulatorNode(
-        context=ctx,
-        parameter_overrides=_params(
-            mode='realtime', magnet='fixed', start_paused=True, marker_rate=0.0, sensors=[0]
-        ),
-    )
-    window = dict(record_from=FIRST_S, record_until=LAST_S)
-    recorder = None
-
-    def set_window() -> None:
-        result = recorder.set_parameters_atomically(_params(**window))
-        assert result.successful, result.reason
-
-    answerer = _BurstAnswerer(ctx, sim, set_window if at_run_time else None)
-    topics = [field_topic(0), CURRENTS_TOPIC, COMMAND_TOPIC, CLOCK_TOPIC]
+def test_recorder_keeps_exactly_the_window_with_the_commands_in_force(ctx, tmp_path, at_run_time):
+    first, last = T0_NS + FIRST_K * PERIOD_NS, T0_NS + LAST_K * PERIOD_NS
+    window = dict(record_from=first * 1e-9, record_until=last * 1e-9)
+    topics = [field_topic(0), CURRENTS_TOPIC, COMMAND_TOPIC]
+    peer = rclpy.create_node('recorder_window_peer', context=ctx)
+    pubs = [
+        peer.create_publisher(MagneticField, field_topic(0), RELIABLE),
+        peer.create_publisher(JointState, CURRENTS_TOPIC, RELIABLE),
+        peer.create_publisher(JointState, COMMAND_TOPIC, RELIABLE),
+    ]
     recorder = RecorderNode(
         context=ctx,
         parameter_overrides=_params(
             path=str(tmp_path / 'bag'),
             topics=topics,
             log_clock='stamp',
-            **(dict(record_from=0.0, record_until=1e-9) if at_run_time else window),
-            intra_process=True,
             metadata_node='',
+            **(dict(record_from=0.0, record_until=1e-9) if at_run_time else window),
         ),
     )
-    spinner = Spinner(ctx, [sim, recorder])
+    spinner = Spinner(ctx, [recorder, peer])
+    answered = []
     try:
-        wait_for(lambda: len(recorder.subscribed) == len(topics), what='the taps')
-        assert not [s.topic_name for s in recorder.subscriptions]  # no middleware
-        sim.set_paused(False)
-        wait_for(lambda: sim.sim.samples > 1.2 * LAST_S * 5000, timeout=60.0, what='0.36 s')
-        sim.set_paused(True)
+        wait_for(lambda: all(p.get_subscription_count() >= 1 for p in pubs), what='the recorder')
+        _publish(pubs, range(0, 200), answered)
+        if at_run_time:  # as `ros2 param set` does: through the node's parameter service
+            client = peer.create_client(
+                SetParametersAtomically, '/maglev_recorder/set_parameters_atomically'
+            )
+            assert client.wait_for_service(timeout_sec=30.0)
+            request = SetParametersAtomically.Request(
+                parameters=[p.to_parameter_msg() for p in _params(**window)]
+            )
+            future = client.call_async(request)
+            wait_for(future.done, what='the window set')
+            assert future.result().result.successful, future.result().result.reason
+        _publish(pubs, range(200, N), answered)
+        for pub in pubs:
+            assert pub.wait_for_all_acked(rclpy.duration.Duration(seconds=30))
+        n = LAST_K - FIRST_K + 1
+        commands = 1 + sum(first <= s <= last for s in answered)  # the start's, those inside
+        expected = dict(zip(topics, (n, n, commands), strict=True))
+        wait_for(
+            lambda: all(recorder.counts.get('/' + t, 0) >= c for t, c in expected.items()),
+            what='the window',
+        )
     finally:
         spinner.close()
-        answerer.close()
         recorder.destroy_node()
-        sim.destroy_node()
-    first, last = round(FIRST_S * 1e9), round(LAST_S * 1e9)
-    n = (last - first) // PERIOD_NS + 1
+        peer.destroy_node()
+    n = LAST_K - FIRST_K + 1
     with BagReader(tmp_path / 'bag') as reader:
         logged = {}
-        for topic, stamp, _ in reader.messages(topics):
+        for topic, stamp, _ in reader.messages(['/' + t for t in topics]):
             logged.setdefault(topic, []).append(stamp)
-    fields = np.array(logged['/' + field_topic(0)])
-    np.testing.assert_array_equal(fields, first + PERIOD_NS * np.arange(n))  # the window
+    stamps = first + PERIOD_NS * np.arange(n)
+    np.testing.assert_array_equal(logged['/' + field_topic(0)], stamps)  # the window
     assert len(logged['/' + CURRENTS_TOPIC]) == n
-    commands = np.array(logged['/' + COMMAND_TOPIC])
-    # the command in force at the start (answering the burst before it, unless a burst
-    # ends at the first sample), then each command at the last sample of the burst it
-    # answers, up to the window's end
-    answered = np.array([s for s in answerer.sent if first <= s <= last])
-    expected = answered if answered[0] == first else np.r_[first, answered]
-    if expected[-1] < last:  # the one in force at the window's last sample, logged there
-        expected = np.r_[expected, last]
-    np.testing.assert_array_equal(commands, expected)
-    data = read_bag(  # bursts of uneven length (a loaded machine): commands at uneven times
+    inside = [s for s in answered if first <= s <= last]
+    assert logged['/' + COMMAND_TOPIC] == [first, *inside, last]
+    data = read_bag(
         tmp_path / 'bag',
         [f'b={field_topic(0)}:magnetic_field.x'],
-        [f'c={COMMAND_TOPIC}:data[0]'],
+        [f'c={COMMAND_TOPIC}:data[0]'],  # the old spelling reads the JointState's effort
         allow_gaps=True,
     ).data
     assert data.N == n  # every sample has its input: nothing trimmed
-    u = np.asarray(data.u)[:, 0]
-    stamps = first + PERIOD_NS * np.arange(n)
-    held = np.array([max([s for s in answerer.sent if s <= t], default=-1) for t in stamps])
-    np.testing.assert_allclose(u, held * 1e-9, rtol=0, atol=1e-12)  # u(t): answer to <= t
+    held = np.array([max(s for s in answered if s <= t) for t in stamps])
+    np.testing.assert_allclose(np.asarray(data.u)[:, 0], held * 1e-9, rtol=0, atol=1e-12)
+
+
+def test_the_removed_intra_process_is_refused_with_what_replaced_it(ctx, domain, tmp_path):
+    with pytest.raises(RecorderParameterError, match='intra_process was removed: the recorder'):
+        RecorderNode(
+            context=ctx, parameter_overrides=_params(path=str(tmp_path / 'a'), intra_process=True)
+        )
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    command = [sys.executable, '-m', 'maglev_ros.nodes.recorder', '--ros-args', '-p',
+               f'path:={tmp_path / "b"}', '-p', 'intra_process:=false']  # fmt: skip
+    proc = subprocess.run(command, env=env, capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, proc.stdout + proc.stderr
+    lines = [line for line in (proc.stdout + proc.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1 and 'intra_process was removed' in lines[0], lines
+    assert not (tmp_path / 'a').exists() and not (tmp_path / 'b').exists()  # no bag begun
 
 
 def test_a_window_set_at_run_time_is_checked_and_keeps_the_bag(ctx, tmp_path):
@@ -159,4 +174,5 @@ def test_window_and_log_clock_are_checked(tmp_path):
     with np.testing.assert_raises_regex(RecorderParameterError, 'record_until must be 0'):
         build_config({'path': path, 'record_from': 2.0, 'record_until': 1.0})
     cfg = build_config({'path': path, 'log_clock': 'stamp', 'record_until': 1.0})
-    assert cfg.log_clock == 'stamp' and cfg.record_until == 1.0 and not cfg.intra_process
+    assert cfg.log_clock == 'stamp' and cfg.record_until == 1.0
+    assert not hasattr(cfg, 'intra_process')  # removed (see the test below)

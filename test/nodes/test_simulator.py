@@ -107,7 +107,7 @@ class Peer:
     def _on_sample(self, msg):
         self.currents.append(msg)
         if self.commands is not None and self.sent < len(self.commands):
-            self.pub.publish(command_message(0, self.commands[self.sent].tolist()))
+            self.pub.publish(command_message(stamp_ns(msg), self.commands[self.sent]))
             self.sent += 1
 
     def drain(self, quiet=0.5):
@@ -402,7 +402,9 @@ def test_realtime_follows_commands_and_pauses(make_peer):
     wait_for(
         lambda: (
             any(list(m.effort) == [0.5, -0.5, 0.0, 0.0] for m in peer.currents[-50:])
-            or peer.pub.publish(command_message(0, [0.5, -0.5, 0.0, 0.0]))
+            or peer.pub.publish(
+                command_message(stamp_ns(peer.currents[-1]), [0.5, -0.5, 0.0, 0.0])
+            )
         ),
         what='the command applied',
     )

@@ -7,7 +7,7 @@ from maglev_ros.cdr.typestore import jazzy_typestore
 from maglev_ros.physics import Simulator
 from maglev_ros.physics.kernels import odometry_values
 from maglev_ros.physics.sample_encoder import SampleEncoder
-from maglev_ros.physics.session import SimulationSession
+from maglev_ros.physics.session import SampleBatch, SimulationSession
 
 RATE = 5000.0
 FREE = [0.001, 0.0, 0.0365] + [0.0] * 9  # a falling magnet: its state changes every sample
@@ -105,3 +105,33 @@ def test_topics_without_subscribers_are_not_serialised(v2, active):
     for i in range(len(batch)):
         wanted = [m for m, a in zip(full[5 * i : 5 * i + 5], active, strict=True) if a]
         assert some[k * i : k * i + k] == wanted
+
+
+def test_publish_hands_each_message_to_its_topic_clock_first(v2):
+    batch = _batch(v2, samples=10, burst=5)  # indices 1 .. 10: a burst starts at 5 and 10
+    encoder = SampleEncoder([1, 2], state=True, clock='burst', burst=5)
+    sent = []
+
+    def to(topic):
+        return lambda message: sent.append((topic, message))
+
+    calls = [to(t) if t != 'maglev/sensor_1/field' else None for t in encoder.topics]
+    assert encoder.publish(batch, calls, to('/clock')) == 3 * len(batch)
+    clocks = encoder.clock_messages(batch)
+    assert sent[:2] == [('/clock', m) for m in clocks]  # /clock first
+    active = [c is not None for c in calls]
+    expected = encoder.sample_messages(batch, active)
+    assert [m for _, m in sent[2:]] == expected  # sample after sample
+    assert [t for t, _ in sent[2:5]] == ['maglev/sensor_2/field', 'maglev/state/true',
+                                         'maglev/currents']  # fmt: skip
+    sent.clear()
+    assert encoder.publish(batch, [None] * 4, to('/clock')) == 0  # nobody reads the samples
+    assert [t for t, _ in sent] == ['/clock', '/clock']
+    crash = SampleBatch(
+        np.empty(0, np.int64),
+        np.empty(0, np.int64),
+        *(np.empty((0, n)) for n in (9, 12, 4)),
+        crashed=True,
+    )
+    sent.clear()
+    assert encoder.publish(crash, calls, to('/clock')) == 0 and sent == []  # a crash alone

@@ -225,3 +225,44 @@ def test_invalid_settings(v2):
         SimulationSession(simulator(v2), 'fast')
     with pytest.raises(ValueError, match='command_timeout must be a finite number > 0'):
         SimulationSession(simulator(v2), 'lockstep', command_timeout=0.0)
+
+
+def test_tick_starts_lockstep_once_ready_then_holds_on_a_timeout(v2):
+    s = session(v2, command_timeout=0.5)
+    peers = []
+    assert s.tick(0.0, lambda: bool(peers)) == (None, '', False)  # the graph is not there
+    assert not s.started
+    peers.append('controller')
+    batch, note, warning = s.tick(0.1, lambda: bool(peers))
+    assert batch.indices.tolist() == [0] and note == 'started: stepping in lockstep'
+    assert not warning
+    assert s.tick(0.5, lambda: 1 / 0) == (None, '', False)  # started: ready is not asked again
+    batch, note, warning = s.tick(0.7, lambda: True)  # 0.6 s without a command
+    assert batch.indices.tolist() == [1] and s.counters['timeouts'] == 1 and warning
+    assert note == 'no command for 0.600 s > 0.5 s at t = 0.000200 s: holding the last command'
+    s.set_paused(True, now=0.7)
+    assert s.tick(10.0, lambda: True) == (None, '', False)  # paused: no timeout
+
+
+def test_tick_in_real_time_waits_for_a_first_command_then_paces(v2):
+    s = session(v2, mode='realtime')
+    assert s.tick(0.0, lambda: True) == (None, '', False)  # ready, but no command yet
+    s.command([0.1, 0.0, 0.0, 0.0], now=0.0)
+    batch, note, _ = s.tick(0.0, lambda: True)
+    assert batch.indices.tolist() == [0] and note == 'started: stepping in realtime'
+    assert s.tick(0.0, lambda: True) == (None, '', False)  # pacing starts: a burst is not due yet
+    batch = s.tick(0.00101, lambda: True).batch
+    assert batch.indices.tolist() == [1, 2, 3, 4, 5]
+    np.testing.assert_array_equal(batch.currents[:, 0], 0.1)  # the command held (ideal coils)
+
+
+def test_command_lag_counts_the_samples_after_the_answered_one(v2):
+    s = session(v2, mode='realtime')
+    s.start(now=0.0)
+    assert s.command_lag is None
+    s.pace(0.0)
+    s.pace(0.00101)  # samples 1..5 returned
+    s.command(np.zeros(4), now=0.00101, stamp_ns=3 * 200_000)
+    assert s.command_lag == 2
+    s.command(np.zeros(4), now=0.00101)  # unstamped: the lag stays
+    assert s.command_lag == 2

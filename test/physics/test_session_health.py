@@ -53,3 +53,11 @@ def test_timeout_line_names_the_wait_and_the_time(v2):
     assert timeout_line(session, 0.75) == (
         'no command for 0.750 s > 0.5 s at t = 0.000000 s: holding the last command'
     )
+
+
+def test_command_lag_is_reported_once_a_stamped_command_came(v2):
+    session = SimulationSession(Simulator(v2, 5000.0, magnet='fixed'), 'lockstep', now=0.0)
+    session.start(now=0.0)
+    assert session_health(session, 'fixed').values['command lag (samples)'] == ''
+    session.command(np.zeros(4), now=0.0, stamp_ns=0)  # answers sample 0, the newest
+    assert session_health(session, 'fixed').values['command lag (samples)'] == 0

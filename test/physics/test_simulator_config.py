@@ -7,6 +7,9 @@ import pytest
 from maglev_ros.physics.simulator_config import (
     SimulatorConfig,
     SimulatorConfigError,
+    check_initial_state,
+    check_parameter_set,
+    check_sensor_indices,
     make_simulator,
 )
 
@@ -53,3 +56,47 @@ def test_builds_the_configured_simulator():
 def test_errors_name_the_value(changes, message):
     with pytest.raises(SimulatorConfigError, match=message):
         make_simulator(dataclasses.replace(BASE, **changes))
+
+
+def test_summary_says_what_runs():
+    line = dataclasses.replace(BASE, sensor_noise=2e-5, seed=3).summary('maggy_v2', (0, 1, 2))
+    assert line == (
+        'maggy_v2 (fast field), magnet free, lockstep at 5000 Hz, sensors [0, 1, 2], coil '
+        'dynamics on, sensor delay 1, noise 2e-05 T, seed 3'
+    )
+    waiting = dataclasses.replace(
+        BASE, mode='realtime', start_paused=True, wait_for_controller=True
+    )
+    assert waiting.summary('maggy_v2', (0,)).endswith(', paused, waiting for a first command')
+
+
+@pytest.mark.parametrize(
+    ('check', 'value', 'message'),
+    [
+        (
+            check_initial_state,
+            (0.0,) * 3,
+            r'x0 must be 12 finite numbers .*, got \[0.0, 0.0, 0.0\]',
+        ),
+        (check_initial_state, (float('nan'),) * 12, 'x0 must be 12 finite numbers'),
+        (check_sensor_indices, (0, 0), r'x0 must be distinct sensor indices >= 0, got \[0, 0\]'),
+        (check_sensor_indices, (-1,), 'x0 must be distinct sensor indices >= 0'),
+        (check_parameter_set, '', 'x0 must name a parameter set, got an empty string'),
+    ],
+)
+def test_checks_name_the_parameter_and_raise_the_error_asked_for(check, value, message):
+    with pytest.raises(SimulatorConfigError, match=message):
+        check('x0', value)
+
+    class NodeError(ValueError):
+        pass
+
+    with pytest.raises(NodeError, match=message):
+        check('x0', value, error=NodeError)
+
+
+def test_checks_pass_good_values():
+    assert check_initial_state('x0', ()) is None  # the first equilibrium
+    assert check_initial_state('x0', (0.0,) * 12) == (0.0,) * 12
+    assert check_sensor_indices('s', (2, 0)) == (2, 0)
+    assert check_parameter_set('p', 'maggy_v4') == 'maggy_v4'
