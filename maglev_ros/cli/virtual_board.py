@@ -376,7 +376,15 @@ class TruthRecorder:
         return field
 
     def write(self, out, lock) -> None:
-        """Write the kept rows to ``out`` (CSV) and forget them."""
+        """Write the kept rows to ``out`` (CSV) and forget them.
+
+        Parameters
+        ----------
+        out : file
+            The open truth file.
+        lock : threading.RLock
+            The virtual board's lock (the board's thread appends the rows).
+        """
         with lock:
             rows, self.rows = self.rows, []
         out.writelines(','.join(f'{v:.12g}' for v in row) + '\n' for row in rows)

@@ -1,10 +1,11 @@
 """maglev-calibrate on a bag of the closed loop on a V4x PC-control board.
 
 The board is the emulated firmware (physics plant, magnet free) whose magnet is
-not the believed one: polarisation and mass +10 % (it floats at the believed height). The loop (the KF with the
-board's measurement model, the LQR, a PRBS on the pairs) believes the nominal
-set and records the bag. ``--measurement board`` recovers the board's magnet
-within the stated uncertainty; the raw-field model on the same bag refuses.
+not the believed one: polarisation and mass +10 % (it floats at the believed
+height). The loop (the KF with the board's measurement model, the LQR, a PRBS on
+the pairs) believes the nominal set and records the bag. ``--measurement board``
+recovers the board's magnet within the stated uncertainty; the raw-field model
+on the same bag refuses.
 """
 
 from __future__ import annotations
