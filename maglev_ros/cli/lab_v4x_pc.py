@@ -11,8 +11,9 @@ samples with the excitation (``--excitation``, ``--amplitude``, default 0.05 A,
 ``bag/`` and runs the identification with the physics check through the board's
 processing (:func:`maglev_ros.sysid.board_check.check_board_bag`): ``models.json``.
 
-Exit status 0 when all samples were run, 1 when the loop stopped early (the
-reason is printed; the bag keeps what was recorded), 2 on bad input.
+Exit status 0 when all samples were run and identified, 1 when the loop stopped
+early or the record could not be identified (e.g. gaps: periods the host started
+late; the reason is printed, the bag keeps what was recorded), 2 on bad input.
 """
 
 from __future__ import annotations
@@ -135,7 +136,14 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         'models': [],
     }
     if run.samples == samples:
-        data, results, checks = check_board_bag(bag, args.params, settings.sensor)
+        from maglev_ros.bags import BagError
+
+        try:
+            data, results, checks = check_board_bag(bag, args.params, settings.sensor)
+        except (BagError, ValueError) as err:
+            summary['identification'] = f'not run: {err}'
+            print(f'identification not run: {err}')
+            results, checks = (), {}
         print(f'{"model":<28} {"fit val. %":>10}  {"physics check (1-10 Hz)":<24} status')
         for item in results:
             for row in item.result.rows:
@@ -161,7 +169,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
                 )
     (out / 'models.json').write_text(json.dumps(summary, indent=1))
     print(f'wrote {out / "models.json"}')
-    return 0 if run.samples == samples else 1
+    return 0 if run.samples == samples and 'identification' not in summary else 1
 
 
 def _start_board(args: argparse.Namespace, link: str):
