@@ -51,6 +51,7 @@ class SampleLog:
 
     def __init__(self, applied=None) -> None:
         self.applied_of = applied
+        self.skipped = 0
         self.index: list[int] = []
         self.stamps_ns: list[int] = []
         self.readings: list[np.ndarray] = []
@@ -63,7 +64,10 @@ class SampleLog:
         return len(self.index)
 
     def __call__(self, s) -> None:
-        """Keep one :class:`~maglev_ros.loop.LoopSample`."""
+        """Keep one :class:`~maglev_ros.loop.LoopSample` (not a period without readings)."""
+        if not np.isfinite(s.reading).any():
+            self.skipped += 1  # a period the host missed: a gap in the bag
+            return
         n_s = s.currents.shape[0]
         applied = np.zeros(n_s) if s.applied is None else s.applied
         if self.applied_of is not None:

@@ -24,13 +24,15 @@ sample's replies, plus the schedule's time since then (``k / sample_rate``
 while the schedule holds). So stamps are uniform and a late period shows as
 the gap it is. The request goes out when the host wakes, after the
 scheduled time by :attr:`wake_delays` (the board's field is its latest 200 us
-sample then). The loop sees ``sample_rate`` as its rate. :meth:`open`
-measures the board's round-trip rate (``round_trip_rate``: one over the
-median round trip with nothing else to do) and refuses a sample rate it
-cannot carry with 25 % to spare. A period the host starts more than half a
-period late is not made up: the sample is taken at once, the schedule
-restarts from it (``late`` counts them), and :attr:`rate_reached` reports
-the rate the samples came at.
+sample then). The loop sees ``sample_rate`` as its rate. :meth:`open` measures the board's
+round-trip rate (``round_trip_rate``: one over the median round trip with
+nothing else to do) and refuses a sample rate it cannot carry with 25 % to
+spare. A host that wakes a whole period or more late has missed those
+periods: the block holds one row per missed period (readings NaN, so the
+estimator predicts across them with the currents held; ``late`` counts
+them) before the sample, which keeps the estimator's time the board's.
+More than 50 missed periods restart the schedule (a gap).
+:attr:`rate_reached` reports the rate the samples came at.
 
 **Commands.** Coil currents (A, x+ x- y+ y-) pass a
 :class:`~maglev_ros.hardware.command_guard.CommandGuard` with ``pairs=True``:
@@ -66,7 +68,7 @@ DEFAULT_RATE = 1000.0
 #: A sample rate needs this factor more round trips per second than one per period.
 RATE_MARGIN = 1.25
 _RATE_PROBES = 200  # round trips timed by open()
-_LATE_FACTOR = 0.5  # a sample later than this part of a period restarts the schedule
+_MAX_MISSED = 50  # missed periods filled with predict-only rows; beyond, the schedule restarts
 _REOPEN_S = 0.05  # s between attempts to reopen a lost link for its reset
 
 
@@ -99,7 +101,7 @@ class V4xPcPlant:
     round_trip_p99 : float
         Their 99th percentile, s.
     late : int
-        Samples taken more than half a period after their due time.
+        Periods the host missed (woke a whole period or more late).
     periods : list of float
         Time between successive samples, s (for the rate reached).
     coils_reset : bool
@@ -144,6 +146,7 @@ class V4xPcPlant:
         self._wall0_ns = 0
         self.wake_delays: list[float] = []
         self._command = (0, 0)  # pair differences sent with the next read
+        self._held_currents = np.zeros(4)  # the currents of the last sample, A
 
     # -- handle ---------------------------------------------------------------------------
 
@@ -223,19 +226,28 @@ class V4xPcPlant:
         Returns
         -------
         SampleBlock
-            One sample (field T, currents A), or an empty ``crashed`` block
-            after a link error (the coils were reset and the link closed).
+            The sample (field T, currents A), after one row per period the host
+            missed (woke a whole period or more late): readings NaN (the estimator
+            predicts across them), currents the ones held; or an empty
+            ``crashed`` block after a link error (the coils were reset and the
+            link closed).
         """
         if self.stopped:
             return _stopped(self.stopped)
         now = self.clock()
+        missed = 0
         if self._due is None:
             self._due = now
         elif self._due > now:
             self.sleep(self._due - now)
-        elif now - self._due > _LATE_FACTOR * self.period:
-            self.late += 1
-            self._due = now  # a late period is not made up: the schedule restarts here
+        else:
+            missed = int((now - self._due) / self.period)
+            if missed > _MAX_MISSED:  # far behind: the schedule restarts here (a gap)
+                self.late += 1
+                self._due, missed = now, 0
+            elif missed:
+                self.late += missed
+                self._due += missed * self.period
         try:
             sample = self.link.command_and_sample(*self._command)
             t = self.clock()
@@ -251,16 +263,23 @@ class V4xPcPlant:
         self._resets_seen = self.link.counts.resets  # a command went out: 04s from here on
         self.wake_delays.append(t - due)
         self._due += self.period
+        n = missed + 1
         k = self._k
-        self._k += 1
-        since = due - self._t0
+        self._k += n
+        since = due - self._t0 - self.period * np.arange(missed, -1, -1)
+        readings = np.full((n, 3), np.nan)
+        readings[-1] = sample.field_mT * 1e-3
+        currents = np.empty((n, 4))
+        currents[:-1] = self._held_currents
+        currents[-1] = sample.currents_A
+        self._held_currents = currents[-1].copy()
         return SampleBlock(
-            index=np.array([k]),
-            times=np.array([since]),
-            stamps_ns=np.array([self._wall0_ns + round(since * 1e9)], dtype=np.int64),
-            readings=(sample.field_mT * 1e-3)[None, :],
-            currents=np.asarray(sample.currents_A, dtype=float)[None, :],
-            valid=np.ones(1, dtype=bool),
+            index=np.arange(k, k + n),
+            times=since,
+            stamps_ns=self._wall0_ns + np.rint(since * 1e9).astype(np.int64),
+            readings=readings,
+            currents=currents,
+            valid=np.ones(n, dtype=bool),
         )
 
     def write(self, command: np.ndarray, stamp_ns: int) -> None:
