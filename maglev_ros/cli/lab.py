@@ -251,6 +251,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument('--no-plots', action='store_true', help='write no plots')
     p.add_argument('--quiet', action='store_true', help='no progress display')
+    p.add_argument(
+        '--firmware',
+        choices=('v2x', 'v4x_pc'),
+        default='v2x',
+        help='board firmware: v2x (default) or v4x_pc (the V4x PC-control firmware: the '
+        'closed loop at 1000 Hz on its processed field, maglev_ros.cli.lab_v4x_pc)',
+    )
     board = p.add_mutually_exclusive_group()
     board.add_argument(
         '--board',
@@ -770,7 +777,13 @@ def _lab_bringup():
 
 def _run(args: argparse.Namespace) -> int:
     limit_blas_threads(1)  # small solves: see limit_blas_threads
-    _check(args)
+    v4x_pc = args.firmware == 'v4x_pc'
+    if v4x_pc:
+        from maglev_ros.cli.lab_v4x_pc import check_v4x_pc, run_v4x_pc_session
+
+        check_v4x_pc(args)
+    else:
+        _check(args)
     out = Path(args.out or time.strftime('lab_%Y%m%d_%H%M%S'))
     bag = out / 'bag'
     if args.board and not Path(args.board).exists():
@@ -785,6 +798,8 @@ def _run(args: argparse.Namespace) -> int:
             raise UsageError(f'{bag} is not a bag (it holds other files); not removing it')
         shutil.rmtree(bag)
     out.mkdir(parents=True, exist_ok=True)
+    if v4x_pc:
+        return run_v4x_pc_session(args, out, bag)
     if closed_loop(args):
         from maglev_ros.cli.closed_loop_lab import run_session
 

@@ -10,6 +10,13 @@ SIGTERM. Examples::
     maglev-virtual-board --plant physics --magnet free --noise 1e-4 --quantization 0.098e-3
     maglev-virtual-board --plant mypkg.plants:make_plant   # factory(n_sensors)
     maglev-virtual-board --firmware v4x_pc --magnet free   # V4x PC control, physics plant
+    maglev-virtual-board --firmware v4x_pc --magnet free --truth /tmp/truth.csv
+
+``--truth FILE`` (physics plant) writes the magnet's true pose as CSV every
+2 ms of board time: ``t_s,x_m,y_m,z_m,alpha_rad,beta_rad,crashed,monotonic_s``
+(board time since power-up, the pose, 1 once the magnet crashed, and the
+machine's monotonic clock when the row was taken, to match a host's times):
+what a host cannot read from the board, the check of a closed loop against it.
 
 ``--firmware v4x_pc`` emulates the V4x PC-control firmware (COBS requests,
 docs/boards.md) on the physics plant by default, with the TLV493D's noise
@@ -29,6 +36,7 @@ import sys
 import threading
 from collections.abc import Callable, Sequence
 from functools import partial
+from time import monotonic
 
 from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
@@ -36,7 +44,7 @@ from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
 from maglev_ros.hardware.virtual_board import VirtualBoard
 
-from .usage import Parser, UsageError, non_negative_float, run_command
+from .usage import Parser, UsageError, check_output_file, non_negative_float, run_command
 
 __all__ = ['build_parser', 'load_plant', 'main']
 
@@ -146,6 +154,11 @@ def build_parser() -> argparse.ArgumentParser:
         '--sensor-delay', type=_integer_from(0), default=0, help='samples (physics; default 0)'
     )
     parser.add_argument('--seed', type=int, default=0, help='seed of the sensor noise (physics)')
+    parser.add_argument(
+        '--truth',
+        metavar='FILE',
+        help="physics: write the magnet's true pose as CSV every 2 ms (see above)",
+    )
     parser.add_argument('--startup-delay', type=_seconds, default=2.0, help='s after open')
     parser.add_argument('--watchdog', type=_seconds, default=1.0, help='s (V2x)')
     parser.add_argument('--log-period', type=_seconds, default=1e-3, help='s per line (V4x)')
@@ -231,7 +244,7 @@ def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], ob
             setup_plant=setup,
             sensor=args.board_sensor,
         )
-        if isinstance(plant, SimulatorPlant):
+        if isinstance(plant, (SimulatorPlant, TruthRecorder)):
 
             def power_up_pc() -> object:
                 plant.reset()
@@ -261,7 +274,7 @@ def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], ob
             startup_delay=args.startup_delay,
             scaling=getattr(plant, 'scaling', None),
         )
-    if not isinstance(plant, SimulatorPlant):
+    if not isinstance(plant, (SimulatorPlant, TruthRecorder)):
         return make
 
     def power_up() -> object:
@@ -301,20 +314,81 @@ def _run(args: argparse.Namespace) -> int:
     else:
         args.sensors = args.sensors or 1
         plant = load_plant(args.plant, args.sensors)
+    truth = None
+    if args.truth:
+        if not isinstance(plant, SimulatorPlant):
+            raise UsageError('--truth needs the physics plant (--plant physics)')
+        check_output_file('--truth', args.truth)
+        plant = truth = TruthRecorder(plant)
     board = VirtualBoard(_firmware_factory(args, plant), link=args.link)
     stop = threading.Event()
     previous = {}
     for signum in (signal.SIGINT, signal.SIGTERM):
         previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    out = open(args.truth, 'w', encoding='utf-8') if truth else None  # noqa: SIM115
     try:
+        if out:
+            out.write('t_s,x_m,y_m,z_m,alpha_rad,beta_rad,crashed,monotonic_s\n')
         with board:
             print(board.path, flush=True)
             while not stop.wait(0.2):
                 board.check()
+                if out:
+                    truth.write(out, board.lock)
     finally:
         for signum, handler in previous.items():
             signal.signal(signum, handler)
+        if out:
+            truth.write(out, board.lock)
+            out.close()
     return 0
+
+
+class TruthRecorder:
+    """A physics plant that keeps the magnet's true pose every ``every`` samples.
+
+    Parameters
+    ----------
+    plant : SimulatorPlant
+        The plant it calls.
+    every : int, optional
+        Samples between kept poses (default 10: 2 ms at 5 kHz).
+    """
+
+    def __init__(self, plant: SimulatorPlant, every: int = 10) -> None:
+        self.plant = plant
+        self.every = every
+        self.rows: list[tuple] = []
+        self._calls = 0
+
+    def __getattr__(self, name: str):
+        return getattr(self.plant, name)
+
+    def __call__(self, pwm, time: float):
+        """Step the plant; keep ``(t, x, y, z, alpha, beta, crashed, monotonic)`` at times."""
+        field = self.plant(pwm, time)
+        self._calls += 1
+        if self._calls % self.every == 0:
+            sim = self.plant.simulator
+            pose = sim.crash_state if sim.crashed and sim.crash_state is not None else sim.state
+            row = (time, *pose[:5].tolist(), int(sim.crashed), monotonic())
+            self.rows.append(row)
+        return field
+
+    def write(self, out, lock) -> None:
+        """Write the kept rows to ``out`` (CSV) and forget them.
+
+        Parameters
+        ----------
+        out : file
+            The open truth file.
+        lock : threading.RLock
+            The virtual board's lock (the board's thread appends the rows).
+        """
+        with lock:
+            rows, self.rows = self.rows, []
+        out.writelines(','.join(f'{v:.12g}' for v in row) + '\n' for row in rows)
+        out.flush()
 
 
 if __name__ == '__main__':

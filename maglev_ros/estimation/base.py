@@ -130,6 +130,14 @@ class Estimator:
         self.strength_index = self.n_reduced if self.config.magnet_strength else None
         self.bias_start = self.n_reduced + (1 if self.config.magnet_strength else 0)
         self.n_states = self.bias_start + (self.n_outputs if self.config.bias_states else 0)
+        #: the board's processing (measurement 'board'), its filter states after the biases
+        self.board = None
+        self.filter_start = self.n_states
+        if self.config.measurement == 'board':
+            from ..physics.board_processing import BoardProcessing
+
+            self.board = BoardProcessing.from_model(self.model)
+            self.n_states += int(self.board.filtered.sum())
         self.dt = self.config.dt
         self.r_diag = np.full(self.n_outputs, self.config.measurement_variance)
         self.gate = (
@@ -148,7 +156,8 @@ class Estimator:
         std = [c.initial_position] * 3 + [c.initial_angle] * 2
         std += [c.initial_velocity] * 3 + [c.initial_rate] * 2
         std += [c.initial_strength] * (self.bias_start - self.n_reduced)
-        std += [c.initial_bias] * (self.n_states - self.bias_start)
+        std += [c.initial_bias] * (self.filter_start - self.bias_start)
+        std += [c.initial_bias] * (self.n_states - self.filter_start)  # board filter states
         return np.diag(np.square(std))
 
     def disturbance_matrix(self) -> np.ndarray:
@@ -185,7 +194,7 @@ class Estimator:
         q[: self.n_reduced, : self.n_reduced] = (gd * std**2) @ gd.T
         for i in range(self.n_reduced, self.bias_start):
             q[i, i] = self.config.strength_walk**2
-        for i in range(self.bias_start, self.n_states):
+        for i in range(self.bias_start, self.filter_start):
             q[i, i] = self.config.bias_walk**2
         return 0.5 * (q + q.T)
 

@@ -6,12 +6,14 @@ from dataclasses import dataclass, fields
 
 from ..parameters import NodeParameterError, check_settings, choice, finite, integer, setting
 
-__all__ = ['FILTERS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
+__all__ = ['FILTERS', 'MEASUREMENTS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
 
 #: Filter kinds: linear KF about the equilibrium, EKF and UKF on the nonlinear model.
 FILTERS = ('kf', 'ekf', 'ukf')
 #: Process models of the EKF and UKF prediction.
 PREDICTIONS = ('fast', 'full')
+#: What the readings are: the sensors' field, or a V4x PC-control board's processed field.
+MEASUREMENTS = ('raw', 'board')
 
 
 class EstimatorConfigError(ValueError):
@@ -98,6 +100,15 @@ class EstimatorConfig:
         Initial standard deviation of ``s`` (relative).
     strength_walk : float
         Random walk of ``s``, relative, rms per sample.
+    measurement : {'raw', 'board'}
+        What the readings are. ``raw``: the sensors' field, as the physics
+        model gives it. ``board``: the field a V4x PC-control firmware
+        reports (:mod:`maglev_ros.physics.board_processing`): the power-up
+        baseline (magnet absent, coils off) and the coils' feedthrough on x
+        and y removed, x and y low-pass filtered (``f = 0.2 b + 0.8 f`` per
+        200 us board step, so ``a = 0.8^(Ts / 200 us)`` per sample). The
+        filter's state (one per filtered channel) joins the estimator's
+        states, after the bias states. KF only; chosen, never inferred.
     gate_probability : float
         Per-sensor chi-square gate: a sensor's 3-axis innovation is rejected
         when its NIS exceeds the chi-square(3) quantile of this probability.
@@ -147,6 +158,12 @@ class EstimatorConfig:
     strength_walk: float = setting(
         1.0e-7, 'random walk of the strength state, relative rms per sample', finite()
     )
+    measurement: str = setting(
+        'raw',
+        "what the readings are: raw (the sensors) or board (a V4x PC-control board's "
+        'processed field; kf only)',
+        choice(*MEASUREMENTS),
+    )
     gate_probability: float = setting(0.99999, 'per-sensor chi-square gate probability', _gate)
     freeze_samples: int = setting(
         4, 'identical readings in a row that mark a sensor frozen', integer(2)
@@ -164,6 +181,11 @@ class EstimatorConfig:
 
     def __post_init__(self):
         check_settings(self, EstimatorConfigError)
+        if self.measurement == 'board' and (self.filter != 'kf' or self.magnet_strength):
+            raise EstimatorConfigError(
+                'measurement board is supported by the kf filter without magnet_strength only, '
+                f'got filter {self.filter!r}, magnet_strength {self.magnet_strength!r}'
+            )
         if self.magnet_strength and self.filter != 'kf':
             raise EstimatorConfigError(
                 f'magnet_strength is supported by the kf filter only, got filter {self.filter!r}'

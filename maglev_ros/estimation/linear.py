@@ -74,20 +74,26 @@ class KalmanEstimator(Estimator):
         self.Q = section(self._model, mo, 'Q', (n, n))
         g = self.disturbance_matrix()
         ad, gd = zoh(lin.A, g, self.dt)  # g's first columns are B: gd's are Bd
-        self.F[:] = np.eye(n)
-        self.F[:nr, :nr] = ad
-        self.B[:nr] = gd[:, :mi]
-        self.H[:, :nr] = lin.C
-        if n > self.bias_start:
-            self.H[:, self.bias_start :] = np.eye(m)
+        F = np.eye(n)
+        F[:nr, :nr] = ad
+        B = np.zeros((n, mi))
+        B[:nr] = gd[:, :mi]
+        H = np.zeros((m, n))
+        H[:, :nr] = lin.C
+        if self.filter_start > self.bias_start:
+            H[:, self.bias_start : self.filter_start] = np.eye(m)
         self.C = np.ascontiguousarray(lin.C, dtype=float)
         self.magnet_field = self.y_eq - self.model.measurement(
             self.x_eq, self.u_eq, with_magnet=False
         )
         if self.strength_index is not None:
-            self.H[:, self.strength_index] = self.magnet_field
-        self.D[:] = lin.D
-        self.Q[:] = self.process_noise(gd)
+            H[:, self.strength_index] = self.magnet_field
+        D = np.array(lin.D, dtype=float)
+        Q = self.process_noise(gd)
+        if self.board is not None:  # the board's processed field (BoardProcessing)
+            D = self._board_model(F, B, H, D, Q, gd)
+        self.F[:], self.B[:], self.H[:], self.D[:] = F, B, H, D
+        self.Q[:] = 0.5 * (Q + Q.T)
         for name, value in (
             ('y_eq', self.y_eq),
             ('u_eq', self.u_eq),
@@ -130,6 +136,48 @@ class KalmanEstimator(Estimator):
         """
         super().reset(x0)
         self._packed = (self._model, self._ints, self._floats, self.freeze.frozen)
+
+    def _board_model(self, F, B, H, D, Q, gd) -> np.ndarray:
+        """Make F, B, H, Q (in place) and D, y_eq model the board's processed field.
+
+        The readings are ``b = raw - baseline - feedthrough i`` (the physics
+        model's own baseline and feedthrough: :class:`BoardProcessing`); each
+        filtered channel reads its filter state ``f``, which the board updates
+        at each of its 200 us steps inside the host sample:
+        ``f+ = a f + Fx dx + Fw w`` (:meth:`BoardProcessing.host_filter`, with
+        the currents and the disturbances held over the sample, in deviations
+        from the equilibrium). The filter's process noise is that of the
+        disturbances through ``Fw`` (correlated with the magnet's).
+
+        Returns
+        -------
+        ndarray, shape (p, n_s)
+            The processed D (zero on filtered rows: they read the filter state).
+        """
+        board, nr, m = self.board, self.n_reduced, self.n_inputs
+        rows = np.flatnonzero(board.filtered)
+        cols = np.arange(self.filter_start, self.n_states)
+        self.y_eq = self.y_eq - board.baseline - board.feedthrough @ self.u_eq
+        d = D - board.feedthrough
+        g = self.disturbance_matrix()
+        d_all = np.zeros((rows.size, g.shape[1]))
+        d_all[:, :m] = d[rows]
+        fx, fw, a = board.host_filter(self.linear.A, g, self.C[rows], d_all, self.dt)
+        self.filter_pole = a
+        F[cols] = 0.0
+        F[np.ix_(cols, np.arange(nr))] = fx
+        F[np.ix_(cols, cols)] = a * np.eye(rows.size)
+        B[cols] = fw[:, :m]
+        H[np.ix_(rows, np.arange(nr))] = 0.0  # a bias still adds after the filter
+        H[np.ix_(rows, cols)] = np.eye(rows.size)
+        d[rows] = 0.0
+        full_g = np.zeros((self.n_states, g.shape[1]))
+        full_g[:nr] = gd
+        full_g[cols] = fw
+        full = (full_g * self.disturbance_std() ** 2) @ full_g.T
+        Q[:, cols] = full[:, cols]
+        Q[cols, :] = full[cols, :]
+        return d
 
     def _set_state(self, dx, P) -> None:
         if self._x is None:

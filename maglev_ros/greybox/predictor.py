@@ -28,7 +28,7 @@ import numpy as np
 from numba import njit
 from scipy.linalg import solve_discrete_are
 
-from ..physics.board_processing import BoardProcessing, augment
+from ..physics.board_processing import BoardProcessing, augment_exact
 from ..physics.discretization import zoh
 from ..physics.equilibria import find_equilibria
 from ..physics.linearization import FD_STEP, linearize
@@ -308,8 +308,9 @@ class LinearGreyBoxProblem:
             full = BoardProcessing.from_model(model)
             y_eq = y_eq - full.baseline[self.channels]
             d = d - full.feedthrough[self.channels]
-            ad, bd, c, d = augment(
-                ad, bd, c, d, full.filtered[self.channels], full.host_pole(self.Ts)
+            # the board filters at each of its 200 us steps inside the host sample
+            ad, bd, c, d = augment_exact(
+                lin.A, lin.B, c, d, full, full.filtered[self.channels], self.Ts
             )
         q = (self.process_noise**2) * (bd @ bd.T) + 1e-30 * np.eye(ad.shape[0])
         r = np.diag(self.sigma**2)

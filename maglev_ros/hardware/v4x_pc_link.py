@@ -123,6 +123,10 @@ class V4xPcLink:
         4.3 s after power-up, and it answers once set-up ends.
     serial_link : SerialLink, optional
         The port handle (default: a ``SerialLink`` at 115200 baud).
+    clock : callable, optional
+        Monotonic time, s, of the timeouts (default :func:`time.monotonic`; an
+        :class:`~maglev_ros.hardware.emulated_port.EmulatedPort`'s clock runs
+        them on the emulated board's time).
 
     Examples
     --------
@@ -138,12 +142,14 @@ class V4xPcLink:
         timeout: float = 0.1,
         open_timeout: float = 6.0,
         serial_link: SerialLink | None = None,
+        clock=time.monotonic,
     ) -> None:
         if not timeout > 0 or not open_timeout > 0:
             raise ValueError(
                 f'timeout and open_timeout must be > 0 s, got {timeout!r}, {open_timeout!r}'
             )
         self.port = port
+        self._clock = clock
         self.timeout = float(timeout)
         self.open_timeout = float(open_timeout)
         self._serial = serial_link or SerialLink(port, V4X_PC_BAUD, read_timeout=_POLL_S)
@@ -219,8 +225,8 @@ class V4xPcLink:
             True when ``EE`` came back.
         """
         self._serial.write(proto.request(proto.PING))
-        deadline = time.monotonic() + (self.timeout if timeout is None else timeout)
-        while time.monotonic() < deadline:
+        deadline = self._clock() + (self.timeout if timeout is None else timeout)
+        while self._clock() < deadline:
             data = self._serial.read()
             if data == bytes([proto.PING_REPLY]):
                 return True
@@ -257,6 +263,42 @@ class V4xPcLink:
     def status(self) -> proto.StatusReply:
         """Request ``05``: the status bytes and the board's uptime."""
         return self._transact(proto.request(proto.STATUS), proto.STATUS)
+
+    def command_and_sample(self, p_x: int, p_y: int) -> Cycle:
+        """Apply a command, then read the sensors and the currents: one round trip.
+
+        ``03``, ``01`` and ``02`` go in one write; the board answers them in
+        order within one loop pass, so the field is its latest sample taken
+        before the command (the command drives the coils from its next
+        sample on) and the currents its ADC reading with the command applied.
+        (:meth:`cycle` sends them the other way round: the currents before
+        the command.)
+
+        Parameters
+        ----------
+        p_x, p_y : int
+            Pair differences to apply, -255 .. 255.
+
+        Returns
+        -------
+        Cycle
+            Host time at the first reply, field, rate and currents.
+        """
+        frames = (
+            proto.set_pwm_request(p_x, p_y)
+            + proto.request(proto.READ_SENSORS)
+            + proto.request(proto.READ_CURRENTS)
+        )
+        (_, sensors, currents), stamp_ns = self._exchange(
+            frames, (proto.SET_PWM, proto.READ_SENSORS, proto.READ_CURRENTS)
+        )
+        self.last_command = (int(p_x), int(p_y))
+        return Cycle(
+            stamp_ns,
+            np.array(sensors.field_mT),
+            np.array(sensors.rate_mT_s),
+            np.array(currents.currents_A),
+        )
 
     def cycle(self, p_x: int, p_y: int) -> Cycle:
         """One control step in one round trip: ``01``, ``02`` and ``03`` sent together.
@@ -303,7 +345,7 @@ class V4xPcLink:
         try:
             self._serial.write(frames)
             payloads, problem, stamp_ns = self._read_frames(
-                time.monotonic() + self.timeout, len(codes)
+                self._clock() + self.timeout, len(codes)
             )
         except LinkError:
             self._safe_reset()  # the port may be gone: best effort
@@ -345,7 +387,7 @@ class V4xPcLink:
         got = bytearray()
         stamp_ns = 0
         while True:
-            if time.monotonic() > deadline:
+            if self._clock() > deadline:
                 self.counts.dropped_bytes += len(got)
                 return [bytes(got)], _TIMEOUT, 0
             data = self._serial.read()
@@ -372,24 +414,24 @@ class V4xPcLink:
         A board with another firmware may never be quiet (a V2x board streams):
         the deadline ends the drain, and the ping then fails.
         """
-        quiet_until = time.monotonic() + _QUIET_S
-        while time.monotonic() < min(quiet_until, deadline):
+        quiet_until = self._clock() + _QUIET_S
+        while self._clock() < min(quiet_until, deadline):
             data = self._serial.read()
             if data:
                 self.counts.dropped_bytes += len(data)
-                quiet_until = time.monotonic() + _QUIET_S
+                quiet_until = self._clock() + _QUIET_S
 
     def _resync(self, timeout: float) -> None:
         """End a half frame, drop stale bytes, ping until ``EE``; LinkError on no answer."""
         self.counts.resyncs += 1
-        deadline = time.monotonic() + timeout
+        deadline = self._clock() + timeout
         self._serial.write(DELIMITER)
         while True:
             self._drain(deadline)
-            if self.ping(min(0.25, max(deadline - time.monotonic(), 0.01))):
+            if self.ping(min(0.25, max(deadline - self._clock(), 0.01))):
                 self._drain(deadline + _QUIET_S)  # bytes after EE (none from a sound board)
                 return
-            if time.monotonic() > deadline:
+            if self._clock() > deadline:
                 raise LinkError(
                     f'{self.port}: no answer to the ping (AA -> EE) within {timeout:g} s; '
                     f'expected a Maggy V4x board running the {FIRMWARE_NAME} '
@@ -408,7 +450,7 @@ class V4xPcLink:
         """Send ``04`` and wait briefly for its reply; never raise."""
         try:
             self._serial.write(proto.request(proto.RESET))
-            payloads, problem, _ = self._read_frames(time.monotonic() + self.timeout, 1)
+            payloads, problem, _ = self._read_frames(self._clock() + self.timeout, 1)
         except LinkError:
             return
         if not problem and payloads == [bytes([proto.RESET])]:

@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'BoardProcessing', 'augment']
+__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'BoardProcessing', 'augment', 'augment_exact']
 
 #: The firmware's loop period, s (5 kHz).
 BOARD_PERIOD = 2e-4
@@ -102,6 +102,69 @@ class BoardProcessing:
         steps = max(Ts / self.board_period, 1.0)
         return float((1.0 - self.weight) ** steps)
 
+    def board_steps(self, Ts: float) -> int:
+        """Return the board's filter steps per host sample, ``round(Ts / board_period)`` (>= 1).
+
+        Parameters
+        ----------
+        Ts : float
+            Host sample time, s.
+        """
+        return max(1, int(round(Ts / self.board_period)))
+
+    def host_filter(
+        self, A: np.ndarray, G: np.ndarray, C: np.ndarray, D: np.ndarray, Ts: float
+    ) -> tuple[np.ndarray, np.ndarray, float]:
+        """Return the filtered channels' update over one host sample, exact at the board steps.
+
+        With the inputs ``w`` held over the host sample (from its start) and
+        the continuous model ``dx/dt = A x + G w``, the board takes ``M =
+        Ts / board_period`` samples ``b_j = C x(j dt_b) + D w`` in the host
+        sample and filters each: the filter output at the next host sample is
+        ``f+ = a f + Fx x + Fw w`` with ``a = 0.8^M``. (The host-rate
+        approximation of :meth:`host_pole` takes ``b`` at the sample's end
+        for all ``M`` steps: a phase lead of about 1.5 board steps.)
+
+        Parameters
+        ----------
+        A : ndarray, shape (n, n)
+            Continuous dynamics, 1/s.
+        G : ndarray, shape (n, r)
+            Continuous input matrix of the held inputs (currents first).
+        C : ndarray, shape (q, n)
+            The filtered channels' output matrix (processed: raw C).
+        D : ndarray, shape (q, r)
+            Their direct term (processed: feedthrough removed; zero for
+            inputs that are not currents).
+        Ts : float
+            Host sample time, s (a multiple of the board period; otherwise
+            rounded to whole board steps).
+
+        Returns
+        -------
+        Fx : ndarray, shape (q, n)
+        Fw : ndarray, shape (q, r)
+        a : float
+            ``(1 - weight)^M``.
+        """
+        from scipy.linalg import expm
+
+        n, r = G.shape
+        steps = self.board_steps(Ts)
+        big = np.zeros((n + r, n + r))
+        big[:n, :n], big[:n, n:] = A, G
+        e = expm(big * self.board_period)
+        phi, gam = e[:n, :n], e[:n, n:]
+        keep = 1.0 - self.weight
+        power, held = np.eye(n), np.zeros((n, r))
+        fx, fw = np.zeros((C.shape[0], n)), np.zeros((C.shape[0], r))
+        for j in range(1, steps + 1):
+            power, held = phi @ power, phi @ held + gam  # x(j dt_b) = power x + held w
+            w = self.weight * keep ** (steps - j)
+            fx += w * (C @ power)
+            fw += w * (C @ held + D)
+        return fx, fw, float(keep**steps)
+
     def apply(self, raw: np.ndarray, currents: np.ndarray, Ts: float) -> np.ndarray:
         """Process a raw field record as the firmware would (host-rate filter).
 
@@ -172,3 +235,58 @@ def augment(
     c2[rows] = np.hstack([(1 - a) * cf, a * np.eye(q)])
     d2[rows] = (1 - a) * df
     return ad2, bd2, c2, d2
+
+
+def augment_exact(
+    A: np.ndarray,
+    B: np.ndarray,
+    c: np.ndarray,
+    d: np.ndarray,
+    board: BoardProcessing,
+    filtered: np.ndarray,
+    Ts: float,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Sample ``dx/dt = A x + B u, b = c x + d u`` with the board's filter, exactly.
+
+    The inputs are held over each host sample; the board filters ``b`` at
+    each of its steps (:meth:`BoardProcessing.host_filter`). The filter
+    output ``f_k`` of each filtered channel joins the state and is that
+    channel's reading (no direct term); unfiltered channels read ``c x + d u``.
+
+    Parameters
+    ----------
+    A, B : ndarray
+        Continuous model, shapes (n, n), (n, m).
+    c, d : ndarray
+        Processed output (feedthrough removed), shapes (p, n), (p, m).
+    board : BoardProcessing
+        The board's processing (its weight and period).
+    filtered : ndarray of bool, shape (p,)
+        Channels with the low-pass.
+    Ts : float
+        Host sample time, s.
+
+    Returns
+    -------
+    tuple of ndarray
+        ``Ad, Bd, C, D`` of the sampled model, ``n + (filtered channels)`` states.
+    """
+    from scipy.linalg import expm
+
+    rows = np.flatnonzero(filtered)
+    n, m, q = A.shape[0], B.shape[1], rows.size
+    fx, fu, a = board.host_filter(A, B, c[rows], d[rows], Ts)
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = A, B
+    e = expm(big * board.board_steps(Ts) * board.board_period)
+    ad = np.zeros((n + q, n + q))
+    ad[:n, :n] = e[:n, :n]
+    ad[n:, :n] = fx
+    ad[n:, n:] = a * np.eye(q)
+    bd = np.vstack([e[:n, n:], fu])
+    c2 = np.hstack([c, np.zeros((c.shape[0], q))])
+    d2 = np.array(d, dtype=float)
+    c2[rows] = 0.0
+    c2[rows, n + np.arange(q)] = 1.0
+    d2[rows] = 0.0
+    return ad, bd, c2, d2

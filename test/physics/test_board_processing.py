@@ -68,3 +68,42 @@ def test_augmented_model_equals_filtering_its_output():
         np.testing.assert_allclose(y2, np.r_[f, y[2]], atol=1e-12)
         x = ad @ x + bd @ u[k]
         s = ad2 @ s + bd2 @ u[k]
+
+
+def test_host_filter_is_the_board_loop_on_the_continuous_model(model):
+    """The filter states over a 1 ms host sample equal the 5 kHz loop run on the plant."""
+    from scipy.linalg import expm
+
+    from maglev_ros.physics import linearize
+    from maglev_ros.physics.board_processing import augment_exact
+
+    bp = BoardProcessing.from_model(model, sensors=[0])
+    lin = linearize(model).reduced()
+    rows = [0, 1, 2]
+    A, B = lin.A, lin.B
+    c = lin.C[rows]
+    d = lin.D[rows] - bp.feedthrough
+    Ts, steps = 1e-3, 5
+    n, m = A.shape[0], B.shape[1]
+    big = np.zeros((n + m, n + m))
+    big[:n, :n], big[:n, n:] = A, B
+    e = expm(big * 2e-4)
+    phi, gam = e[:n, :n], e[:n, n:]
+    ad, bd, c2, d2 = augment_exact(A, B, c, d, bp, bp.filtered, Ts)
+    rng = np.random.default_rng(3)
+    x = rng.normal(0, 1e-4, n)
+    f = rng.normal(0, 1e-4, 2)
+    state = np.concatenate([x, f])
+    for _ in range(20):
+        u = rng.uniform(-1, 1, m)
+        for _ in range(steps):  # the board: its plant and its filter every 200 us
+            x = phi @ x + gam @ u
+            f = 0.8 * f + 0.2 * (c[:2] @ x + d[:2] @ u)
+        state = ad @ state + bd @ u
+        np.testing.assert_allclose(state[:n], x, rtol=1e-9, atol=1e-15)
+        np.testing.assert_allclose((c2 @ state + d2 @ u)[:2], f, rtol=1e-9, atol=1e-15)
+        z = c[2] @ x + d[2] @ u  # z is read unfiltered
+        assert (c2 @ state + d2 @ u)[2] == pytest.approx(z, rel=1e-9, abs=1e-15)
+    # the filter state decays with the pole of the host-rate shortcut
+    a = bp.host_pole(Ts)
+    assert ad[n, n] == pytest.approx(a)

@@ -1,0 +1,188 @@
+"""``maglev-lab --firmware v4x_pc``: the closed-loop session on a V4x PC-control board.
+
+With ``--board PATH`` (a board flashed with the PC-control firmware, docs/boards.md)
+or ``--virtual-board`` (``maglev-virtual-board --firmware v4x_pc``, physics plant,
+sensor noise 0.1 mT, the board's processing on), and ``--magnet free``: the loop of
+:func:`maglev_ros.loop.v4x_pc_setup.run_v4x_pc_loop` (one ``03 01 02`` round
+trip per sample at ``--control-rate``, default 1000 Hz; the KF with the board's
+measurement model; the LQR on the pairs) holds the magnet for ``--samples``
+samples with the excitation (``--excitation``, ``--amplitude``, default 0.05 A,
+``--band``, default 0-0.05 of Nyquist) on the pairs from the first sample, writes
+``bag/`` and runs the identification with the physics check through the board's
+processing (:func:`maglev_ros.sysid.board_check.check_board_bag`): ``models.json``.
+
+Exit status 0 when all samples were run and identified, 1 when the loop stopped
+early or the record could not be identified (e.g. gaps: periods the host started
+late; the reason is printed, the bag keeps what was recorded), 2 on bad input.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from maglev_ros.cli.usage import UsageError
+
+__all__ = ['check_v4x_pc', 'run_v4x_pc_session']
+
+PROG = 'maglev-lab'
+V4X_PC_RATE = 1000.0  # Hz, samples (and commands) per second by default
+V4X_PC_AMPLITUDE = 0.05  # A per pair: the hold stays within 0.5 mm (docs/benchmarks.md)
+V4X_PC_BAND = (0.0, 0.05)  # of Nyquist: 0-25 Hz at 1 kHz, where the field sees the motion
+
+
+def check_v4x_pc(args: argparse.Namespace) -> None:
+    """Refuse what the V4x PC-control session cannot run (one line each).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments.
+
+    Raises
+    ------
+    UsageError
+        No board, the magnet not free, or a sample rate other than the loop's.
+    """
+    if not (args.board or args.virtual_board):
+        raise UsageError('--firmware v4x_pc needs --board PATH or --virtual-board')
+    if args.magnet not in (None, 'free'):
+        raise UsageError(
+            f'--firmware v4x_pc runs the closed loop: --magnet free (got {args.magnet})'
+        )
+    if args.samples is not None and args.samples < 2:
+        raise UsageError(f'--samples must be >= 2, got {args.samples}')
+
+
+def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
+    """Run the session (module docstring); return the exit status.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        maglev-lab's parsed arguments (checked by :func:`check_v4x_pc`).
+    out, bag : Path
+        The output directory and its bag (new).
+    """
+    from maglev_ros.cli.lab_board import stop_child
+    from maglev_ros.control.excitation import CommandExcitation
+    from maglev_ros.hardware.v4x_pc_link import V4xPcLink
+    from maglev_ros.hardware.v4x_pc_poller import REPLY_TIMEOUT_S
+    from maglev_ros.loop.sample_log import write_sample_bag
+    from maglev_ros.loop.v4x_pc_setup import V4xPcLoopSettings, run_v4x_pc_loop
+    from maglev_ros.sysid.board_check import check_board_bag
+
+    rate = args.control_rate or V4X_PC_RATE
+    samples = args.samples or int(round(25.0 * rate))
+    amplitude = V4X_PC_AMPLITUDE if args.amplitude is None else args.amplitude
+    band = V4X_PC_BAND if args.band is None else tuple(args.band)
+    try:
+        settings = V4xPcLoopSettings(params=args.params, sample_rate=rate)
+        excitation = CommandExcitation(
+            args.excitation, amplitude, band, 'pairs', seed=args.seed, length=samples
+        )
+    except ValueError as err:
+        raise UsageError(str(err)) from None
+    where = args.board or f'a virtual V4x PC-control board ({args.params}, magnet free)'
+    print(
+        f'{PROG}: {samples} samples at {rate:g} Hz on {where}, {args.excitation} '
+        f'{amplitude:g} A on the pairs, seed {args.seed}',
+        flush=True,
+    )
+    child = None
+    port = args.board or str(out / 'ttyMAGGY')
+
+    def start() -> None:  # after the loop is built: a free magnet falls from set-up's end
+        nonlocal child
+        if args.virtual_board:
+            child = _start_board(args, port)
+
+    link = V4xPcLink(port, timeout=REPLY_TIMEOUT_S, open_timeout=30.0)
+    t0 = time.monotonic()
+    try:
+        run = run_v4x_pc_loop(settings, link, samples, excitation, ready=start)
+    except (OSError, ValueError) as err:
+        raise UsageError(str(err)) from None
+    finally:
+        if child is not None:
+            stop_child(child)
+    wall = time.monotonic() - t0
+    print(
+        f'{run.samples} samples in {wall:.1f} s: rate {run.rate_reached:.1f} Hz (set {rate:g}), '
+        f'{run.late} late periods; board round trips {run.round_trip_rate:.0f} /s (median)'
+        + (f'; stopped: {run.reason}' if run.reason else '')
+    )
+    write_sample_bag(
+        bag,
+        run.log,
+        (settings.sensor,),
+        {'magnet': 'free', 'params': args.params, 'firmware': 'v4x_pc', 'seed': args.seed},
+    )
+    print(f'wrote {bag}')
+    est = run.log.arrays()['estimates']
+    summary = {
+        'samples': run.samples,
+        'rate_hz': run.rate_reached,
+        'late_periods': run.late,
+        'round_trip_rate_hz': run.round_trip_rate,
+        'stopped': run.reason,
+        'estimated_max_abs_xy_m': np.nanmax(np.abs(est[:, :2]), axis=0).tolist()
+        if len(est)
+        else None,
+        'models': [],
+    }
+    if run.samples == samples:
+        from maglev_ros.bags import BagError
+
+        try:
+            data, results, checks = check_board_bag(bag, args.params, settings.sensor)
+        except (BagError, ValueError) as err:
+            summary['identification'] = f'not run: {err}'
+            print(f'identification not run: {err}')
+            results, checks = (), {}
+        print(f'{"model":<28} {"fit val. %":>10}  {"physics check (1-10 Hz)":<24} status')
+        for item in results:
+            for row in item.result.rows:
+                check = checks.get((item.group.name, row.label))
+                text = (
+                    f'{check.max_db:5.2f} dB {check.max_deg:5.1f} deg'
+                    if hasattr(check, 'max_db')
+                    else ''
+                )
+                fit = float(np.mean(row.fit_validation))
+                print(
+                    f'{item.group.name + " " + row.label:<28} {fit:10.1f}  {text:<24} {row.status}'
+                )
+                summary['models'].append(
+                    {
+                        'group': item.group.name,
+                        'model': row.label,
+                        'status': row.status,
+                        'fit_validation': fit if np.isfinite(fit) else None,
+                        'physics_max_db': getattr(check, 'max_db', None),
+                        'physics_max_deg': getattr(check, 'max_deg', None),
+                    }
+                )
+    (out / 'models.json').write_text(json.dumps(summary, indent=1))
+    print(f'wrote {out / "models.json"}')
+    return 0 if run.samples == samples and 'identification' not in summary else 1
+
+
+def _start_board(args: argparse.Namespace, link: str):
+    """Start ``maglev-virtual-board --firmware v4x_pc --magnet free`` on ``link``."""
+    import subprocess
+    import sys
+
+    cmd = [
+        sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
+        '--magnet', 'free', '--params', args.params, '--link', link, '--seed', str(args.seed),
+    ]  # fmt: skip
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    if not child.stdout.readline().strip():
+        child.wait(timeout=60)
+        raise UsageError(f'the virtual board did not start: {child.stderr.read().strip()}')
+    return child

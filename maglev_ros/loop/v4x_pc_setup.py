@@ -1,0 +1,284 @@
+"""The closed loop on a V4x PC-control board, built from plain settings.
+
+What runs the magnet on a current (V4x) board from a PC: the board's one
+sensor and its processed field (:class:`~maglev_ros.estimation.EstimatorConfig`
+``measurement='board'``), a KF with that measurement model at the loop's
+sample rate, the LQR at the same rate, as a
+:class:`~maglev_ros.loop.ControlLoop` on a
+:class:`~maglev_ros.loop.v4x_pc_plant.V4xPcPlant`.
+
+The board applies pair differences only (x+ gets ``p_x``, x- ``-p_x``): the
+LQR's common-mode part (the same current in every coil, which acts on the
+height z) cannot reach the coils and is dropped by the plant's guard. The
+height is not controlled then; it is held by the base magnets (the z mode of
+the model is an undamped oscillation, stable, not unstable as x and y are).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ..hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
+from .control_loop import ControlLoop
+from .v4x_pc_plant import DEFAULT_RATE, V4xPcPlant
+
+__all__ = ['V4xPcLoopSettings', 'V4xPcRun', 'board_model', 'build_v4x_pc_loop', 'run_v4x_pc_loop']
+
+
+@dataclass(frozen=True)
+class V4xPcLoopSettings:
+    """What the loop on a V4x PC-control board runs.
+
+    Attributes
+    ----------
+    params : str
+        Parameter set the estimator and the controller believe (``maggy_v2``,
+        ``maggy_v4`` or a YAML path).
+    sensor : int
+        Which sensor of the set the board reads (its mux channel 7).
+    sample_rate : float
+        Samples (and commands) per second, Hz.
+    supply_voltage, coil_resistance : float
+        V and ohm: the PWM scaling (255 counts at full duty).
+    current_limit : float
+        Largest commanded |current| per coil, A.
+    bias_states : bool
+        Estimate a constant offset per axis (the baseline's error, a
+        feedthrough slope's error).
+    coil_dynamics : bool
+        The coils' L/R lag in the LQR design.
+    command_delay : int
+        Samples of command delay in the LQR design (1: the plant sends the
+        command of sample k with the request of sample k+1).
+    sensor_noise : float
+        T rms per axis the estimator assumes.
+    angular_acceleration_noise : float
+        The estimator's unmodelled torque per inertia, rad/s^2 rms
+        (:class:`~maglev_ros.estimation.EstimatorConfig`).
+    """
+
+    params: str = 'maggy_v2'
+    sensor: int = 0
+    sample_rate: float = DEFAULT_RATE
+    supply_voltage: float = 12.0
+    coil_resistance: float = 4.0
+    current_limit: float = 1.0
+    bias_states: bool = True
+    coil_dynamics: bool = False
+    command_delay: int = 1
+    sensor_noise: float = 1.0e-4
+    angular_acceleration_noise: float = 50.0
+
+    @property
+    def scaling(self) -> CurrentScaling:
+        """PWM counts per ampere of the board (255 counts at full duty)."""
+        return CurrentScaling.from_supply(
+            self.supply_voltage, self.coil_resistance, V4X_PWM_FULL_SCALE
+        )
+
+
+def board_model(params, sensor: int):
+    """Return the physics model of ``params`` with only the board's sensor.
+
+    Parameters
+    ----------
+    params : str or MaggyParameters
+        Preset, YAML path or a loaded set.
+    sensor : int
+        Index of the sensor the board reads.
+
+    Raises
+    ------
+    ValueError
+        If the set has no such sensor.
+    """
+    from ..physics import MaggyParameters, load_parameters, make_model
+
+    p = params if isinstance(params, MaggyParameters) else load_parameters(params)
+    if not 0 <= sensor < len(p.sensors):
+        raise ValueError(
+            f'sensor must be 0 to {len(p.sensors) - 1} for {params!r}, got {sensor!r}'
+        )
+    return make_model(p.replace(sensors=(p.sensors[sensor],)))
+
+
+def build_v4x_pc_loop(
+    s: V4xPcLoopSettings, link, observers=(), excitation=None, clock=None, sleep=None
+) -> tuple[ControlLoop, V4xPcPlant]:
+    """Build the loop and its plant (the plant is not opened: :meth:`V4xPcPlant.open`).
+
+    Parameters
+    ----------
+    s : V4xPcLoopSettings
+    link : V4xPcLink
+        The board's link.
+    observers : iterable
+        The loop's observers (:class:`~maglev_ros.loop.ControlLoop`).
+    excitation : array_like, shape (N, 4), optional
+        Currents added to the command at sample k < N, A.
+    clock, sleep : callable, optional
+        The plant's clock (default the wall clock).
+
+    Returns
+    -------
+    (ControlLoop, V4xPcPlant)
+
+    Raises
+    ------
+    ValueError
+        If the set cannot be loaded or controlled, or a setting is out of range.
+    """
+    from ..control import ControllerConfig, make_controller
+    from ..estimation import EstimatorConfig, make_estimator
+    from ..physics import linearize
+
+    model = board_model(s.params, s.sensor)
+    linear = linearize(model)
+    controller = make_controller(
+        model,
+        ControllerConfig(
+            mode='lqr',
+            sample_rate=s.sample_rate,
+            command_delay=s.command_delay,
+            sensor_delay=0,
+            coil_dynamics=s.coil_dynamics,
+            current_limit=s.current_limit,
+        ),
+        linear=linear,
+    )
+    estimator = make_estimator(
+        model,
+        EstimatorConfig(
+            filter='kf',
+            sample_rate=s.sample_rate,
+            sensor_delay=0,
+            sensor_noise=s.sensor_noise,
+            angular_acceleration_noise=s.angular_acceleration_noise,
+            bias_states=s.bias_states,
+            measurement='board',
+        ),
+        linear=linear,
+    )
+    timing = {k: v for k, v in (('clock', clock), ('sleep', sleep)) if v is not None}
+    plant = V4xPcPlant(link, s.scaling, s.current_limit, s.sample_rate, **timing)
+    loop = ControlLoop(plant, controller, estimator, excitation=excitation, observers=observers)
+    # compile the estimator's and the controller's kernels now, not in the first period
+    x_hat = estimator.step(estimator.y_eq, estimator.u_eq)
+    controller.command(0.0, x_hat, estimator.u_eq)
+    loop.reset()
+    return loop, plant
+
+
+@dataclass
+class V4xPcRun:
+    """What :func:`run_v4x_pc_loop` did.
+
+    Attributes
+    ----------
+    samples : int
+        Samples handled.
+    reason : str
+        Why the loop stopped early ('' if it ran them all).
+    round_trip_rate : float
+        The board's round trips per second, measured when the plant opened, Hz.
+    round_trip_p99 : float
+        The 99th percentile of those round trips, s.
+    rate_reached : float
+        Samples per second over the run, Hz.
+    late : int
+        Periods started more than half a period late.
+    log : SampleLog
+        Every sample (for :func:`~maglev_ros.loop.sample_log.write_sample_bag`).
+    started, ended : float
+        The plant clock at the first sample's request and after the last, s.
+    """
+
+    samples: int
+    reason: str
+    round_trip_rate: float
+    round_trip_p99: float
+    rate_reached: float
+    late: int
+    log: object
+    started: float
+    ended: float
+
+
+def run_v4x_pc_loop(
+    s: V4xPcLoopSettings,
+    link,
+    samples: int,
+    excitation=None,
+    clock=None,
+    sleep=None,
+    progress=None,
+    ready=None,
+) -> V4xPcRun:
+    """Open the board, run the closed loop for ``samples`` samples, zero the coils.
+
+    Parameters
+    ----------
+    s : V4xPcLoopSettings
+    link : V4xPcLink
+        The board's link (closed).
+    samples : int
+        Samples to run.
+    excitation : CommandExcitation, optional
+        Added to the command from the first sample (identification).
+    clock, sleep : callable, optional
+        The plant's clock (default the wall clock).
+    progress : callable, optional
+        ``progress(done)`` after each second of samples.
+    ready : callable, optional
+        Called once the loop is built (seconds of model set-up and compiling)
+        and before the board is opened: e.g. to start a virtual board, whose
+        free magnet falls from the end of its set-up unless the loop runs.
+
+    Returns
+    -------
+    V4xPcRun
+
+    Raises
+    ------
+    LinkError
+        The board does not answer.
+    ValueError
+        A setting is out of range, or the board's round trips are too slow.
+    """
+    import time as _time
+
+    from .sample_log import SampleLog
+
+    ex = None
+    if excitation is not None and excitation.enabled:
+        from ..control.excitation import ExcitationSchedule
+
+        ex = ExcitationSchedule(excitation, s.sample_rate).sequence(samples)
+    log = SampleLog()
+    loop, plant = build_v4x_pc_loop(s, link, [log], ex, clock, sleep)
+    log.applied_of = plant.applied
+    now = clock or _time.monotonic
+    if ready is not None:
+        ready()
+    plant.open()
+    try:
+        started = now()
+        done, chunk = 0, max(1, int(s.sample_rate))
+        while done < samples and not loop.stopped:
+            done += loop.run(min(chunk, samples - done))
+            if progress is not None:
+                progress(done)
+        ended = now()
+    finally:
+        plant.close()  # 04: the board has no watchdog
+    return V4xPcRun(
+        done,
+        loop.reason,
+        plant.round_trip_rate,
+        plant.round_trip_p99,
+        plant.rate_reached,
+        plant.late,
+        log,
+        started,
+        ended,
+    )

@@ -1,0 +1,169 @@
+"""The physics check's reference for a board that processes its field (V4x PC control).
+
+A V4x PC-control board reports its field after removing the power-up
+baseline and the coils' feedthrough and after a first-order low-pass on x
+and y at its own 5 kHz (:mod:`maglev_ros.physics.board_processing`). An
+identified model of such a record (pair current -> Bx or By) is therefore
+compared with the linearisation *through the board's processing*:
+:func:`board_local_plant` samples it exactly at the board's steps, for a
+record whose current of sample k is held until sample k+1 and whose field
+of sample k was read before it (what
+:class:`~maglev_ros.loop.v4x_pc_plant.V4xPcPlant` records).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..physics.board_processing import BoardProcessing
+from .physics_check import PAIRS, LocalPlant, PhysicsCheckError
+
+__all__ = ['board_bag_channels', 'board_local_plant', 'check_board_bag']
+
+
+def board_local_plant(
+    linear,
+    Ts: float,
+    output: str = 'Bx_0',
+    pair: str = 'x',
+    board: BoardProcessing | None = None,
+) -> LocalPlant:
+    """Sample a linearisation through the board's processing into a SISO plant.
+
+    Parameters
+    ----------
+    linear : physics.LinearModel
+        Reduced linearisation with ``outputs`` names (``linearize(model).reduced()``).
+    Ts : float
+        Host sample time, s (a multiple of the board's 200 us).
+    output : str
+        A filtered channel (``Bx_<k>`` or ``By_<k>``).
+    pair : {'x', 'y'}
+        The input: the antisymmetric pair current ``u`` (x+ = u, x- = -u), A.
+    board : BoardProcessing
+        The board's processing of the linearisation's channels
+        (:meth:`BoardProcessing.from_model` of the same model).
+
+    Returns
+    -------
+    LocalPlant
+        State ``[x; f]`` (the magnet's deviation, the filter's output), the
+        reading ``y(k) = f(k)``; no delay beyond the model's.
+
+    Raises
+    ------
+    PhysicsCheckError
+        Unknown or unfiltered output, unknown pair, no processing given.
+    """
+    if board is None:
+        raise PhysicsCheckError('board_local_plant needs the board processing (board=...)')
+    names = list(getattr(linear, 'outputs', ()) or [])
+    if output not in names:
+        raise PhysicsCheckError(f'unknown output {output!r}; the model has {names}')
+    row = names.index(output)
+    if not board.filtered[row]:
+        raise PhysicsCheckError(f'{output} is not low-pass filtered by the board (x and y are)')
+    if pair not in PAIRS:
+        raise PhysicsCheckError(f'unknown pair {pair!r}; choose {", ".join(PAIRS)}')
+    if not (np.isfinite(Ts) and Ts > 0):
+        raise PhysicsCheckError(f'Ts must be a positive sample time in s, got {Ts!r}')
+    A = np.asarray(linear.A, float)
+    w = np.zeros(linear.B.shape[1])
+    w[:4] = PAIRS[pair]
+    b = (np.asarray(linear.B, float) @ w)[:, None]
+    c = np.asarray(linear.C, float)[row][None, :]
+    d = np.array([[(np.asarray(linear.D, float)[row] - board.feedthrough[row]) @ w]])
+    fx, fu, a = board.host_filter(A, b, c, d, Ts)
+    from scipy.linalg import expm
+
+    n = A.shape[0]
+    big = np.zeros((n + 1, n + 1))
+    big[:n, :n], big[:n, n:] = A, b
+    e = expm(big * board.board_steps(Ts) * board.board_period)
+    A2 = np.zeros((n + 1, n + 1))
+    A2[:n, :n] = e[:n, :n]
+    A2[n, :n] = fx[0]
+    A2[n, n] = a
+    B2 = np.concatenate([e[:n, n], fu[0]])
+    C2 = np.zeros(n + 1)
+    C2[n] = 1.0
+    return LocalPlant(A2, B2, C2, 0.0, float(Ts), 0, str(output), w)
+
+
+def board_bag_channels(sensor: int = 0) -> tuple[list[str], list[str]]:
+    """Channel specs of a V4x PC-control loop's bag for the seed's models.
+
+    Outputs ``Bx_0``, ``By_0`` (the board's processed x and y field of its
+    sensor, T); inputs ``u_x``, ``u_y`` (the pair currents the board measured
+    with the sample's command applied, A) and ``r_x``, ``r_y`` (the
+    excitation part of the commands, the IV's instruments, A).
+
+    Parameters
+    ----------
+    sensor : int
+        The parameter set's index of the board's sensor (its topic).
+    """
+    from ..topics import CURRENTS_TOPIC, EXCITATION_TOPIC, field_channel
+
+    def pair(name: str, topic: str, plus: int) -> str:
+        return f'{name}=0.5*{topic}:effort[{plus}]-0.5*{topic}:effort[{plus + 1}]'
+
+    outputs = [f'Bx_0={field_channel(sensor, "x")}', f'By_0={field_channel(sensor, "y")}']
+    inputs = [
+        pair('u_x', CURRENTS_TOPIC, 0),
+        pair('u_y', CURRENTS_TOPIC, 2),
+        pair('r_x', EXCITATION_TOPIC, 0),
+        pair('r_y', EXCITATION_TOPIC, 2),
+    ]
+    return outputs, inputs
+
+
+def check_board_bag(
+    bag,
+    params: str,
+    sensor: int = 0,
+    split: float = 0.5,
+    band: tuple[float, float] = (1.0, 10.0),
+):
+    """Identify the seed's models on a V4x PC-control loop's bag; check them against physics.
+
+    Parameters
+    ----------
+    bag : str or Path
+        The bag (:func:`~maglev_ros.loop.sample_log.write_sample_bag`).
+    params : str
+        The parameter set of the reference (the plant's).
+    sensor : int
+        The board's sensor in the set.
+    split : float
+        Estimation part of the record.
+    band : (float, float)
+        Frequencies compared, Hz (default 1-10 Hz: with the feedthrough removed
+        the field sees the coils only through the magnet's motion, which falls
+        as 1/f^2 above the x mode; at 0.05 A of excitation it is below the
+        filtered noise above about 20 Hz).
+
+    Returns
+    -------
+    data : IdData
+        The record (outputs ``Bx_0``, ``By_0``; inputs ``u_x``, ``u_y``, ``r_x``, ``r_y``).
+    results : tuple of GroupResult
+        :func:`~maglev_ros.sysid.seed_models.identify_groups` (IV with the excitation).
+    checks : dict
+        :func:`~maglev_ros.sysid.seed_models.physics_deviations` against
+        :func:`board_local_plant` of each pair.
+    """
+    from ..bags import read_bag
+    from ..loop.v4x_pc_setup import board_model
+    from ..physics import linearize
+    from .seed_models import identify_groups, physics_deviations
+
+    outputs, inputs = board_bag_channels(sensor)
+    # periods the host missed are gaps: outputs interpolated, inputs held across them
+    data = read_bag(bag, outputs, inputs, allow_gaps=True).data
+    model = board_model(params, sensor)
+    linear = linearize(model).reduced()
+    board = BoardProcessing.from_model(model)
+    results = identify_groups(data, split)
+    plants = {p: board_local_plant(linear, data.Ts, f'B{p}_0', p, board) for p in ('x', 'y')}
+    return data, results, physics_deviations(results, plants, band)

@@ -1,0 +1,192 @@
+"""The closed loop on the V4x PC-control board: the emulated firmware, on simulated time.
+
+The board is the byte-exact emulator (physics plant, magnet free, 0.1 mT sensor
+noise, 0.098 mT resolution, the firmware's baseline, feedthrough removal and
+x/y low-pass) behind an :class:`EmulatedPort`, so the loop runs as fast as the
+machine computes with the board's timing exact. The real-time run against
+``maglev-virtual-board`` on a pty is ``benchmarks/v4x_pc_hold.py``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from maglev_ros.hardware import v4x_pc_protocol as proto
+from maglev_ros.hardware.emulated_port import EmulatedPort
+from maglev_ros.hardware.physics_plant import make_simulator_plant
+from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
+from maglev_ros.hardware.v4x_pc_link import V4xPcLink
+from maglev_ros.loop.v4x_pc_plant import V4xPcPlant
+from maglev_ros.loop.v4x_pc_setup import V4xPcLoopSettings, build_v4x_pc_loop, run_v4x_pc_loop
+from maglev_ros.physics import SensorEffects
+
+SETTINGS = V4xPcLoopSettings()
+
+
+def emulated_board(seed: int = 0, params=None):
+    """The free magnet on the emulated V4x PC-control board: (plant, firmware, port, link).
+
+    ``params``: the board's parameter set (default the one the loop believes).
+    """
+    scaling = SETTINGS.scaling
+    params = params or SETTINGS.params
+    sensor = SensorEffects(noise_rms=1e-4, quantization=0.098e-3)
+    plant = make_simulator_plant('free', params, scaling, sensor, seed)
+    setup = make_simulator_plant('absent', params, scaling, sensor, seed + 1)
+    firmware = V4xPcFirmware(plant, scaling=scaling, setup_plant=setup)
+    port = EmulatedPort(firmware)
+    # the link's timeouts run on the board's time too: the run is the same on any machine
+    link = V4xPcLink('emulated', serial_link=port, timeout=0.25, clock=port.clock)
+    return plant, firmware, port, link
+
+
+def test_the_magnet_levitates_and_the_coils_end_at_zero():
+    plant, firmware, port, link = emulated_board()
+    positions = []
+    samples = 4000  # 4 s at 1 kHz
+
+    def sleep(seconds):
+        port.sleep(seconds)
+        positions.append(plant.simulator.state[:3].copy())
+
+    run = run_v4x_pc_loop(SETTINGS, link, samples, clock=port.clock, sleep=sleep)
+    assert run.samples == samples and run.reason == ''
+    assert not plant.crashed
+    xy = np.abs(np.array(positions)[:, :2])
+    assert xy.max() < 0.5e-3, xy.max(axis=0)
+    assert run.rate_reached == pytest.approx(1000.0, rel=1e-6)  # the board's clock
+    assert run.late == 0
+    # the commands reached the board as pairs, and the plant reset the coils at the end
+    assert firmware.pwm.tolist() == [0, 0, 0, 0]
+    assert firmware.applied[-1][1:] == (0, 0)
+    assert firmware.requests[proto.SET_PWM] >= samples
+    assert np.ptp([p for _, p, _ in list(firmware.applied)[-samples:]]) > 5  # it was driven
+    log = run.log.arrays()
+    assert log['readings'].shape == (samples, 3) and log['currents'].shape == (samples, 4)
+    # a sample's currents are the board's ADC reading with the sample's command applied
+    assert np.allclose(log['currents'][:, 0], -log['currents'][:, 1], atol=0.02)
+
+
+def test_a_board_too_slow_for_the_rate_is_refused_with_its_coils_reset():
+    _, firmware, port, link = emulated_board()
+    port.read_step_us = 2000  # every read waits 2 ms: ~500 round trips per second
+    loop, plant = build_v4x_pc_loop(SETTINGS, link, clock=port.clock, sleep=port.sleep)
+    with pytest.raises(ValueError, match=r'round trips per second; 1000 Hz needs 1250'):
+        plant.open()
+    assert not link.is_open and firmware.requests[proto.RESET] >= 2  # open's, close's
+
+
+def _running(seconds: float = 0.5):
+    """A loop on the emulated board that ran ``seconds`` with the magnet levitating."""
+    sim, firmware, port, link = emulated_board()
+    loop, plant = build_v4x_pc_loop(SETTINGS, link, clock=port.clock, sleep=port.sleep)
+    plant.open()
+    loop.run(int(seconds * SETTINGS.sample_rate))
+    assert not loop.stopped and not sim.crashed
+    plant.write(np.array([0.6, -0.6, 0.2, -0.2]), 0)  # a known command, then on
+    plant.read()
+    assert firmware.pwm.tolist() == [51, -51, 17, -17]
+    return sim, firmware, port, loop, plant
+
+
+def test_a_board_that_stops_answering_stops_the_loop_at_zero_current():
+    _, firmware, port, loop, plant = _running()
+    firmware.tamper_next_burst(lambda data: b'')  # the replies of one request are lost
+    loop.run(100)
+    assert loop.stopped and 'no reply to request 03 01 02 within 0.25 s' in loop.reason
+    assert 'coils reset' in loop.reason
+    assert firmware.pwm.tolist() == [0, 0, 0, 0] and plant.coils_reset
+    plant.close()
+    assert firmware.pwm.tolist() == [0, 0, 0, 0]
+
+
+def test_an_unplug_stops_the_loop_and_close_resets_the_coils_when_plugged_back():
+    _, firmware, port, loop, plant = _running()
+    port.unplug()
+    loop.run(100)
+    assert loop.stopped and 'device disconnected' in loop.reason
+    # no watchdog: a board on its own supply keeps driving its coils while unplugged
+    assert np.any(firmware.pwm != 0) and not plant.coils_reset
+    plug_at = port.now_us + 300_000
+
+    def sleep(seconds):  # the cable goes back in 0.3 s later
+        port.sleep(seconds)
+        if port.now_us >= plug_at:
+            port.plug()
+
+    plant.sleep = sleep
+    plant.close()
+    assert plant.coils_reset
+    assert firmware.pwm.tolist() == [0, 0, 0, 0] and firmware.applied[-1][1:] == (0, 0)
+
+
+def test_an_unplug_for_longer_than_reset_wait_is_reported():
+    _, firmware, port, loop, plant = _running()
+    port.unplug()
+    loop.run(10)
+    plant.reset_wait = 0.2
+    plant.close()  # gives up after 0.2 s of the board's time
+    assert not plant.coils_reset and 'device disconnected' in plant.stopped
+
+
+def test_commands_become_pair_differences_of_pwm_counts():
+    _, _, port, link = emulated_board()
+    plant = V4xPcPlant(link, SETTINGS.scaling, 1.0, clock=port.clock, sleep=port.sleep)
+    # x+ 0.5, x- -0.3: the pair difference 0.4 A on x+ and -0.4 A on x- (85 counts/A)
+    applied = plant.applied(np.array([0.5, -0.3, 2.0, 0.0]))
+    counts = SETTINGS.scaling.counts_per_ampere
+    assert applied.tolist() == pytest.approx(
+        [34 / counts, -34 / counts, 85 / counts, -85 / counts]  # y clamped at 1 A
+    )
+
+
+class _OwnSupply:
+    """One firmware across unplug and plug (a board on its own supply keeps its PWM)."""
+
+    def __init__(self):
+        rng = np.random.default_rng(1)
+        self.firmware = V4xPcFirmware(
+            lambda pwm, t: (np.array([0.5, -0.3, 40.0]) + rng.normal(0, 0.01, 3))[None, :],
+            scaling=SETTINGS.scaling,
+            init_delay=0.0,
+        )
+        self.offset_us = 0
+
+    def __call__(self):
+        self.offset_us = self.firmware.now_us
+        return self
+
+    def advance_to(self, t_us):
+        return self.firmware.advance_to(self.offset_us + t_us)
+
+    def __getattr__(self, name):
+        return getattr(self.firmware, name)
+
+
+def test_an_unplug_on_the_virtual_board_ends_at_zero_current_once_plugged_back():
+    import threading
+
+    from maglev_ros.hardware.virtual_board import VirtualBoard
+
+    factory = _OwnSupply()
+    with VirtualBoard(factory) as board:
+        assert board.wait_until(lambda b: b.firmware.running, 30.0)
+        link = V4xPcLink(board.path, timeout=0.25)
+        plant = V4xPcPlant(link, SETTINGS.scaling, 1.0, sample_rate=100.0, reset_wait=20.0)
+        plant.open()
+        plant.write(np.array([0.6, -0.6, 0.2, -0.2]), 0)
+        plant.read()
+        with board.lock:
+            assert factory.firmware.pwm.tolist() == [51, -51, 17, -17]
+        board.unplug()
+        block = plant.read()
+        assert block.crashed and block.reason.startswith('link error: write to')
+        with board.lock:  # no watchdog: the coils stay driven while the cable is out
+            assert factory.firmware.pwm.tolist() == [51, -51, 17, -17]
+        threading.Timer(0.5, board.plug).start()
+        plant.close()  # reopens the port when the cable is back, and sends 04
+        assert plant.coils_reset
+        with board.lock:
+            assert factory.firmware.pwm.tolist() == [0, 0, 0, 0]
+            assert factory.firmware.applied[-1][1:] == (0, 0)
