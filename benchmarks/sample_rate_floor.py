@@ -1,0 +1,79 @@
+"""How the closed loop holds as the sample rate falls: the estimator's noise floor.
+
+Separate processes exchange every sample through the middleware, so they run at a
+lower sample rate than the board's 5 kHz. This script measures, without any
+middleware, what that rate alone costs: the ROS-free closed loop (V2, KF + LQR,
+0.1 mT noise, 0.098 mT steps, one sample of sensor delay, coil dynamics), the
+estimator and the LQR designed for the rate and for ``--delay`` periods of command
+latency, for each rate and seed. Baseline in the same run: the board's 5 kHz.
+
+Printed per rate: the hold RMS and the largest excursion of x and y after 1 s, the
+position estimate's RMS error, and how many runs lost the magnet (and when).
+
+    python benchmarks/sample_rate_floor.py --rates 1000 2500 5000 --seeds 4 --seconds 20
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from maglev_ros.control import ControllerConfig
+from maglev_ros.control.closed_loop import make_closed_loop
+from maglev_ros.estimation import EstimatorConfig
+
+
+def hold(rate: float, seed: int, delay: int, seconds: float) -> dict:
+    """Run the loop at ``rate`` Hz for ``seconds`` s; return its hold figures."""
+    loop = make_closed_loop(
+        'maggy_v2',
+        estimator=EstimatorConfig(sample_rate=rate, bias_states=True),
+        controller=ControllerConfig(sample_rate=rate, command_delay=delay),
+        seed=seed,
+    )
+    r = loop.run(seconds)
+    start = int(rate)  # after 1 s
+    x = np.asarray(r.x)[start:, :2]
+    error = (np.asarray(r.estimate) - np.asarray(r.x))[start:, :2]
+    lost = bool(r.crashed)
+    return {
+        'lost_at': len(r.x) / rate if lost else None,
+        'rms': np.sqrt(np.mean(x**2, axis=0)) if len(x) else np.full(2, np.nan),
+        'largest': np.abs(x).max(axis=0) if len(x) else np.full(2, np.nan),
+        'error': np.sqrt(np.mean(error**2, axis=0)) if len(x) else np.full(2, np.nan),
+    }
+
+
+def _figure(kept: list[dict], key: str, pick) -> str:
+    """Return ``pick`` over the kept runs of figure ``key``, um, as 'x, y' ('-': none)."""
+    if not kept:
+        return '-'
+    v = pick(np.array([r[key] for r in kept]), axis=0) * 1e6
+    return f'{v[0]:.0f}, {v[1]:.0f}'
+
+
+def main() -> None:
+    """Print the hold per sample rate (see the module docstring)."""
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument('--rates', type=float, nargs='+', default=[1000.0, 2500.0, 5000.0])
+    p.add_argument('--seeds', type=int, default=4, help='seeds 0 .. N-1 per rate')
+    p.add_argument('--delay', type=int, default=2, help='command latency, periods')
+    p.add_argument('--seconds', type=float, default=20.0)
+    args = p.parse_args()
+    print(f'{"rate Hz":>8}  {"lost":>7}  {"RMS x, y um":>14}  {"largest x, y um":>16}  '
+          f'{"estimate error x, y um":>23}  lost at (s)')  # fmt: skip
+    for rate in args.rates:
+        runs = [hold(rate, seed, args.delay, args.seconds) for seed in range(args.seeds)]
+        kept = [r for r in runs if r['lost_at'] is None]
+        lost = [f'{r["lost_at"]:.2f}' for r in runs if r['lost_at'] is not None]
+
+        print(
+            f'{rate:>8.0f}  {len(lost):>3} of {len(runs)}  {_figure(kept, "rms", np.median):>14}  '
+            f'{_figure(kept, "largest", np.max):>16}  {_figure(kept, "error", np.median):>23}  '
+            f'{" ".join(lost) or "-"}'
+        )
+
+
+if __name__ == '__main__':
+    main()
