@@ -47,7 +47,6 @@ __all__ = [
     'ParameterTable',
     'check_settings',
     'config_params',
-    'finite',
     'choice',
     'coerce',
     'help_requested',
@@ -245,25 +244,6 @@ def number(low: float | None = None, *, above: bool = False, high: float | None 
         return value
 
     check.rule = text.strip()
-    return check
-
-
-def finite(positive: bool = False) -> Check:
-    """Return the rule of a finite number, positive or >= 0 (a core config's words).
-
-    Parameters
-    ----------
-    positive : bool
-        Above 0 (else at least 0).
-    """
-    need = 'positive' if positive else '>= 0'
-
-    def check(name: str, value: float) -> float:
-        if not (math.isfinite(value) and (value > 0 if positive else value >= 0)):
-            raise NodeParameterError(f'{name} must be a finite number {need}, got {value!r}')
-        return value
-
-    check.rule = '> 0' if positive else '>= 0'
     return check
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from pathlib import Path
 
-from ..parameters import NodeParameterError, check_settings, choice, finite, integer, setting
+from ..parameters import NodeParameterError, check_settings, choice, integer, number, setting
 
 __all__ = [
     'MAX_COMMAND_DELAY',
@@ -106,7 +106,9 @@ class ControllerConfig:
         'lqr (state feedback on the estimate) or pd (firmware PD on the field)',
         choice(*MODES),
     )
-    sample_rate: float = setting(5000.0, 'control rate, Hz (one command per sample)', finite(True))
+    sample_rate: float = setting(
+        5000.0, 'control rate, Hz (one command per sample)', number(0, above=True)
+    )
     command_delay: int = setting(
         1,
         f'samples before a command drives the coils (0 to {MAX_COMMAND_DELAY}; 1: the board; '
@@ -115,17 +117,21 @@ class ControllerConfig:
     )
     sensor_delay: int = setting(1, 'samples of reading delay (0 or 1)', integer(0, 1))
     coil_dynamics: bool = setting(True, "LQR models the coils' L/R lag")
-    current_limit: float = setting(1.0, 'largest command per coil, A', finite(True))
-    position_scale: float = setting(1.0e-4, 'Bryson scale of x y z, m', finite(True))
-    angle_scale: float = setting(0.003, 'Bryson scale of alpha beta, rad', finite(True))
-    velocity_scale: float = setting(0.02, 'Bryson scale of the velocity, m/s', finite(True))
-    rate_scale: float = setting(0.5, 'Bryson scale of wx wy, rad/s', finite(True))
-    current_scale: float = setting(1.0, 'Bryson scale of the commands, A', finite(True))
+    current_limit: float = setting(1.0, 'largest command per coil, A', number(0, above=True))
+    position_scale: float = setting(1.0e-4, 'Bryson scale of x y z, m', number(0, above=True))
+    angle_scale: float = setting(0.003, 'Bryson scale of alpha beta, rad', number(0, above=True))
+    velocity_scale: float = setting(
+        0.02, 'Bryson scale of the velocity, m/s', number(0, above=True)
+    )
+    rate_scale: float = setting(0.5, 'Bryson scale of wx wy, rad/s', number(0, above=True))
+    current_scale: float = setting(1.0, 'Bryson scale of the commands, A', number(0, above=True))
     integral: bool = setting(False, 'integral action on x y z (anti-windup at the limit)')
     integral_scale: float = setting(
-        2.0e-5, 'Bryson scale of the integrated error, m s', finite(True)
+        2.0e-5, 'Bryson scale of the integrated error, m s', number(0, above=True)
     )
-    input_timeout: float = setting(0.005, 's without input -> zero currents, ERROR', finite(True))
+    input_timeout: float = setting(
+        0.005, 's without input -> zero currents, ERROR', number(0, above=True)
+    )
     rearm_samples: int = setting(
         10, 'fresh inputs in a row that re-arm after a timeout', integer(1)
     )
@@ -133,15 +139,15 @@ class ControllerConfig:
         3.0e-3,
         'LQR: estimate this far from the equilibrium = magnet lost: zero currents, '
         'ERROR, latched until enabled again, m',
-        finite(True),
+        number(0, above=True),
     )
-    pd_kp: float = setting(15000.0, 'PD proportional gain, A/T', finite())
-    pd_kd: float = setting(250.0, 'PD derivative gain, A/(T/s)', finite())
-    pd_cutoff: float = setting(30.0, 'PD field filter cut-off, Hz', finite(True))
+    pd_kp: float = setting(15000.0, 'PD proportional gain, A/T', number(0))
+    pd_kd: float = setting(250.0, 'PD derivative gain, A/(T/s)', number(0))
+    pd_cutoff: float = setting(30.0, 'PD field filter cut-off, Hz', number(0, above=True))
     pd_sensor: int = setting(0, 'sensor the PD reads', integer(0))
     pd_feedthrough: bool = setting(True, "PD removes the coils' direct field")
     magnet_threshold: float = setting(
-        2.0e-3, 'PD active while |Bz - Bz without magnet| exceeds it, T', finite()
+        2.0e-3, 'PD active while |Bz - Bz without magnet| exceeds it, T', number(0)
     )
 
     def __post_init__(self):

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, fields
 
-from ..parameters import NodeParameterError, check_settings, choice, finite, integer, setting
+from ..parameters import NodeParameterError, check_settings, choice, integer, number, setting
 
 __all__ = ['FILTERS', 'MEASUREMENTS', 'PREDICTIONS', 'EstimatorConfig', 'EstimatorConfigError']
 
@@ -135,28 +135,28 @@ class EstimatorConfig:
         'EKF/UKF process model: fast (one step per sample) or full (RK4)',
         choice(*PREDICTIONS),
     )
-    sample_rate: float = setting(5000.0, 'samples per second, Hz', finite(positive=True))
+    sample_rate: float = setting(5000.0, 'samples per second, Hz', number(0, above=True))
     sensor_delay: int = setting(1, 'samples of reading delay (the board: 1)', _zero_or_one)
-    sensor_noise: float = setting(1.0e-4, 'Hall noise, T rms per axis', finite(positive=True))
-    quantization: float = setting(0.098e-3, 'Hall resolution, T per LSB', finite())
-    current_noise: float = setting(0.003, 'current held over a sample, A rms', finite())
-    acceleration_noise: float = setting(0.1, 'unmodelled force per mass, m/s^2 rms', finite())
+    sensor_noise: float = setting(1.0e-4, 'Hall noise, T rms per axis', number(0, above=True))
+    quantization: float = setting(0.098e-3, 'Hall resolution, T per LSB', number(0))
+    current_noise: float = setting(0.003, 'current held over a sample, A rms', number(0))
+    acceleration_noise: float = setting(0.1, 'unmodelled force per mass, m/s^2 rms', number(0))
     angular_acceleration_noise: float = setting(
-        50.0, 'unmodelled torque per inertia, rad/s^2 rms', finite()
+        50.0, 'unmodelled torque per inertia, rad/s^2 rms', number(0)
     )
     bias_states: bool = setting(False, 'estimate a field offset per sensor axis')
     bias_walk: float = setting(
-        1.0e-8, 'random walk of the bias states, T rms per sample', finite()
+        1.0e-8, 'random walk of the bias states, T rms per sample', number(0)
     )
     initial_bias: float = setting(
-        1.0e-3, 'initial std of the bias states, T', finite(positive=True)
+        1.0e-3, 'initial std of the bias states, T', number(0, above=True)
     )
     magnet_strength: bool = setting(False, "estimate the magnet's strength as one state (kf only)")
     initial_strength: float = setting(
-        0.2, 'initial std of the strength state, relative', finite(positive=True)
+        0.2, 'initial std of the strength state, relative', number(0, above=True)
     )
     strength_walk: float = setting(
-        1.0e-7, 'random walk of the strength state, relative rms per sample', finite()
+        1.0e-7, 'random walk of the strength state, relative rms per sample', number(0)
     )
     measurement: str = setting(
         'raw',
@@ -174,10 +174,10 @@ class EstimatorConfig:
         'samples without an accepted reading before the filter restarts from its prior',
         integer(2),
     )
-    initial_position: float = setting(1.0e-3, 'initial position std, m', finite(positive=True))
-    initial_angle: float = setting(0.03, 'initial angle std, rad', finite(positive=True))
-    initial_velocity: float = setting(0.02, 'initial velocity std, m/s', finite(positive=True))
-    initial_rate: float = setting(2.0, 'initial body-rate std, rad/s', finite(positive=True))
+    initial_position: float = setting(1.0e-3, 'initial position std, m', number(0, above=True))
+    initial_angle: float = setting(0.03, 'initial angle std, rad', number(0, above=True))
+    initial_velocity: float = setting(0.02, 'initial velocity std, m/s', number(0, above=True))
+    initial_rate: float = setting(2.0, 'initial body-rate std, rad/s', number(0, above=True))
 
     def __post_init__(self):
         check_settings(self, EstimatorConfigError)

@@ -54,7 +54,7 @@ def _write(tmp_path: Path, data: dict) -> Path:
         (
             {'grid': {'controller.position_scale': [1e-4, 0.0]}},
             'grid.controller.position_scale',
-            'position_scale must be a finite number positive',
+            'position_scale must be a finite number > 0',
         ),
         ({'success': {'window': 0.5}}, 'success.window', 'longer than the duration'),
     ],

@@ -130,7 +130,7 @@ def test_nonlinear_filters_agree_with_the_kf_near_the_equilibrium(v2, v2_linear,
     [
         ({'filter': 'pf'}, 'filter must be one of kf, ekf, ukf'),
         ({'sensor_delay': 2}, 'sensor_delay must be 0 or 1'),
-        ({'sensor_noise': -1.0}, 'sensor_noise must be a finite number positive'),
+        ({'sensor_noise': -1.0}, 'sensor_noise must be a finite number > 0'),
         ({'freeze_samples': 1}, 'freeze_samples must be an integer >= 2'),
         ({'gate_probability': 0.2}, 'gate_probability must be in'),
     ],
