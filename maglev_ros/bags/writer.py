@@ -377,10 +377,36 @@ class BagWriter:
             stamp = int(timestamp_ns)
             if stamp < 0:
                 raise BagError(f'timestamp must be >= 0 ns, got {timestamp_ns!r}')
-            self._writer.write(handle.connection, stamp, data)
+            self._write_whole(handle.connection, stamp, data)
             self.message_count += 1
             if time.monotonic() >= self._flush_due:
                 self.flush()
+
+    def _write_whole(self, connection, stamp: int, data: bytes) -> None:
+        """Write one message, or nothing of it when an exception interrupts the write.
+
+        A signal handler that raises (``sys.exit`` on SIGTERM, ``KeyboardInterrupt``)
+        can interrupt the storage's write between two of a record's fields; the
+        chunk would then hold a partial record that the close writes out, and the
+        bag would not read. MCAP: the chunk's buffer and message index are put back
+        as they were before the message, then the exception goes on.
+        """
+        storage = self._writer.storage
+        chunk = getattr(storage, 'chunk', None)  # rosbags' MCAP writer
+        if chunk is None:
+            self._writer.write(connection, stamp, data)
+            return
+        start = chunk.bio.tell()
+        index = chunk.msgs[connection.id]
+        entries = len(index)
+        try:
+            self._writer.write(connection, stamp, data)
+        except BaseException:
+            if chunk is storage.chunk and chunk.bio.tell() != start:  # not closed meanwhile
+                chunk.bio.seek(start)
+                chunk.bio.truncate()
+                del index[entries:]
+            raise
 
     def flush(self) -> None:
         """Put every message written so far into the file (done every FLUSH_PERIOD_S).

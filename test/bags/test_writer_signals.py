@@ -85,3 +85,28 @@ def test_threads_write_while_another_closes(tmp_path):
         assert {t: i.count for t, i in reader.topics.items()} == {
             f'/maglev/sensor_{k}/field': 300 for k in range(3)
         }
+
+
+def test_an_exception_inside_a_record_leaves_no_partial_record(tmp_path, monkeypatch):
+    """A signal handler's exception between two fields of a record (MCAP) writes none of it."""
+    import rosbags.rosbag2.storage_mcap as mcap
+
+    original = mcap.write_record
+    calls = {'n': 0}
+
+    def interrupted(bio, op, record):
+        calls['n'] += 1
+        if calls['n'] == 50:  # the record's opcode is out, its length not yet
+            bio.write(op.to_bytes(1, byteorder='little'))
+            raise SystemExit(0)
+        return original(bio, op, record)
+
+    monkeypatch.setattr(mcap, 'write_record', interrupted)
+    path = tmp_path / 'rec'
+    with pytest.raises(SystemExit), BagWriter(path, storage='mcap') as bag:
+        topic = bag.add_topic(SENSOR, 'sensor_msgs/msg/MagneticField')
+        for k in range(100):
+            bag.write(topic, k, field_msg(k, (0.0, 0.0, 0.0)))
+    with BagReader(path) as reader:
+        stamps = [s for _, s, _ in reader.messages([SENSOR])]
+    assert stamps == list(range(len(stamps))) and 40 <= len(stamps) < 50
