@@ -9,7 +9,7 @@ estimator at the sample rate and the controller at the control rate, as a
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .control_loop import ControlLoop
 from .paced import PacedSimulatedPlant
@@ -99,9 +99,18 @@ def build_simulated_loop(
         If the control rate does not divide the sample rate, or the set
         cannot be loaded or controlled (naming the problem).
     """
-    from .lab import LabSettings, build_lab_loop
+    from .lab import build_lab_loop
 
-    lab = LabSettings(
+    timing = {k: v for k, v in (('clock', clock), ('sleep', sleep)) if v is not None}
+    loop = build_lab_loop(_lab_settings(s), observers=observers, **timing)
+    return loop, loop.plant
+
+
+def _lab_settings(s: SimulatedLoopSettings):
+    """Return the lab builder's settings of the loop node's: real time, bias states."""
+    from .lab import LabSettings
+
+    return LabSettings(
         params=s.params,
         sample_rate=s.sample_rate,
         control_rate=s.control_rate,
@@ -120,9 +129,6 @@ def build_simulated_loop(
         command_delay=s.command_delay,
         skip_ahead=True,
     )
-    timing = {k: v for k, v in (('clock', clock), ('sleep', sleep)) if v is not None}
-    loop = build_lab_loop(lab, observers=observers, **timing)
-    return loop, loop.plant
 
 
 def build_loop(s: SimulatedLoopSettings, board: dict | None = None):
@@ -150,7 +156,7 @@ def build_loop(s: SimulatedLoopSettings, board: dict | None = None):
     if board is None:
         return build_simulated_loop(s)
     from .board import BOARD_SAMPLE_RATE, BoardPlant
-    from .lab import LabSettings, build_lab_loop
+    from .lab import build_lab_loop
 
     if s.sample_rate != BOARD_SAMPLE_RATE:
         raise ValueError(
@@ -163,18 +169,8 @@ def build_loop(s: SimulatedLoopSettings, board: dict | None = None):
         burst=s.burst,
         command_timeout=board['command_timeout'],
     )
-    lab = LabSettings(
-        params=s.params,
-        sample_rate=s.sample_rate,
-        control_rate=s.control_rate,
-        noise=s.sensor_noise,
-        quantization=s.sensor_quantization,
-        sensor_delay=s.sensor_delay,
-        coil_dynamics=s.coil_dynamics,
-        filter=s.filter,
-        mode=s.mode,
-        bias_states=True,
-    )
+    # the board's own latency is designed for (command_delay None), its plant is the board
+    lab = replace(_lab_settings(s), command_delay=None)
     loop = build_lab_loop(lab, plant=plant)
     plant.open()
     return loop, plant
