@@ -284,21 +284,7 @@ class V4xPcLink:
         Cycle
             Host time at the first reply, field, rate and currents.
         """
-        frames = (
-            proto.set_pwm_request(p_x, p_y)
-            + proto.request(proto.READ_SENSORS)
-            + proto.request(proto.READ_CURRENTS)
-        )
-        (_, sensors, currents), stamp_ns = self._exchange(
-            frames, (proto.SET_PWM, proto.READ_SENSORS, proto.READ_CURRENTS)
-        )
-        self.last_command = (int(p_x), int(p_y))
-        return Cycle(
-            stamp_ns,
-            np.array(sensors.field_mT),
-            np.array(sensors.rate_mT_s),
-            np.array(currents.currents_A),
-        )
+        return self._round_trip(p_x, p_y, command_first=True)
 
     def cycle(self, p_x: int, p_y: int) -> Cycle:
         """One control step in one round trip: ``01``, ``02`` and ``03`` sent together.
@@ -318,14 +304,23 @@ class V4xPcLink:
         Cycle
             Host time at the sensor reply, field, rate and currents.
         """
-        frames = (
-            proto.request(proto.READ_SENSORS)
-            + proto.request(proto.READ_CURRENTS)
-            + proto.set_pwm_request(p_x, p_y)
-        )
-        (sensors, currents, _), stamp_ns = self._exchange(
-            frames, (proto.READ_SENSORS, proto.READ_CURRENTS, proto.SET_PWM)
-        )
+        return self._round_trip(p_x, p_y, command_first=False)
+
+    # -- internals ------------------------------------------------------------------------
+
+    def _round_trip(self, p_x: int, p_y: int, command_first: bool) -> Cycle:
+        """Send ``03`` with ``01`` and ``02`` in one write (``03`` first or last); one Cycle."""
+        reads = proto.request(proto.READ_SENSORS) + proto.request(proto.READ_CURRENTS)
+        command = proto.set_pwm_request(p_x, p_y)
+        codes = (proto.READ_SENSORS, proto.READ_CURRENTS)
+        if command_first:
+            (_, sensors, currents), stamp_ns = self._exchange(
+                command + reads, (proto.SET_PWM, *codes)
+            )
+        else:
+            (sensors, currents, _), stamp_ns = self._exchange(
+                reads + command, (*codes, proto.SET_PWM)
+            )
         self.last_command = (int(p_x), int(p_y))
         return Cycle(
             stamp_ns,
@@ -333,8 +328,6 @@ class V4xPcLink:
             np.array(sensors.rate_mT_s),
             np.array(currents.currents_A),
         )
-
-    # -- internals ------------------------------------------------------------------------
 
     def _transact(self, frame: bytes, code: int):
         return self._exchange(frame, (code,))[0][0]
