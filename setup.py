@@ -1,9 +1,14 @@
 """Build script for maglev_ros (ament_python; also a plain pip package)."""
 
 import os
+import subprocess
+import sys
 from glob import glob
 
 from setuptools import find_packages, setup
+from setuptools.command.install import install
+
+HERE = os.path.dirname(os.path.abspath(__file__))
 
 PACKAGE = 'maglev_ros'
 
@@ -38,6 +43,31 @@ NODES: dict[str, str] = {
 console_scripts = [f'maglev-{verb}={target}' for verb, target in CLI_TOOLS.items()]
 console_scripts += [f'{verb}={target}' for verb, target in CLI_TOOLS.items()]
 console_scripts += [f'{name}={target}' for name, target in NODES.items()]
+
+
+class InstallAndCompile(install):
+    """``setup.py install`` (what ``colcon build`` runs), then the kernels compiled.
+
+    A plain install into a prefix (not a wheel's staging root) fills the numba
+    cache of the installed package (``python -m maglev_ros.cli.kernels``), so
+    that a node started right after ``colcon build`` does not compile first.
+    ``MAGLEV_BUILD_COMPILE=0`` skips it; a failure only warns.
+    """
+
+    def run(self) -> None:
+        """Install, then compile the kernels into the installed package."""
+        super().run()
+        if self.root is not None or os.environ.get('MAGLEV_BUILD_COMPILE', '1') == '0':
+            return
+        env = dict(os.environ)
+        env['PYTHONPATH'] = os.pathsep.join(
+            filter(None, [self.install_lib, env.get('PYTHONPATH')])
+        )
+        cmd = [sys.executable, '-m', f'{PACKAGE}.cli.kernels', '--seed-from']
+        cmd.append(os.path.join(HERE, PACKAGE))
+        if subprocess.run(cmd, env=env, cwd=self.install_lib, check=False).returncode:
+            print(f'warning: {PACKAGE}: kernels not compiled; the first run compiles them')
+
 
 setup(
     name=PACKAGE,
@@ -94,4 +124,5 @@ setup(
         ],
     },
     entry_points={'console_scripts': console_scripts},
+    cmdclass={'install': InstallAndCompile},
 )

@@ -3,9 +3,10 @@
 The build is the session fixture ``colcon_build`` of ``test/conftest.py`` (the
 package source copied into a temporary workspace, ``colcon build
 --packages-select maglev_ros`` once per session, a plain copy install, which is
-what ``ros2 run`` users get by default; a few seconds). This module checks the
+what ``ros2 run`` users get by default). This module checks the
 console scripts, the ament index marker, ``package.xml``, the config and launch
-files, and that an installed console script runs.
+files, that an installed console script runs, and that the build compiled the
+loop node's kernels.
 """
 
 from __future__ import annotations
@@ -160,3 +161,40 @@ def test_installed_cli_runs(colcon_build: ColconBuild, verb: str) -> None:
         f'--- stdout ---\n{_tail(proc.stdout)}\n--- stderr ---\n{_tail(proc.stderr)}'
     )
     assert 'usage' in proc.stdout.lower(), proc.stdout
+
+
+_COUNT_COMPILES = """
+from numba.core import event
+compiles = []
+class Count(event.Listener):
+    def on_start(self, ev):
+        compiles.append(getattr(ev.data.get('dispatcher'), '__qualname__', '?'))
+    def on_end(self, ev):
+        pass
+event.register('numba:compile', Count())
+from maglev_ros.cli.kernels import compile_encoders
+assert compile_encoders()
+print('compiled:', sorted(set(compiles)))
+"""
+
+
+def test_the_build_leaves_the_loop_nodes_kernels_compiled(colcon_build: ColconBuild) -> None:
+    """Right after ``colcon build`` the loop node's kernels load from the install's cache.
+
+    The build's last step (``maglev_ros.cli.kernels``) fills the cache, so the
+    loop (simulator, KF, LQR) and its message encoders compile nothing when a
+    node first runs them.
+    """
+    colcon_build.require()
+    site = colcon_build.site_packages() / PACKAGE
+    indexed = {p.name.split('-')[0] for p in site.rglob('__pycache__/*.nbi')}
+    for kernel in ('kernels.sample_step', 'linear_kernels.kf_packed_step', 'kernels.lqr_law'):
+        assert kernel in indexed, f'{kernel} not compiled by the build: {sorted(indexed)}'
+    env = colcon_build.run_env()
+    env.pop('NUMBA_CACHE_DIR', None)
+    proc = subprocess.run(
+        [sys.executable, '-c', _COUNT_COMPILES], env=env, capture_output=True, text=True,
+        timeout=RUN_TIMEOUT, stdin=subprocess.DEVNULL, cwd=colcon_build.workspace.parent,
+    )  # fmt: skip
+    assert proc.returncode == 0, _tail(proc.stderr)
+    assert 'compiled: []' in proc.stdout, proc.stdout + _tail(proc.stderr)
