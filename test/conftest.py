@@ -181,3 +181,35 @@ def main_job(tmp_path_factory: pytest.TempPathFactory):
     from doc_blocks import run_main_job
 
     return run_main_job(tmp_path_factory.mktemp('main_job'), next_domain_id())
+
+
+@pytest.fixture(scope='session')
+def v2():
+    """The maggy_v2 model, built once per session."""
+    from maglev_ros.physics import make_model
+
+    return make_model('maggy_v2')
+
+
+@pytest.fixture(scope='session')
+def v2_linear(v2):
+    """Its linearisation at the hover equilibrium."""
+    from maglev_ros.physics import linearize
+
+    return linearize(v2)
+
+
+@pytest.fixture(scope='session')
+def v4():
+    """The maggy_v4 model, built once per session."""
+    from maglev_ros.physics import make_model
+
+    return make_model('maggy_v4')
+
+
+@pytest.fixture(scope='session')
+def v4_linear(v4):
+    """Its linearisation at the hover equilibrium."""
+    from maglev_ros.physics import linearize
+
+    return linearize(v4)

@@ -2,19 +2,7 @@
 
 import pytest
 
-from maglev_ros.physics import linearize, make_model
-
 from .open_loop import open_loop_run
-
-
-@pytest.fixture(scope='session')
-def v2():
-    return make_model('maggy_v2')
-
-
-@pytest.fixture(scope='session')
-def v2_linear(v2):
-    return linearize(v2)
 
 
 @pytest.fixture(scope='session')

@@ -125,7 +125,7 @@ def _start(sim, spinner_nodes, ctx, est=None, ctrl=None):
 
 def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx):
     # s of simulated time: the settling; the 60 s hold runs on the ROS-free loop
-    # (test/controller), which these nodes equal sample by sample
+    # (test/control), which these nodes equal sample by sample
     duration = 1.0
     n = int(duration * RATE)
     sim, est, ctrl = _graph(ctx, command_timeout=120.0)

@@ -12,10 +12,5 @@ def fast_model(request):
 
 
 @pytest.fixture(scope='session')
-def v2():
-    return make_model('maggy_v2')
-
-
-@pytest.fixture(scope='session')
 def v2_equilibrium(v2):
     return v2.hover_state(find_equilibria(v2)[0].z)
