@@ -10,9 +10,10 @@ against the physics and compared with the online identifier::
 
     maglev-lab --out lab/
 
-Open loop (``--magnet fixed`` or ``absent``): runs the simulator (lockstep), the
-excitation and the recorder as three nodes on one executor in this process, for
-a given simulated duration; then converts the bag into a data set
+Open loop (``--magnet fixed`` or ``absent``): the same lab session on the
+simulator (lockstep) with the open loop as its controller (the excitation
+node's signal, one command a sample) and the bag writer as its observer, for a
+given simulated duration; then converts the bag into a data set
 (:func:`maglev_ros.bags.read_bag`: command inputs by log time, exact alignment),
 identifies one ARX model per field component against the excitation inputs,
 prints the fit on estimation and validation data and writes the plots::
@@ -52,7 +53,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import shutil
 import signal
 import sys
@@ -82,14 +82,10 @@ from maglev_ros.excitation import PATTERNS, SIGNALS, pattern_matrix
 from maglev_ros.stop_signals import StopSignals
 from maglev_ros.topics import (
     AXES,
-    CLOCK_TOPIC,
-    COMMAND_TOPIC,
     CURRENTS_TOPIC,
-    TRUE_STATE_TOPIC,
     command_channel,
     current_channel,
     field_channel,
-    field_topic,
 )
 
 __all__ = [
@@ -531,7 +527,13 @@ def overrides(**values) -> list:
 
 
 def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
-    """Run simulator (lockstep), excitation and recorder on one executor.
+    """Record the simulated platform driven by the excitation: the open-loop lab session.
+
+    The lab session (:func:`~maglev_ros.loop.run_session`, no settling) on a
+    lockstep :class:`~maglev_ros.loop.SimulatedPlant` (the magnet ``fixed`` or
+    ``absent``) with the :class:`~maglev_ros.loop.OpenLoop` controller: the
+    excitation node's signal (one period, repeated) from the first sample on,
+    one command a sample, exactly ``--samples`` samples recorded.
 
     Parameters
     ----------
@@ -545,107 +547,72 @@ def run_experiment(args: argparse.Namespace, bag: Path, stop=None) -> dict:
     Returns
     -------
     dict
-        ``samples``, ``simulated_s``, ``wall_s``, ``timeouts``, ``crashed``.
-
-    Raises
-    ------
-    KeyboardInterrupt
-        On a stop signal (the bag is finalised first).
+        ``samples``, ``simulated_s``, ``wall_s``, ``timeouts``, ``crashed``,
+        ``crash_reason``, ``stopped``.
     """
-    from maglev_ros.nodes.excitation import ExcitationNode
-    from maglev_ros.nodes.recorder import RecorderNode
-    from maglev_ros.nodes.simulator import SimulatorNode
+    from maglev_ros.loop import (
+        BagRecorder,
+        ControlLoop,
+        OpenLoop,
+        SessionPlan,
+        SimulatedPlant,
+        run_session,
+    )
+    from maglev_ros.nodes.excitation import build_config as excitation_config
+    from maglev_ros.nodes.excitation import commands_of
+    from maglev_ros.nodes.simulator import build_config as simulator_config
+    from maglev_ros.physics.simulator_config import make_simulator
 
-    topics = [field_topic(k) for k in args.sensors] + [
-        CURRENTS_TOPIC,
-        COMMAND_TOPIC,
-        TRUE_STATE_TOPIC,
-        CLOCK_TOPIC,
-    ]
-    with _lab_bringup() as lab:
-        ctx = lab.context
-        sim = SimulatorNode(
-            context=ctx,
-            parameter_overrides=overrides(
-                params=args.params,
-                field_model=args.field_model,
-                magnet=args.magnet,
-                sample_rate=args.sample_rate,
-                coil_dynamics=not args.no_coil,
-                sensor_delay=args.delay,
-                sensor_noise=args.noise,
-                seed=args.seed,
-                mode='lockstep',
-                start_paused=True,
-                sensors=list(args.sensors),
-                marker_rate=0.0,
-                command_timeout=5.0,
-            ),
-        )
-        lab.add(sim)
-        excite = ExcitationNode(
-            context=ctx,
-            parameter_overrides=overrides(
-                signal=args.excitation,
-                amplitude=args.amplitude,
-                band=list(args.band),
-                pattern=args.pattern,
-                seed=args.seed,
-                length=args.length,
-                max_commands=args.samples,
-            ),
-        )
-        lab.add(excite)
-        recorder = RecorderNode(
-            context=ctx,
-            parameter_overrides=overrides(
-                path=str(bag), storage=args.storage, topics=topics, log_clock='topic'
-            ),
-        )
-        lab.add(recorder, destroy_last=True)  # finalises the bag
-        lab.start()
-        lab.wait_until(
-            lambda: (
-                len(recorder.subscribed) == len(topics)
-                and recorder.metadata_complete
-                and excite.command_subscribers >= 2
-                and sim.currents_subscribers >= 2
-                and sim.command_publishers >= 1
-            ),
-            'the node graph',
-            stop=stop,
-        )
-        wall = time.monotonic()
-        sim.set_paused(False)
-        # the first sample is published before any command; each command then steps the
-        # simulation once, and the excitation stops after exactly `samples` commands
-        target = args.samples + 1
+    settings = dict(
+        params=args.params,
+        field_model=args.field_model,
+        magnet=args.magnet,
+        sample_rate=args.sample_rate,
+        coil_dynamics=not args.no_coil,
+        sensor_delay=args.delay,
+        sensor_noise=args.noise,
+        seed=args.seed,
+        mode='lockstep',
+    )
+    simulator = make_simulator(simulator_config(settings))
+    excitation = dict(
+        signal=args.excitation,
+        amplitude=args.amplitude,
+        band=list(args.band),
+        pattern=args.pattern,
+        seed=args.seed,
+        length=args.length,
+    )
+    period = commands_of(excitation_config(excitation))
+    # the command answering sample k is period row k (mod its length), applied at once
+    loop = ControlLoop(
+        SimulatedPlant(simulator), OpenLoop(), excitation=np.resize(period, (args.samples, 4))
+    )
+    metadata = {f'maglev_simulator.{k}': v for k, v in settings.items()}
+    metadata['maglev_simulator.sensors'] = ' '.join(str(k) for k in args.sensors)
+    metadata.update({f'maglev_excitation.{k}': str(v) for k, v in excitation.items()})
+    recorder = BagRecorder(bag, args.sensors, args.storage, metadata, true_state=True, clock=True)
+    try:
         with progress_bar(args.samples, 'simulating', 'samples', args.quiet) as bar:
 
-            def done() -> bool:
-                bar.update(max(0, min(sim.counters['samples'] - 1, args.samples) - bar.n))
-                return sim.counters['samples'] >= target or sim.sim.crashed
+            def progress(stage: str, done: int, total: int) -> None:
+                if stage == 'recording':
+                    bar.update(done - bar.n)
 
-            lab.wait_until(done, 'the simulation', timeout=1e9, stop=stop)
-        sim.set_paused(True)
-        wall = time.monotonic() - wall
-        published = sim.counters['samples']
-        lab.wait_until(
-            lambda: (
-                recorder.counts['/' + CURRENTS_TOPIC] >= published
-                and recorder.counts['/' + COMMAND_TOPIC] >= published - 1
-            ),
-            'the recorder',
-            stop=stop,
-        )
-        return {
-            'samples': published - 1,  # the initial sample answers no command: not in the data
-            'simulated_s': sim.sim.time,
-            'wall_s': wall,
-            'timeouts': sim.counters['timeouts'],
-            'crashed': sim.sim.crashed,
-            'crash_reason': sim.sim.reason,
-        }
+            plan = SessionPlan(args.samples, 0, settle_window=1)
+            stopped = lambda: bool(stop and stop.requested)  # noqa: E731
+            result = run_session(loop, plan, {'recorder': recorder}, progress, stopped)
+    finally:
+        recorder.close()
+    return {
+        'samples': recorder.counts[CURRENTS_TOPIC],
+        'simulated_s': args.samples / args.sample_rate,
+        'wall_s': result.wall_s,
+        'timeouts': 0,
+        'crashed': result.crashed,
+        'crash_reason': result.reason,
+        'stopped': result.stopped,
+    }
 
 
 def run_board_experiment(
@@ -760,19 +727,6 @@ def _run_board(args: argparse.Namespace, bag: Path, stop=None) -> dict:
         return run_board_experiment(args, bag, port, n_sensors, stop)
     finally:
         stop_child(child)
-
-
-def _lab_bringup():
-    """Return a :class:`~maglev_ros.nodes.bringup.Bringup` for the lab's nodes, discovery local.
-
-    ``ROS_AUTOMATIC_DISCOVERY_RANGE`` is set to LOCALHOST unless the
-    environment sets it: the lab's graph stays on this machine. Its context
-    has no rclpy signal handlers (the session's StopSignals handle them).
-    """
-    from maglev_ros.nodes.bringup import Bringup
-
-    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
-    return Bringup()
 
 
 def _run(args: argparse.Namespace) -> int:

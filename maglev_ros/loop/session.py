@@ -70,7 +70,8 @@ class SessionPlan:
         Samples to record, >= 1.
     settle_samples : int
         Ordinal of the last settling sample (the recording starts at the
-        next), >= 1.
+        next), >= 1; or 0: no settling, the recording starts with the first
+        sample (an open-loop recording).
     settle_window : int
         Samples of the settling check's RMS (the last ones before the window).
     set_point : ndarray, shape (3,)
@@ -93,17 +94,17 @@ class SessionPlan:
     excitation: np.ndarray | None = None
 
     def __post_init__(self) -> None:
-        for name in ('samples', 'settle_samples', 'settle_window'):
+        for name, least in (('samples', 1), ('settle_samples', 0), ('settle_window', 1)):
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f'{name} must be an integer >= 1, got {value!r}')
+            if isinstance(value, bool) or not isinstance(value, int) or value < least:
+                raise ValueError(f'{name} must be an integer >= {least}, got {value!r}')
         if self.position not in ('state', 'estimate'):
             raise ValueError(f"position must be 'state' or 'estimate', got {self.position!r}")
 
     @property
     def total(self) -> int:
         """Samples the loop handles: the settling's and the recording's."""
-        return self.settle_samples + 1 + self.samples
+        return self.settle_samples + (1 if self.settle_samples else 0) + self.samples
 
 
 @dataclass(frozen=True)
@@ -178,7 +179,8 @@ class _Tracker:
         self._delayed = deque(self._zero for _ in range(loop.command_delay))
         self._in_force: tuple[np.ndarray, np.ndarray] | None = None
         lo = plan.settle_samples - plan.settle_window + 1
-        self._settle_range = (max(lo, 0), plan.settle_samples)
+        # no settling (0): no ordinal is in the range
+        self._settle_range = (max(lo, 0), plan.settle_samples if plan.settle_samples else -1)
         self._settling: list[np.ndarray] = []
         self.positions: list[np.ndarray] = []
         self.times = [np.nan, np.nan, np.nan]  # first sample, last settling, last recorded
@@ -281,7 +283,7 @@ def run_session(
     asked = stop or (lambda: False)
     started = time.monotonic()
     stopped = False
-    settle_total = plan.settle_samples + 1
+    settle_total = plan.total - plan.samples
     reported = 0
     try:
         while tracker.n < plan.total and not loop.stopped:
@@ -309,7 +311,9 @@ def run_session(
         settle_rms=rms,
         settled=bool(np.all(rms < plan.settled_rms)),
         settle_s=float(t_settled - t0) if np.isfinite(t_settled) else float('nan'),
-        recorded_s=float(t_last - t_settled) if tracker.recorded else 0.0,
+        recorded_s=float(t_last - (t_settled if plan.settle_samples else t0))
+        if tracker.recorded
+        else 0.0,
         wall_s=end - tracker.opened_at if tracker.opened_at is not None else 0.0,
         run_wall_s=time.monotonic() - started,
         positions=np.array(tracker.positions).reshape(-1, 3),

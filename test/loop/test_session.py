@@ -62,6 +62,18 @@ def test_open_loop_session_writes_exactly_the_excitation_on_a_fixed_magnet():
     np.testing.assert_allclose(currents[1:], commands[:-1], atol=1e-12)
 
 
+def test_without_settling_the_recording_starts_with_the_first_sample():
+    sim = Simulator(make_model('maggy_v2'), 5000.0, magnet='fixed', seed=1)
+    ex = np.random.default_rng(0).uniform(-0.2, 0.2, (N, 4))
+    loop = ControlLoop(SimulatedPlant(sim), OpenLoop(), excitation=ex)  # rows by sample
+    recorded = []
+    result = run_session(loop, SessionPlan(N, 0), {'log': recorded.append})
+    assert result.samples == N == len(recorded) and result.commands == N
+    assert [w.sample.index for w in recorded] == list(range(N))
+    np.testing.assert_array_equal(np.array([w.command for w in recorded]), ex)
+    assert result.recorded_s == pytest.approx((N - 1) / 5000.0)
+
+
 class CountingPlant:
     """A lockstep plant of constant readings that can fail and records its close."""
 
@@ -116,6 +128,7 @@ def test_a_failing_plant_ends_the_session_with_its_reason():
     'kwargs, match',
     [
         (dict(samples=0, settle_samples=1), 'samples must be an integer >= 1'),
+        (dict(samples=10, settle_samples=-1), 'settle_samples must be an integer >= 0'),
         (dict(samples=10, settle_samples=1, position='truth'), "position must be 'state'"),
     ],
 )
