@@ -15,12 +15,15 @@ readings) and structure:
 
 Cost on this filter: about 3.5 us a sample for the update and the
 prediction where the general kernels (:mod:`~maglev_ros.estimation.kernels`,
-a fresh array and a call per small product) took about 7.5 us.
+a fresh array and a call per small product) took about 7.5 us; about 5 us for
+the whole sample, bookkeeping included.
 
-The estimator's state lives in three packed arrays (see
-:func:`packed_sizes`) so that a sample is one call of few arguments: a
-numba call costs about 80 ns per argument, 2 us for the 25 separate arrays
-before.
+The estimator's model and state live in two packed arrays, floats and
+ints (see :func:`packed_sizes`), so that a sample is one call of six
+arguments: a numba call costs about 55 ns an argument (2 us for the 25
+separate arrays of the first version). The sums may be reassociated
+(``fastmath`` without ``nnan`` and ``ninf``: a missing reading is NaN), which
+lets them vectorise; the results stay within 2e-14 of filterpy's.
 """
 
 from __future__ import annotations
