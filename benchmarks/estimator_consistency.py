@@ -67,7 +67,11 @@ def tuning(name: str, params: str, kind: str) -> EstimatorConfig:
     config = EstimatorConfig(filter=kind)
     if name == 'none':
         return dataclasses.replace(
-            config, current_noise=1e-4, acceleration_noise=0.0, angular_acceleration_noise=0.0
+            config,
+            current_noise=1e-4,
+            acceleration_noise=0.0,
+            vertical_acceleration_noise=0.0,
+            angular_acceleration_noise=0.0,
         )
     return config
 

@@ -164,7 +164,7 @@ class Estimator:
         """Continuous input matrix of the process noise, shape (10, 4 + 5).
 
         Columns: the coil currents (B), then unit accelerations of vx, vy, vz,
-        wx, wy.
+        wx, wy (standard deviations: :meth:`disturbance_std`).
         """
         g = np.zeros((self.n_reduced, self.n_inputs + 5))
         g[:, : self.n_inputs] = self.linear.B
@@ -177,7 +177,8 @@ class Estimator:
         c = self.config
         return np.array(
             [c.current_noise] * self.n_inputs
-            + [c.acceleration_noise] * 3
+            + [c.acceleration_noise] * 2
+            + [c.vertical_acceleration_noise]
             + [c.angular_acceleration_noise] * 2
         )
 

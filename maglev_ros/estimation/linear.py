@@ -18,6 +18,8 @@ from .linear_kernels import (
 
 __all__ = ['KalmanEstimator']
 
+_empty = np.empty
+
 
 class KalmanEstimator(Estimator):
     """KF on ``dx = x - x_eq`` (10 reduced states, optional 9 sensor-bias states).
@@ -57,21 +59,20 @@ class KalmanEstimator(Estimator):
         n, nr, m, mi = self.n_states, self.n_reduced, self.n_outputs, self.n_inputs
         k, w = self.n_sensors, self.config.nis_window
         layout = packed_sizes(n, m, mi, k, w, nr)
-        self._model = np.zeros(layout['model']['size'])
         self._ints = np.zeros(layout['ints']['size'], dtype=np.int64)
-        self._floats = np.zeros(layout['floats']['size'])
+        self._floats = np.zeros(layout['floats']['size'])  # the model, then the state
 
         def section(array, table, name, shape=None):
             a, b = table[name]
             view = array[a:b]
             return view.reshape(shape) if shape is not None else view
 
-        mo, it, fl = layout['model'], layout['ints'], layout['floats']
-        self.F = section(self._model, mo, 'F', (n, n))
-        self.B = section(self._model, mo, 'B', (n, mi))
-        self.H = section(self._model, mo, 'H', (m, n))
-        self.D = section(self._model, mo, 'D', (m, mi))
-        self.Q = section(self._model, mo, 'Q', (n, n))
+        it, fl = layout['ints'], layout['floats']
+        self.F = section(self._floats, fl, 'F', (n, n))
+        self.B = section(self._floats, fl, 'B', (n, mi))
+        self.H = section(self._floats, fl, 'H', (m, n))
+        self.D = section(self._floats, fl, 'D', (m, mi))
+        self.Q = section(self._floats, fl, 'Q', (n, n))
         g = self.disturbance_matrix()
         ad, gd = zoh(lin.A, g, self.dt)  # g's first columns are B: gd's are Bd
         F = np.eye(n)
@@ -102,12 +103,13 @@ class KalmanEstimator(Estimator):
             ('p_init', self.initial_covariance().ravel()),
             ('gate', [min(self.gate, np.finfo(float).max)]),
         ):
-            section(self._model, mo, name)[:] = value
-        self._p_init = section(self._model, mo, 'p_init', (n, n))
+            section(self._floats, fl, name)[:] = value
+        self._p_init = section(self._floats, fl, 'p_init', (n, n))
         self._ints[: lk.INT_HEADER] = [
             n, m, mi, k, w, nr,
             self.config.sensor_delay, self.freeze.run, self.config.lost_samples,
             0, 0, 0, 0, 0,
+            self.strength_index is None,  # else H is linearised in Python each sample
         ]  # fmt: skip
         section(self._ints, it, 'reduced')[:] = self.reduced
         self._accepted = section(self._ints, it, 'accepted')
@@ -115,6 +117,7 @@ class KalmanEstimator(Estimator):
         self._x = section(self._floats, fl, 'x')
         self._P = section(self._floats, fl, 'P', (n, n))
         self._p_out = section(self._floats, fl, 'out_p', (n, n))
+        self._out_p_at = fl['out_p'][0]
         self._prev = section(self._floats, fl, 'prev')
         self._nis_sensor = section(self._floats, fl, 'nis_sensor')
         self._nis = section(self._floats, fl, 'nis_ring')
@@ -135,7 +138,7 @@ class KalmanEstimator(Estimator):
             Initial estimate.
         """
         super().reset(x0)
-        self._packed = (self._model, self._ints, self._floats, self.freeze.frozen)
+        self._packed = (self._floats, self._ints, self.freeze.frozen)
 
     def _board_model(self, F, B, H, D, Q, gd) -> np.ndarray:
         """Make F, B, H, Q (in place) and D, y_eq model the board's processed field.
@@ -331,17 +334,19 @@ class KalmanEstimator(Estimator):
         ndarray, shape (12,)
             Estimated state at this sample (gamma and wz are 0: unobservable).
         """
-        if self.strength_index is not None:
-            return super().step(y, currents)
-        # C-contiguous always: one compiled signature (a strided row, e.g. of a
-        # burst's array, would compile the kernel again: seconds in a real-time loop)
-        y = np.ascontiguousarray(y, dtype=float)
-        currents = np.ascontiguousarray(currents, dtype=float)
-        out = np.empty(12)
-        if y.ndim == 1 == currents.ndim and kf_packed_step(y, currents, *self._packed, out):
-            self._out_x = out
-            return out  # the prior's x_eq if the filter restarted
-        return super().step(y, currents)  # raises the ValueError that names the input
+        out = _empty(12)
+        try:  # float64 C arrays go straight in; anything else is a TypeError, not a compile
+            if kf_packed_step(y, currents, *self._packed, out):
+                self._out_x = out
+                return out  # the prior's x_eq if the filter restarted
+        except TypeError:  # e.g. a list, or a strided row of a burst's array
+            y = np.ascontiguousarray(y, dtype=float)
+            currents = np.ascontiguousarray(currents, dtype=float)
+            if y.ndim == 1 == currents.ndim and kf_packed_step(y, currents, *self._packed, out):
+                self._out_x = out
+                return out
+        # the magnet-strength state (its H is linearised here), or an input to name
+        return super().step(y, currents)
 
     def step_many(self, ys, currents) -> tuple[np.ndarray, np.ndarray]:
         """Process n complete samples in order, as n calls of :meth:`step`, in one call.
@@ -372,7 +377,7 @@ class KalmanEstimator(Estimator):
         p = np.empty((n, self.n_states, self.n_states))
         if n == 0:
             return x, p
-        kf_packed_steps(ys, currents, *self._packed, x, p)
+        kf_packed_steps(ys, currents, *self._packed, x, p, self._out_p_at)
         self._out_x = x[-1].copy()
         return x, p
 

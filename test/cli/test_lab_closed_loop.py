@@ -27,14 +27,14 @@ def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_model
     domain, tmp_path, capfd
 ):
     out = tmp_path / 'lab'
-    argv = ['--duration', '0.4', '--settle', '0.1', '--seed', str(SEED), '--out', str(out)]
+    argv = ['--duration', '0.4', '--settle', '0.2', '--seed', str(SEED), '--out', str(out)]
     status = lab.main([*argv, '--quiet'])
     printed = capfd.readouterr().out
     summary = json.loads((out / 'models.json').read_text())
     assert status == summary['exit_status'] and status in (0, 1), printed
     run = summary['run']
     # exactly the samples asked for, after settling, each with its command and excitation
-    assert f'recorded {SAMPLES} samples' in printed and 'settled after 0.1 s' in printed
+    assert f'recorded {SAMPLES} samples' in printed and 'settled after 0.2 s' in printed
     assert summary['data'] == {'N': SAMPLES, 'n_estimation': 1000, 'n_validation': 1000}
     assert run['timeouts'] == 0 and not run['crashed'] and run['settled']
     with Reader(out / 'bag') as reader:

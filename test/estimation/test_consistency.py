@@ -12,6 +12,7 @@ from maglev_ros.estimation.consistency import (
     average_band,
     correlation_time,
     matched_config,
+    prediction_errors,
     run_consistency,
     steady_covariance,
 )
@@ -41,6 +42,7 @@ def test_a_filter_without_process_noise_is_found_overconfident(v2, v2_linear):
         EstimatorConfig(),
         current_noise=1e-4,
         acceleration_noise=0.0,
+        vertical_acceleration_noise=0.0,
         angular_acceleration_noise=0.0,
     )
     r = run_consistency(v2, config, 1.5, linear=v2_linear)
@@ -75,6 +77,8 @@ def test_the_matched_filters_innovations_are_consistent(v2, v2_linear, kind):
     assert r.nees_correlation > 10
     assert r.nis_ok, (r.nis, r.nis_band)
     assert r.nees <= r.nees_band[1], (r.nees, r.nees_band)
+    if kind == 'kf':  # the KF: inside the band (the EKF and UKF stay conservative on V2)
+        assert r.nees_ok, (r.nees, r.nees_band)
     with pytest.raises(ValueError, match='no matched process noise'):
         matched_config('maggy_v9', kind)
 
@@ -92,3 +96,20 @@ def test_the_steady_covariance_is_the_filters_fixed_point(v2, v2_linear):
     assert np.max(np.abs(predicted - p)) <= 1e-9 * np.max(np.abs(p))
     with pytest.raises(ValueError, match="start must be 'steady' or 'prior'"):
         run_consistency(v2, config, 1.5, linear=v2_linear, start='zero')
+
+
+def test_the_model_error_is_the_coil_currents_seen_through_b(v2, v2_linear):
+    # the KF's one-step prediction error on the true plant: x, beta, vx and wy move
+    # together (one horizontal current error through B), as do y, alpha, vy and wx;
+    # z is a slow drift (its mean far from zero); what the matched tuning says
+    w = prediction_errors(v2, 'kf', 1.5, linear=v2_linear)
+    assert w.shape == (5000 - 1, 10)
+    corr = np.corrcoef(w.T)
+    x, y, z, a, b, vx, vy, vz, wx, wy = range(10)
+    for i, j in ((x, b), (x, vx), (b, vx), (y, a), (y, vy), (a, vy)):
+        assert abs(corr[i, j]) > 0.8, (i, j, corr[i, j])
+    assert abs(corr[x, wy]) > 0.5 and abs(corr[y, wx]) > 0.5
+    assert abs(corr[x, y]) < 0.2 and abs(corr[vx, vz]) < 0.2
+    assert abs(w[:, vz].mean()) > 0.3 * w[:, vz].std()
+    z_tau = correlation_time(w[:, z] - w[:, z].mean())
+    assert z_tau > 2 * correlation_time(w[:, x] - w[:, x].mean())

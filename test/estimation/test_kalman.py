@@ -227,3 +227,25 @@ def test_step_many_gives_the_numbers_of_step(v2, v2_linear, v2_data, strength):
         many.step_many(ys[:3], np.full((3, 4), np.nan))
     with pytest.raises(ValueError, match='rows'):
         many.step_many(ys[:3], cs[:2])
+
+
+def test_step_takes_lists_and_strided_rows_without_compiling_again(v2, v2_linear, v2_data):
+    """The compiled step has one signature (float64 C arrays); other inputs are converted."""
+    from maglev_ros.estimation.linear_kernels import kf_packed_step
+
+    ys, cs, _ = v2_data
+    arrays = KalmanEstimator(v2, EstimatorConfig(), linear=v2_linear)
+    others = KalmanEstimator(v2, EstimatorConfig(), linear=v2_linear)
+    wide = np.zeros((len(ys), 2 * ys.shape[1]))
+    wide[:, ::2] = ys  # every row a strided view
+    for k in range(50):
+        x = arrays.step(np.ascontiguousarray(ys[k]), np.ascontiguousarray(cs[k]))
+        y = wide[k, ::2] if k % 2 else list(ys[k])
+        assert np.array_equal(others.step(y, [float(c) for c in cs[k]]), x)
+    assert len(kf_packed_step.signatures) == 1
+    with pytest.raises(ValueError, match='y must have 9 readings'):
+        others.step(ys[0][:5], cs[0])
+    with pytest.raises(ValueError, match='y must have 9 readings'):
+        others.step(ys[:2], cs[0])
+    with pytest.raises(ValueError, match='currents must be 4 finite numbers'):
+        others.step(ys[0], [np.nan, 0.0, 0.0, 0.0])
