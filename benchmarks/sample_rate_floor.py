@@ -30,26 +30,46 @@ import numpy as np
 from tqdm import tqdm
 
 from maglev_ros.control import ControllerConfig
-from maglev_ros.control.closed_loop import make_closed_loop
+from maglev_ros.control.closed_loop import ClosedLoop, make_closed_loop
 from maglev_ros.estimation import EstimatorConfig
 
 
 def hold(
-    rate: float, seed: int, delay: int, seconds: float, average: int = 1, offset: int = 0
+    rate: float,
+    seed: int,
+    delay: int,
+    seconds: float,
+    average: int = 1,
+    offset: int = 0,
+    scale: float = 1.0,
+    extra: int = 0,
 ) -> dict:
     """Run the loop at ``rate`` Hz for ``seconds`` s; return its hold figures.
 
     ``average`` readings per sample (at ``average`` x ``rate``), a new command
-    from reading ``offset`` of its group on.
+    from reading ``offset`` of its group on; the estimator's disturbances
+    (held over a sample) times ``scale``; the commands applied ``extra``
+    periods later than the LQR designs for.
     """
+    c = EstimatorConfig()
     loop = make_closed_loop(
         'maggy_v2',
-        estimator=EstimatorConfig(sample_rate=rate, bias_states=True, average=average),
+        estimator=EstimatorConfig(
+            sample_rate=rate,
+            bias_states=True,
+            average=average,
+            acceleration_noise=c.acceleration_noise * scale,
+            angular_acceleration_noise=c.angular_acceleration_noise * scale,
+            current_noise=c.current_noise * scale,
+        ),
         controller=ControllerConfig(sample_rate=rate, command_delay=delay),
         seed=seed,
         average=average,
         offset=offset,
     )
+    if extra:
+        loop = ClosedLoop(loop.simulator, loop.estimator, loop.controller, delay + extra,
+                          average, offset)  # fmt: skip
     r = loop.run(seconds)
     start = int(rate)  # after 1 s
     x = np.asarray(r.x)[start:, :2]
@@ -92,19 +112,26 @@ def main() -> None:
     p.add_argument('--average', type=int, default=1, help='readings per averaged sample')
     p.add_argument('--average-rates', type=float, nargs='+', default=[1000.0])
     p.add_argument('--offsets', type=int, nargs='+', default=[0], help='readings before a command')
+    p.add_argument('--scaled', action='store_true',
+                   help='averaged rows also with disturbances scaled for the rate')  # fmt: skip
+    p.add_argument('--extra', type=int, nargs='+', default=[0],
+                   help='averaged rows: periods of latency beyond the design')  # fmt: skip
     args = p.parse_args()
-    print(f'{"rate Hz":>8}  {"sensed Hz":>9}  {"delay":>5}  {"offset":>6}  {"lost":>7}  '
-          f'{"RMS x, y um":>14}  {"largest x, y um":>16}  {"estimate error x, y um":>23}  '
-          'lost at (s)')  # fmt: skip
-    rows = [(rate, 1, d, 0) for rate in args.rates for d in args.delays]
+    print(f'{"rate Hz":>8}  {"sensed Hz":>9}  {"delay":>5}  {"offset":>6}  {"Q scale":>7}  '
+          f'{"extra":>5}  {"lost":>7}  {"RMS x, y um":>14}  {"largest x, y um":>16}  '
+          f'{"estimate error x, y um":>23}  lost at (s)')  # fmt: skip
+    rows = [(rate, 1, d, 0, 1.0, 0) for rate in args.rates for d in args.delays]
     if args.average > 1:
-        rows += [(rate, args.average, d, o) for rate in args.average_rates
-                 for d in args.delays for o in args.offsets]  # fmt: skip
-    for rate, average, delay, offset in tqdm(rows, desc='rows', leave=False):
-        runs = [hold(rate, seed, delay, args.seconds, average, offset)
+        # the disturbances held over a sample keep their intensity: std x sqrt(Ts / Ts_sensed)
+        scales = [1.0, args.average**-0.5] if args.scaled else [1.0]
+        rows += [(rate, args.average, d, o, q, e) for rate in args.average_rates
+                 for q in scales for d in args.delays for o in args.offsets
+                 for e in args.extra]  # fmt: skip
+    for rate, average, delay, offset, scale, extra in tqdm(rows, desc='rows', leave=False):
+        runs = [hold(rate, seed, delay, args.seconds, average, offset, scale, extra)
                 for seed in range(args.seeds)]  # fmt: skip
         label = f'{rate:>8.0f}  {rate * average:>9.0f}  {delay:>5}  '
-        label += f'{offset if average > 1 else "-":>6}'
+        label += f'{offset if average > 1 else "-":>6}  {scale:>7.2f}  {extra:>5}'
         tqdm.write(_row(label, runs))
 
 
