@@ -6,7 +6,8 @@ estimator, controller and recorder each in its own process) from a colcon instal
 of the package for ``--seconds`` once the simulator steps, then stops it as a
 terminal's Ctrl-C does. Printed:
 
-- the CPU of each process over the hold (user + system, % of one core), from
+- the CPU of each process from the simulator's start (user + system, % of one
+  core over the time it stepped: the run, or until the magnet was lost), from
   ``/proc`` (:mod:`process_cpu`);
 - the command latency the simulator saw: its ``command lag (samples)``
   diagnostic (readings between the newest sample stepped and the sample a
@@ -142,7 +143,6 @@ def main() -> None:
             if not launch.running():
                 raise SystemExit(f'the launch ended:\n{launch.tail()}')
             time.sleep(0.5)
-        time.sleep(0.5)  # the magnet settles
         pids = {name: pid for pid, name in launch.names().items() if name in ROLES}
         before = {name: cpu_seconds(pid) for name, pid in pids.items()}
         lag.recording = True
@@ -164,7 +164,11 @@ def main() -> None:
     if both and os.environ.get('SHOW_RTT'):
         print(np.round(rtt[:80], 1).tolist())
     rms, largest, recorded = _hold(bag)
-    print(f'load average {os.getloadavg()[0]:.1f}; {recorded:.1f} s of state recorded')
+    simulated = float(lag.last.get('simulated time (s)', 'nan'))
+    if simulated < wall:  # the magnet was lost: the shares of the time it was stepped
+        wall = simulated
+    print(f'load average {os.getloadavg()[0]:.1f}; {recorded:.1f} s of state recorded; CPU '
+          f'over {wall:.1f} s of stepping')  # fmt: skip
     for name in ROLES:
         if name in used:
             print(f'  {name:<18} {100 * used[name] / wall:5.1f} % of a core')
