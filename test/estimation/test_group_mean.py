@@ -1,4 +1,4 @@
-"""The mean of N readings over a sample as one linear measurement of its start, and the KF on it."""
+"""The mean of N readings over a sample as one linear measurement of its start; the KF on it."""
 
 from __future__ import annotations
 
@@ -42,8 +42,10 @@ def test_the_mean_of_a_groups_readings_is_c_bar_x_plus_d_bar_u(v2_linear):
 def _track(v2, v2_linear, average: int, samples: int = 40) -> np.ndarray:
     """Feed the means of 5 readings per 1 ms sample to a KF told ``average``; its errors, m."""
     lin = v2_linear.reduced()
-    est = KalmanEstimator(v2, EstimatorConfig(sample_rate=1000.0, average=average,
-                                              sensor_noise=1e-7, quantization=0.0), v2_linear)  # fmt: skip
+    config = EstimatorConfig(
+        sample_rate=1000.0, average=average, sensor_noise=1e-7, quantization=0.0
+    )
+    est = KalmanEstimator(v2, config, v2_linear)
     rng = np.random.default_rng(1)
     x = np.zeros(10)
     x[:3] = [2e-4, -1e-4, 5e-5]
