@@ -43,21 +43,27 @@ def hold(
     offset: int = 0,
     scale: float = 1.0,
     extra: int = 0,
+    modelled: bool = True,
 ) -> dict:
     """Run the loop at ``rate`` Hz for ``seconds`` s; return its hold figures.
 
     ``average`` readings per sample (at ``average`` x ``rate``), a new command
     from reading ``offset`` of its group on; the estimator's disturbances
     (held over a sample) times ``scale``; the commands applied ``extra``
-    periods later than the LQR designs for.
+    periods later than the LQR designs for. Not ``modelled``: the estimator
+    reads each mean as one reading (of its sample's instant) with the mean's noise.
     """
     c = EstimatorConfig()
+    told = average if modelled else 1
+    noise = 1.0 if modelled else average**-0.5
     loop = make_closed_loop(
         'maggy_v2',
         estimator=EstimatorConfig(
             sample_rate=rate,
             bias_states=True,
-            average=average,
+            average=told,
+            sensor_noise=c.sensor_noise * noise,
+            quantization=c.quantization * noise,
             acceleration_noise=c.acceleration_noise * scale,
             angular_acceleration_noise=c.angular_acceleration_noise * scale,
             current_noise=c.current_noise * scale,
@@ -116,21 +122,25 @@ def main() -> None:
                    help='averaged rows also with disturbances scaled for the rate')  # fmt: skip
     p.add_argument('--extra', type=int, nargs='+', default=[0],
                    help='averaged rows: periods of latency beyond the design')  # fmt: skip
+    p.add_argument('--unmodelled', action='store_true',
+                   help='averaged rows also with the means read as single readings')  # fmt: skip
     args = p.parse_args()
-    print(f'{"rate Hz":>8}  {"sensed Hz":>9}  {"delay":>5}  {"offset":>6}  {"Q scale":>7}  '
-          f'{"extra":>5}  {"lost":>7}  {"RMS x, y um":>14}  {"largest x, y um":>16}  '
-          f'{"estimate error x, y um":>23}  lost at (s)')  # fmt: skip
-    rows = [(rate, 1, d, 0, 1.0, 0) for rate in args.rates for d in args.delays]
+    print(f'{"rate Hz":>8}  {"sensed Hz":>9}  {"model":>6}  {"delay":>5}  {"offset":>6}  '
+          f'{"Q scale":>7}  {"extra":>5}  {"lost":>7}  {"RMS x, y um":>14}  '
+          f'{"largest x, y um":>16}  {"estimate error x, y um":>23}  lost at (s)')  # fmt: skip
+    rows = [(rate, 1, d, 0, 1.0, 0, True) for rate in args.rates for d in args.delays]
     if args.average > 1:
         # the disturbances held over a sample keep their intensity: std x sqrt(Ts / Ts_sensed)
         scales = [1.0, args.average**-0.5] if args.scaled else [1.0]
-        rows += [(rate, args.average, d, o, q, e) for rate in args.average_rates
-                 for q in scales for d in args.delays for o in args.offsets
+        models = [True, False] if args.unmodelled else [True]
+        rows += [(rate, args.average, d, o, q, e, m) for rate in args.average_rates
+                 for m in models for q in scales for d in args.delays for o in args.offsets
                  for e in args.extra]  # fmt: skip
-    for rate, average, delay, offset, scale, extra in tqdm(rows, desc='rows', leave=False):
-        runs = [hold(rate, seed, delay, args.seconds, average, offset, scale, extra)
+    for rate, average, delay, offset, scale, extra, modelled in tqdm(rows, leave=False):
+        runs = [hold(rate, seed, delay, args.seconds, average, offset, scale, extra, modelled)
                 for seed in range(args.seeds)]  # fmt: skip
-        label = f'{rate:>8.0f}  {rate * average:>9.0f}  {delay:>5}  '
+        model = 'mean' if average > 1 and modelled else 'single'
+        label = f'{rate:>8.0f}  {rate * average:>9.0f}  {model:>6}  {delay:>5}  '
         label += f'{offset if average > 1 else "-":>6}  {scale:>7.2f}  {extra:>5}'
         tqdm.write(_row(label, runs))
 
