@@ -254,6 +254,8 @@ def test_separate_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2,
                         'separate:=true', f'bag:={bag}')  # fmt: skip
     launch.wait_for(r'\[maglev_simulator\]: .* realtime at 5000 Hz \(published as means of 5',
                     START_TIMEOUT)  # fmt: skip
+    launch.wait_for(r'\[maglev_estimator\]: kf .* 1000 Hz.* the mean of 5 readings',
+                    START_TIMEOUT)  # fmt: skip
     launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
     estimate = first_message(heard(estimates))
