@@ -221,9 +221,22 @@ class ClosedLoop:
         Samples before a command drives the coils (default: the controller's
         ``command_delay``; 1 is the board: the command computed from sample k
         is applied from k+1; at most ``MAX_COMMAND_DELAY``).
+    average, offset : int, optional
+        Simulator steps per sample (each sample their readings' mean) and
+        where in a group a new command lands
+        (:class:`~maglev_ros.loop.SimulatedPlant`).
     """
 
-    def __init__(self, simulator, estimator, controller, command_delay: int | None = None):
+    def __init__(
+        self,
+        simulator,
+        estimator,
+        controller,
+        command_delay: int | None = None,
+        average: int = 1,
+        offset: int = 0,
+    ):
+        self.average, self.offset = average, offset
         self.simulator = simulator
         self.estimator = estimator
         self.controller = controller
@@ -278,14 +291,15 @@ class ClosedLoop:
         from ..loop import ControlLoop, SimulatedPlant
 
         sim = self.simulator
-        n = int(round(duration / sim.dt))
-        plant = SimulatedPlant(sim, cut=cut)
+        dt = sim.dt * self.average
+        n = int(round(duration / dt))
+        plant = SimulatedPlant(sim, cut=cut, average=self.average, offset=self.offset)
         plant.reset(x0)
         log = _ArrayLog(n, sim.model.n_inputs, sim.model.n_outputs, self.estimator)
         log.controller = None if self.pd else self.controller
         observers = [log]
         if progress is not None:
-            every = int(round(1.0 / sim.dt))
+            every = int(round(1.0 / dt))
             observers.append(lambda s: s.index % every == 0 and s.index and progress(s.t))
         loop = ControlLoop(
             plant,
@@ -385,6 +399,8 @@ def make_closed_loop(
     freeze=None,
     seed: int | None = 0,
     linear=None,
+    average: int = 1,
+    offset: int = 0,
 ) -> ClosedLoop:
     """Build the issue's simulated set-up: noisy, delayed sensors, coil electrics.
 
@@ -411,6 +427,12 @@ def make_closed_loop(
         Noise (and random freeze) seed.
     linear : LinearModel, optional
         Linearisation of the believed model, to share.
+    average : int
+        Readings per sample: the simulator runs at ``average`` times the
+        controller's rate and each sample is the mean of its readings (the
+        estimator's config should say the same ``average``).
+    offset : int
+        Readings of each group before a new command applies (0 .. average-1).
     """
     from ..estimation import EstimatorConfig, make_estimator
     from ..physics import CoilDynamics, MaggyModel, SensorEffects, Simulator, linearize, make_model
@@ -428,7 +450,7 @@ def make_closed_loop(
     rate = controller.sample_rate
     sim = Simulator(
         plant_model,
-        rate,
+        rate * average,
         coil=CoilDynamics.from_parameters(plant_model.params) if coil_dynamics else None,
         sensor=SensorEffects(noise, quantization, 0.0, sensor_delay),
         seed=seed,
@@ -439,4 +461,4 @@ def make_closed_loop(
         config = estimator or EstimatorConfig(sample_rate=rate, sensor_delay=sensor_delay)
         est = make_estimator(model, config, linear=lin)
     ctrl = make_controller(model, controller, linear=lin)
-    return ClosedLoop(sim, est, ctrl)
+    return ClosedLoop(sim, est, ctrl, average=average, offset=offset)

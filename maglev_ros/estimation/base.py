@@ -12,6 +12,14 @@ both are known, and the prediction holds their mean (trapezoidal hold, far
 closer than holding i(k-1) while the currents move). With
 ``sensor_delay = 0`` the reading is of k itself: the estimate is the
 posterior at k and the prediction follows.
+
+A sample that is the mean of ``average`` readings (N > 1, the KF only; the
+reading delay is then one reading, 1 / N of a sample): its readings are of
+the states from the previous sample's instant on, so the prior is that
+instant's, as with a delayed reading, and the published estimate is the
+prediction to the sample's own instant. The sample's currents are the
+group's mean: they are held over the group for the update (the feedthrough
+of the mean reading) and for the prediction alike.
 """
 
 from __future__ import annotations
@@ -28,7 +36,11 @@ from ..physics.linearization import REDUCED_STATES
 from .config import EstimatorConfig
 from .freeze import FreezeDetector
 
-__all__ = ['Estimator', 'EstimatorStatus', 'nis_band']
+__all__ = ['DELAY_MEAN', 'Estimator', 'EstimatorStatus', 'nis_band']
+
+#: The readings' timing when a sample is the mean of a group of readings (0 and 1:
+#: ``sensor_delay``).
+DELAY_MEAN = 2
 
 
 def nis_band(dof: int, probability: float = 0.99) -> tuple[float, float]:
@@ -139,6 +151,8 @@ class Estimator:
             self.board = BoardProcessing.from_model(self.model)
             self.n_states += int(self.board.filtered.sum())
         self.dt = self.config.dt
+        #: how the readings stand to the sample (:data:`DELAY_MEAN`: a group's mean)
+        self.delay_mode = DELAY_MEAN if self.config.average > 1 else self.config.sensor_delay
         self.r_diag = np.full(self.n_outputs, self.config.measurement_variance)
         self.gate = (
             np.inf
@@ -282,10 +296,13 @@ class Estimator:
             raise ValueError(f'currents must be {self.n_inputs} finite numbers, got {currents!r}')
         available = self.freeze.check(y)
         delayed = self.config.sensor_delay == 1
-        held = currents if not delayed or self._prev_currents is None else self._prev_currents
-        # over the sample k-1 -> k the coil current ramps from i(k-1) to i(k): with
-        # the delayed reading both ends are known, so the prediction holds their mean
-        across = 0.5 * (held + currents) if delayed else currents
+        if self.delay_mode == DELAY_MEAN:  # the group's mean currents, over the group
+            held = across = currents
+        else:
+            held = currents if not delayed or self._prev_currents is None else self._prev_currents
+            # over the sample k-1 -> k the coil current ramps from i(k-1) to i(k): with
+            # the delayed reading both ends are known, so the prediction holds their mean
+            across = 0.5 * (held + currents) if delayed else currents
         accepted, nis_sensor, nis, dof = self._sample(y, held, across, available, delayed)
         if not available.all():
             self.missing += ~available

@@ -117,6 +117,16 @@ class EstimatorConfig:
         200 us board step, so ``a = 0.8^(Ts / 200 us)`` per sample). The
         filter's state (one per filtered channel) joins the estimator's
         states, after the bias states. KF only; chosen, never inferred.
+    average : int
+        Readings per sample: each sample is the mean of this many readings
+        taken at ``average`` times ``sample_rate`` (the simulator's
+        ``average``; :mod:`maglev_ros.estimation.group_mean`). The filter's
+        state is then at the group's start, the reading its exact linear
+        function ``C_bar x + D_bar u`` with the sample's currents (the group's
+        mean) held over the group, the noise variance divided by ``average``;
+        the published estimate is the prediction to the group's end, the
+        sample's stamp. ``sensor_delay`` (1) counts readings, not samples.
+        KF with raw readings only; 1: single readings.
     gate_probability : float
         Per-sensor chi-square gate: a sensor's 3-axis innovation is rejected
         when its NIS exceeds the chi-square(3) quantile of this probability.
@@ -177,6 +187,12 @@ class EstimatorConfig:
         'processed field; kf only)',
         choice(*MEASUREMENTS),
     )
+    average: int = setting(
+        1,
+        'readings per sample: each sample the mean of this many readings taken at average x '
+        'sample_rate (kf, raw readings, sensor_delay 1; 1: single readings)',
+        integer(1),
+    )
     gate_probability: float = setting(0.99999, 'per-sensor chi-square gate probability', _gate)
     freeze_samples: int = setting(
         4, 'identical readings in a row that mark a sensor frozen', integer(2)
@@ -198,6 +214,19 @@ class EstimatorConfig:
             raise EstimatorConfigError(
                 'measurement board is supported by the kf filter without magnet_strength only, '
                 f'got filter {self.filter!r}, magnet_strength {self.magnet_strength!r}'
+            )
+        if self.average > 1 and (
+            self.filter != 'kf'
+            or self.measurement != 'raw'
+            or self.magnet_strength
+            or self.sensor_delay != 1
+        ):
+            raise EstimatorConfigError(
+                f'average {self.average} (a mean of readings per sample) is supported by the kf '
+                'filter with raw readings, sensor_delay 1 and without magnet_strength only, got '
+                f'filter {self.filter!r}, measurement {self.measurement!r}, sensor_delay '
+                f'{self.sensor_delay!r}, magnet_strength {self.magnet_strength!r}; set average 1 '
+                'or filter kf'
             )
         if self.magnet_strength and self.filter != 'kf':
             raise EstimatorConfigError(
@@ -234,5 +263,8 @@ class EstimatorConfig:
 
     @property
     def measurement_variance(self) -> float:
-        """Variance per axis, T^2: noise plus uniform quantisation error."""
-        return self.sensor_noise**2 + self.quantization**2 / 12.0
+        """Variance per axis of a sample, T^2: noise plus uniform quantisation error.
+
+        Of one reading, divided by ``average`` (the sample is their mean).
+        """
+        return (self.sensor_noise**2 + self.quantization**2 / 12.0) / self.average

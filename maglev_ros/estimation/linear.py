@@ -7,6 +7,7 @@ import numpy as np
 from ..physics.discretization import zoh
 from . import linear_kernels as lk
 from .base import Estimator
+from .group_mean import group_mean_model
 from .linear_kernels import (
     kf_packed_step,
     kf_packed_steps,
@@ -28,6 +29,12 @@ class KalmanEstimator(Estimator):
 
         dx(k+1) = Ad dx(k) + Bd (i(k) - u_eq)
         y(k)    = y_eq + C dx(k) + D (i(k) - u_eq) [+ b]     (D: the coils' direct field)
+
+    With ``average`` N > 1 each sample is the mean of N readings over the
+    sample: ``C`` and ``D`` become the group mean's ``C_bar`` and ``D_bar``
+    (:mod:`~maglev_ros.estimation.group_mean`), the filter's prior is at the
+    group's start and the sample's currents (the group's mean) are held over it
+    for the update and the prediction.
 
     The readings enter as ``z = y - y_eq - D (i - u_eq)``, so the update is the
     plain ``z = H x`` form of filterpy's ``KalmanFilter`` (H = C, or [C I] with
@@ -90,6 +97,8 @@ class KalmanEstimator(Estimator):
         if self.strength_index is not None:
             H[:, self.strength_index] = self.magnet_field
         D = np.array(lin.D, dtype=float)
+        if self.config.average > 1:  # a mean of readings over the sample: of its start
+            H[:, :nr], D = group_mean_model(lin.A, lin.B, lin.C, D, self.dt, self.config.average)
         Q = self.process_noise(gd)
         if self.board is not None:  # the board's processed field (BoardProcessing)
             D = self._board_model(F, B, H, D, Q, gd)
@@ -107,7 +116,7 @@ class KalmanEstimator(Estimator):
         self._p_init = section(self._floats, fl, 'p_init', (n, n))
         self._ints[: lk.INT_HEADER] = [
             n, m, mi, k, w, nr,
-            self.config.sensor_delay, self.freeze.run, self.config.lost_samples,
+            self.delay_mode, self.freeze.run, self.config.lost_samples,
             0, 0, 0, 0, 0,
             self.strength_index is None,  # else H is linearised in Python each sample
         ]  # fmt: skip

@@ -77,9 +77,10 @@ def packed_sizes(n: int, m: int, mi: int, k: int, window: int, nr: int) -> dict:
     published P (n, n), previous currents (mi), per-sensor NIS (k), NIS ring
     (window), the freeze check's last readings (k, 3), last NIS (1).
     ``ints``: the header (:data:`INT_HEADER` entries: n, m, mi, k, window, nr,
-    delayed, freeze run, lost samples, then samples, unaccepted, restarts,
-    last dof, has previous currents, and whether the whole sample runs
-    compiled: not with the magnet-strength state), reduced (nr), accepted (k), dof ring (window),
+    delayed (0, 1, or 2: a group's mean, ``base.DELAY_MEAN``), freeze run, lost
+    samples, then samples, unaccepted, restarts, last dof, has previous
+    currents, and whether the whole sample runs compiled: not with the
+    magnet-strength state), reduced (nr), accepted (k), dof ring (window),
     then per sensor: the freeze check's run lengths and freezes seen, the
     missing and the rejected readings (k each).
 
@@ -486,10 +487,16 @@ def _sample(y, currents, fl, ints, frozen, out):  # pragma: no cover - jitted
             ints[j_events + s] += 1
         frozen[s] = now_frozen[s]
     # the currents at the reading's instant, and held over the prediction
-    delayed = ints[I_DELAYED] == 1
+    # (a group's mean: its mean currents over the group, the prediction published)
+    mean = ints[I_DELAYED] == 2
+    delayed = ints[I_DELAYED] >= 1
     held = np.empty(mi)
     across = np.empty(mi)
     for p in range(mi):
+        if mean:
+            held[p] = currents[p]
+            across[p] = currents[p]
+            continue
         held[p] = fl[o_prev + p] if delayed and ints[I_HAS_PREV] else currents[p]
         across[p] = 0.5 * (held[p] + currents[p]) if delayed else currents[p]
     xp = np.empty(n)

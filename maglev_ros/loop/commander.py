@@ -135,6 +135,11 @@ class Commander:
         self.heard_since: float | None = None  # monotonic s an estimator was heard from
         self.estimates_seen = False
         self.last_input_ns: int | None = None  # node clock at the last input message
+        if self.lqr:  # its compiled law loads now (~10 ms), not on the first estimate
+            enabled, c.enabled = c.enabled, True
+            c.command(0.0, np.array(c.x_eq, dtype=float))
+            c.enabled = enabled
+            c.reset()
 
     @property
     def excited(self) -> bool:

@@ -186,6 +186,7 @@ class EstimatorNode(Node):
         self.get_logger().info(
             f'{e.filter} on {cfg.params}, {n} sensors, {e.sample_rate:g} Hz, '
             f'sensor delay {e.sensor_delay}'
+            f'{f", each sample the mean of {e.average} readings" if e.average > 1 else ""}'
         )
 
     @property

@@ -85,6 +85,8 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
     'sensor_quantization': Param(0.0, 'sensor resolution, T per LSB (0: none)', check=number(0)),
     'sensor_delay': Param(1, 'sensor delay in samples (the board has 1)', check=integer(0)),
     'seed': Param(0, 'seed of the sensor noise', check=integer(0)),
+    'average': Param(1, 'realtime: steps per published sample, each the mean of their readings '
+                     'and currents (5 at 5 kHz: 1 kHz); 1: every step', check=integer(1)),
     'mode': Param('realtime', 'timing: realtime (wall clock) or lockstep (one command per sample)',
                   check=one_of(*MODES)),
     'command_timeout': Param(1.0, 'lockstep: s to wait for a command before holding the last one',
@@ -149,13 +151,14 @@ class SimulatorNode(Node):
         self.sim = make_simulator(cfg)
         self.session = session = SimulationSession(
             self.sim, cfg.mode, pace_period=cfg.pace_period,
-            command_timeout=cfg.command_timeout, paused=cfg.start_paused,
+            command_timeout=cfg.command_timeout, paused=cfg.start_paused, average=cfg.average,
         )  # fmt: skip
         self.counters = session.counters
         self.sensors = cfg.sensors or tuple(range(len(self.sim.model.params.sensors)))
         lockstep = cfg.mode == 'lockstep'
         clock = 'none' if not cfg.publish_clock else 'sample' if lockstep else 'burst'
-        self._encoder = SampleEncoder(self.sensors, cfg.publish_state, clock, session.burst)
+        burst = max(1, session.burst // cfg.average)  # published samples per burst
+        self._encoder = SampleEncoder(self.sensors, cfg.publish_state, clock, burst)
         types = {contract.field_topic(k): MagneticField for k in self.sensors}
         types |= {contract.TRUE_STATE_TOPIC: Odometry, contract.CURRENTS_TOPIC: JointState}
         topics = (*self._encoder.topics, *[contract.CLOCK_TOPIC] * (clock == 'burst'))

@@ -3,12 +3,21 @@
 A board's firmware may sample its sensor faster than it reports and send the
 mean of each group (the V4x firmware low-pass filters its samples; a host at
 1 kHz can take the mean of five 5 kHz samples). :class:`SampleAverager` does
-that to the simulator's samples: each group of ``n`` consecutive samples
-becomes one sample whose reading is the group's mean (the noise's standard
-deviation divided by sqrt(n)), and whose stamp, index, state and currents are
-the group's last (the instant the mean is known). It is what lets separate
-processes exchange samples at a rate the middleware sustains without
-throwing away the information of the faster sensor.
+that to the simulator's samples: the samples ``(m - 1) n + 1 .. m n`` of a run
+become its sample ``m``, whose reading and coil currents are the group's means
+(the noise's standard deviation divided by sqrt(n)), and whose stamp and state
+are the group's last, sample ``m n`` (the instant the mean is known). The
+run's initial sample 0 passes alone as sample 0: the averaged samples then
+lie on the grid of the slower rate from the run's start, and a simulator
+stepping a burst of ``n`` samples per wake-up ends a group with each burst
+(a command received between bursts applies from a group's start).
+
+It is what lets separate processes exchange samples at a rate the middleware
+sustains without throwing away the information of the faster sensor. The
+estimator models such a sample as what it is, a mean over the group
+(:mod:`maglev_ros.estimation.group_mean`): with the sensor's one reading of
+delay, the readings are of the states from the previous sample's instant on,
+and the estimate is predicted to the stamp.
 """
 
 from __future__ import annotations
@@ -21,7 +30,7 @@ __all__ = ['SampleAverager']
 
 
 class SampleAverager:
-    """Means of ``n`` consecutive samples, across batches (module docstring).
+    """Means of groups of ``n`` samples by their run index, across batches (module docstring).
 
     Parameters
     ----------
@@ -56,7 +65,8 @@ class SampleAverager:
         -------
         SampleBatch
             One sample per completed group (``crashed`` as ``batch``'s); the
-            samples of an unfinished group wait for the next call.
+            samples of an unfinished group wait for the next call. Samples
+            must come in order of their run index, as a session returns them.
         """
         n = self.n
         if n == 1:
@@ -67,19 +77,20 @@ class SampleAverager:
                 *(np.concatenate([getattr(held, f), getattr(batch, f)]) for f in _FIELDS),
                 crashed=batch.crashed,
             )
-        whole = (len(batch) // n) * n
+        ends = np.flatnonzero(batch.indices % n == 0)  # each group's last sample
+        whole = int(ends[-1]) + 1 if len(ends) else 0
         rest = slice(whole, len(batch))
         self._held = SampleBatch(*(getattr(batch, f)[rest] for f in _FIELDS))
-        last = slice(n - 1, whole, n)
-        k = whole // n
-        width = batch.readings.shape[1]
-        readings = batch.readings[:whole].reshape(k, n, width).mean(axis=1)
+        if not whole:
+            return SampleBatch(*(getattr(batch, f)[:0] for f in _FIELDS), crashed=batch.crashed)
+        starts = np.concatenate([[0], ends[:-1] + 1]).astype(np.intp)
+        counts = (ends + 1 - starts)[:, None]
         return SampleBatch(
-            batch.indices[last] // n,
-            batch.stamps_ns[last],
-            readings,
-            batch.states[last],
-            batch.currents[last],
+            batch.indices[ends] // n,
+            batch.stamps_ns[ends],
+            np.add.reduceat(batch.readings[:whole], starts, axis=0) / counts,
+            batch.states[ends],
+            np.add.reduceat(batch.currents[:whole], starts, axis=0) / counts,
             crashed=batch.crashed,
         )
 

@@ -44,6 +44,15 @@ published sample: simulated time increases across runs.
 
 Stamps: sample i of a run is stamped ``run_start_ns + round(i * 1e9 /
 sample_rate)`` ns of simulated time.
+
+Averaged samples (``average`` N > 1, real time): the simulator steps at its
+sample rate (the sensing rate) and the session returns one sample per N
+steps, the mean of their readings and currents, stamped (with its true
+state) at the group's last step, sample ``m`` of the slower rate at step
+``m N`` (:class:`~maglev_ros.physics.sample_average.SampleAverager`; the
+run's initial sample alone is sample 0). A burst of ``pace_period`` = N steps
+ends a group, so a command applies from a group's start. The counters count
+steps, :attr:`SimulationSession.command_lag` steps too.
 """
 
 from __future__ import annotations
@@ -161,6 +170,9 @@ class SimulationSession:
     now : float, optional
         Monotonic time at creation, s (default ``time.monotonic()``), the
         start of the first real-time factor interval.
+    average : int, optional
+        Steps per returned sample, each sample their mean (real time only;
+        module docstring). 1: every step is a sample.
 
     Attributes
     ----------
@@ -174,7 +186,7 @@ class SimulationSession:
     Raises
     ------
     ValueError
-        On an unknown mode or a negative period or timeout.
+        On an unknown mode, a negative period or timeout, or averaging in lockstep.
     """
 
     def __init__(
@@ -186,9 +198,17 @@ class SimulationSession:
         command_timeout: float = 1.0,
         paused: bool = False,
         now: float | None = None,
+        average: int = 1,
     ) -> None:
+        from .sample_average import SampleAverager
+
         if mode not in MODES:
             raise ValueError(f'mode must be one of {", ".join(MODES)}, got {mode!r}')
+        self.averager = SampleAverager(average)
+        if average > 1 and mode != 'realtime':
+            raise ValueError(
+                f'average {average} (samples as means of steps) needs mode realtime, got {mode!r}'
+            )
         if not (math.isfinite(pace_period) and pace_period >= 0):
             raise ValueError(f'pace_period must be a finite number >= 0, got {pace_period!r}')
         if not (math.isfinite(command_timeout) and command_timeout > 0):
@@ -312,6 +332,7 @@ class SimulationSession:
         """
         self.run_start_ns = self.last_stamp_ns + int(round(self.dt_ns))
         self._first_reading = self.sim.reset()
+        self.averager.reset()
         self._queue.clear()
         self._command = _ZERO.copy()
         self._steps_since_command = 0
@@ -488,8 +509,9 @@ class SimulationSession:
             due = 1
         if self.max_batch is not None:
             due = min(due, self.max_batch)
+        before = self.sim.samples
         batch = self._burst(due)
-        done += len(batch) + batch.crashed
+        done += self.sim.samples - before  # steps, the crashing one too (a batch may average)
         self._pace = (base, done)
         return batch, max(base + (done + self.burst) * dt - now, 0.0)
 
@@ -568,7 +590,10 @@ class SimulationSession:
             self.counters['samples'] += n
         if crashed:
             self.last_state = self.sim.crash_state
-        return SampleBatch(indices, stamps, readings, states, currents, crashed)
+        batch = self.averager.add(
+            SampleBatch(indices, stamps, readings, states, currents, crashed)
+        )
+        return batch if len(batch) or crashed else None
 
 
 def timeout_line(session: SimulationSession, age: float) -> str:

@@ -166,6 +166,11 @@ class SimulatorConfig:
         Real time: step from the first sample on only once a first command
         arrived and ``start_subscribers`` subscribers of ``maglev/currents``
         exist, so a free magnet does not fall before the controller is up.
+    average : int
+        Real time: steps per published sample, each sample the mean of their
+        readings and currents, stamped at the last
+        (:class:`~maglev_ros.physics.sample_average.SampleAverager`); 1: every
+        step is published.
     """
 
     params: str
@@ -192,6 +197,7 @@ class SimulatorConfig:
     marker_rate: float
     diagnostics_period: float
     wait_for_controller: bool = False
+    average: int = 1
 
     def summary(self, set_name: str, sensors: tuple[int, ...]) -> str:
         """One line saying what runs (the node logs it at start).
@@ -203,9 +209,14 @@ class SimulatorConfig:
         sensors : tuple of int
             The sensors published (all of the set's when :attr:`sensors` is empty).
         """
+        means = ''
+        if self.average > 1:
+            rate = self.sample_rate / self.average
+            means = f' (published as means of {self.average}: {rate:g} Hz)'
         return (
             f'{set_name} ({self.field_model} field), magnet {self.magnet}, {self.mode} at '
-            f'{self.sample_rate:g} Hz, sensors {list(sensors)}, coil dynamics '
+            f'{self.sample_rate:g} Hz{means}'
+            f', sensors {list(sensors)}, coil dynamics '
             f'{"on" if self.coil_dynamics else "off"}, sensor delay {self.sensor_delay}, '
             f'noise {self.sensor_noise:g} T, seed {self.seed}'
             f'{", paused" if self.start_paused else ""}'
@@ -229,8 +240,14 @@ def make_simulator(cfg: SimulatorConfig) -> Simulator:
     Raises
     ------
     SimulatorConfigError
-        If the parameter set cannot be loaded or the options do not fit it.
+        If the parameter set cannot be loaded, the options do not fit it, or
+        ``average`` is asked in lockstep.
     """
+    if cfg.average > 1 and cfg.mode != 'realtime':
+        raise SimulatorConfigError(
+            f'average {cfg.average} (published samples as means of steps) needs mode realtime, '
+            f'got mode {cfg.mode!r}: set average 1 or mode realtime'
+        )
     try:
         model = make_model(
             cfg.params, field=cfg.field_model, torque=cfg.torque, kinematics=cfg.kinematics

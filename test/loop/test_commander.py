@@ -115,3 +115,17 @@ def test_references_and_triggers_are_checked():
         check_trigger('estimate', 'pd')
     with pytest.raises(ValueError, match='trigger must be one of sample, estimate'):
         check_trigger('each', 'lqr')
+
+
+@pytest.mark.parametrize('enabled', [True, False])
+def test_the_warm_up_loads_the_law_and_leaves_no_trace(enabled):
+    config = ControllerConfig(sample_rate=RATE, command_delay=3)
+    fresh, warmed = make_controller(MODEL, config), make_controller(MODEL, config)
+    fresh.set_enabled(enabled)
+    warmed.set_enabled(enabled)
+    stage = Commander(warmed, MODEL.n_outputs // 3, trigger='estimate')
+    assert warmed.enabled == enabled and not warmed.active
+    for k in range(1, 6):  # the pending commands and the watchdog start as a fresh one's
+        got = stage.estimate(k * PERIOD_NS, _state(k * 1e-4), 0.0)
+        want = fresh.command(k * 1e-3, _state(k * 1e-4))
+        np.testing.assert_array_equal(got.total, want)

@@ -31,6 +31,7 @@ from maglev_ros.nodes.simulator import (
     build_config,
     make_simulator,
 )
+from maglev_ros.physics import Simulator
 
 TIMEOUT = 30.0  # s, generous: the machine is shared
 
@@ -374,6 +375,42 @@ def test_realtime_bursts_publish_the_core_h_until_the_crash(make_peer):
     clock = np.array([stamp_ns(m) for m in peer.clock])
     clock = clock[(clock >= stamps[0]) & (clock <= stamps[-1])]
     np.testing.assert_array_equal(clock, stamps[stamps % 1_000_000 == 0])  # one per burst
+
+
+def test_realtime_averaged_samples_are_means_of_five_steps_on_the_1_khz_grid(make_peer):
+    # average 5 at 5 kHz: one sample per 1 ms burst, stamped at its group's last step,
+    # its fields the mean of the group's 5 readings (the core's own steps, bit for bit
+    # up to the mean's round-off), /clock with each sample (one per burst)
+    x0 = [0.001, 0.0, 0.0365] + [0.0] * 9
+    peer = make_peer(
+        lockstep=False, initial_state=x0, coil_dynamics=False, sensor_delay=0, marker_rate=0.0,
+        diagnostics_period=0.2, average=5,
+    )  # fmt: skip
+    sim = peer.sim
+    peer.call(peer.pause_client, SetBool.Request(data=False))
+    wait_for(lambda: sim.counters['crashes'] == 1, what='the crash')
+    peer.drain()
+    stamps = np.array([stamp_ns(m) for m in peer.currents])
+    assert len(stamps) > 20 and np.all(np.diff(stamps) == 1_000_000), stamps[:5]
+    reference = Simulator(sim.sim.model, 5000.0, x0=x0)
+    readings = [reference.reset()] + [reference.step(np.zeros(4)) for _ in range(5 * 20)]
+    means = [readings[0]] + [np.mean(readings[5 * m - 4 : 5 * m + 1], axis=0)
+                             for m in range(1, 21)]  # fmt: skip
+    by_stamp = {stamp_ns(m): m for m in peer.fields[sim.sensors[0]]}
+    compared = [m for m in range(21) if m * 1_000_000 in by_stamp]
+    assert len(compared) >= 15, sorted(by_stamp)[:5]  # the first may precede the subscription
+    for m in compared:
+        field = by_stamp[m * 1_000_000].magnetic_field
+        np.testing.assert_allclose([field.x, field.y, field.z], means[m][:3], rtol=1e-12,
+                                   atol=1e-15)  # fmt: skip
+    clock = np.array([stamp_ns(m) for m in peer.clock])
+    np.testing.assert_array_equal(clock[(clock >= stamps[0]) & (clock <= stamps[-1])], stamps)
+
+
+def test_averaged_samples_in_lockstep_are_refused(ctx):
+    with pytest.raises(SimulatorParameterError, match='average 5 .* needs mode realtime'):
+        SimulatorNode(context=ctx, parameter_overrides=[
+            Parameter('average', value=5), Parameter('mode', value='lockstep')])  # fmt: skip
 
 
 def test_lockstep_timeout_holds_the_last_command(make_peer):

@@ -28,14 +28,16 @@ def test_groups_are_averaged_across_batches_as_in_one_batch():
     parts = [averager.add(SampleBatch(*(getattr(whole, f)[a:b] for f in (
         'indices', 'stamps_ns', 'readings', 'states', 'currents'))))
         for a, b in ((0, 3), (3, 4), (4, 17), (17, 23))]  # fmt: skip
-    assert len(one) == 4 and sum(len(p) for p in parts) == 4
+    assert len(one) == 5 and sum(len(p) for p in parts) == 5
     joined = np.concatenate([p.readings for p in parts])
     np.testing.assert_array_equal(joined, one.readings)
-    np.testing.assert_allclose(one.readings[1], whole.readings[5:10].mean(axis=0))
-    # stamp, index, state and currents: the group's last sample
-    assert one.stamps_ns.tolist() == [800_000, 1_800_000, 2_800_000, 3_800_000]
-    assert one.indices.tolist() == [0, 1, 2, 3]
-    assert one.states[2, 0] == 14 and one.currents[3, 0] == pytest.approx(0.19)
+    # the run's sample 0 alone, then samples 1-5, 6-10, ...: the 1 kHz grid of a 5 kHz run
+    np.testing.assert_array_equal(one.readings[0], whole.readings[0])
+    np.testing.assert_allclose(one.readings[1], whole.readings[1:6].mean(axis=0))
+    # stamp and state: the group's last sample; the currents: the group's mean
+    assert one.stamps_ns.tolist() == [0, 1_000_000, 2_000_000, 3_000_000, 4_000_000]
+    assert one.indices.tolist() == [0, 1, 2, 3, 4]
+    assert one.states[2, 0] == 10 and one.currents[3, 0] == pytest.approx(0.13)
 
 
 def test_the_mean_divides_the_noise_by_the_root_of_the_group():

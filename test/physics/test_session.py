@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from maglev_ros.physics import CoilDynamics, Simulator
+from maglev_ros.physics import CoilDynamics, SensorEffects, Simulator
 from maglev_ros.physics.session import (
     MAX_BACKLOG_S,
     PAUSED_POLL_S,
@@ -266,3 +266,32 @@ def test_command_lag_counts_the_samples_after_the_answered_one(v2):
     assert s.command_lag == 2
     s.command(np.zeros(4), now=0.00101)  # unstamped: the lag stays
     assert s.command_lag == 2
+
+
+def test_realtime_averaged_samples_are_group_means_on_the_slower_grid(v2):
+    s = SimulationSession(
+        simulator(v2, sensor=SensorEffects(1e-4), magnet='free', seed=4), 'realtime', now=0.0,
+        average=5,
+    )  # fmt: skip
+    reference = simulator(v2, sensor=SensorEffects(1e-4), magnet='free', seed=4)
+    first = s.start(now=0.0)  # the run's sample 0 alone
+    np.testing.assert_array_equal(first.readings[0], reference.reset())
+    s.command([0.1, 0.0, 0.0, 0.0], now=0.0)
+    assert s.pace(0.0)[0] is None  # the pacing's origin
+    assert s.pace(0.0017)[0].indices.tolist() == [1]  # 8 steps: group 1-5, 6-8 wait
+    batch, _ = s.pace(0.0027)  # 13 steps: group 6-10 completes, 11-13 wait
+    assert batch.indices.tolist() == [2] and batch.stamps_ns.tolist() == [2_000_000]
+    steps = [(reference.step([0.1, 0.0, 0.0, 0.0]), reference.currents, reference.state)
+             for _ in range(10)]  # fmt: skip
+    readings, currents, states = (np.array(c) for c in zip(*steps, strict=True))
+    np.testing.assert_allclose(batch.readings[0], readings[5:].mean(axis=0))
+    np.testing.assert_allclose(batch.currents[0], currents[5:].mean(axis=0))
+    np.testing.assert_array_equal(batch.states[0], states[9])
+    assert s.counters['samples'] == 14  # steps are counted
+
+
+def test_averaged_samples_need_real_time(v2):
+    with pytest.raises(ValueError, match='average 5 .* needs mode realtime'):
+        SimulationSession(simulator(v2), 'lockstep', average=5)
+    with pytest.raises(ValueError, match='samples per mean must be an integer >= 1'):
+        SimulationSession(simulator(v2), 'realtime', average=0)
