@@ -38,6 +38,7 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from time import monotonic
 
+from maglev_ros.frozen_heap import frozen_heap
 from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
 from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
@@ -329,7 +330,9 @@ def _run(args: argparse.Namespace) -> int:
     try:
         if out:
             out.write('t_s,x_m,y_m,z_m,alpha_rad,beta_rad,crashed,monotonic_s\n')
-        with board:
+        # the board's thread must keep real time: no collection of the whole heap
+        # (the physics model, numba) stalls it (maglev_ros.frozen_heap)
+        with frozen_heap(), board:
             print(board.path, flush=True)
             while not stop.wait(0.2):
                 board.check()

@@ -125,6 +125,10 @@ class V4xPcFirmware:
         Identical readings in a row that reset the sensor.
     """
 
+    #: s between a pacing layer's wake-ups (one sample period: a request finds the
+    #: board caught up, as the firmware is between its samples)
+    pacing_period = SAMPLE_US * 1e-6
+
     def __init__(
         self,
         plant: Plant,

@@ -120,6 +120,7 @@ class VirtualBoard:
         self._master: int | None = None
         self._device: str | None = None
         self._firmware: Firmware | None = None
+        self._poll_s = _POLL_S
         self._t0 = 0.0
         self._port_open = False
         self._port_opens = 0
@@ -272,6 +273,9 @@ class VirtualBoard:
             os.symlink(device, tmp)
             os.replace(tmp, self._link)
             self._firmware = self._factory()
+            # a firmware that samples faster than the default poll is paced at its
+            # own rate (V4x PC control: 200 us), so a request finds it caught up
+            self._poll_s = min(_POLL_S, getattr(self._firmware, 'pacing_period', _POLL_S))
             self._master = master
             self._device = device
             self._t0 = time.monotonic()
@@ -357,8 +361,8 @@ class VirtualBoard:
         self._port_open = False  # no process holds the slave open
         self._backlog.clear()  # what a closed port was sent is lost
 
-    def _poll_input(self) -> None:
-        """Read host bytes; track port open/close through EIO."""
+    def _poll_input(self) -> bool:
+        """Read host bytes; track port open/close through EIO; return whether bytes came."""
         try:
             data = os.read(self._master, 4096)
         except BlockingIOError:
@@ -367,7 +371,7 @@ class VirtualBoard:
             if err.errno != errno.EIO:
                 raise
             self._port_closed()
-            return
+            return False
         if not self._port_open:
             self._port_open = True
             self._port_opens += 1
@@ -375,6 +379,7 @@ class VirtualBoard:
         if data:
             self._received += len(data)
             self._firmware.receive(data)
+        return bool(data)
 
     def _run(self) -> None:
         try:
@@ -382,12 +387,15 @@ class VirtualBoard:
                 with self._lock:
                     master = self._master
                     if master is not None and not self._paused.is_set():
-                        # the host's bytes first: a command that came while this thread
-                        # waited drives the samples computed now (the board reads its
-                        # serial input every loop, before its samples)
-                        self._poll_input()
+                        # the board's samples up to now first, with the commands it had:
+                        # the thread wakes when the host's bytes come (select), so they
+                        # arrived now, and the firmware answers them now, from its latest
+                        # sample; taken before the catch-up, a request would be answered
+                        # (and a command applied) up to a wait earlier than it was sent
                         now_us = int((time.monotonic() - self._t0) * 1e6)
                         out = self._firmware.advance_to(now_us)
+                        if self._poll_input():
+                            out += self._firmware.advance_to(now_us)
                         if out and self._port_open:
                             if self._tampers:
                                 out = self._tampers.popleft()(out)
@@ -400,7 +408,7 @@ class VirtualBoard:
                     time.sleep(_CLOSED_POLL_S)
                     continue
                 try:
-                    select.select([master], waiting, [], _POLL_S)
+                    select.select([master], waiting, [], self._poll_s)
                 except (OSError, ValueError):  # closed by unplug meanwhile
                     continue
         except BaseException as err:  # surfaced by check()
