@@ -63,9 +63,10 @@ def start_board(args, out: Path) -> tuple[subprocess.Popen, str, Path, str]:
     cmd = [
         sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
         '--magnet', 'free', '--params', params, '--link', str(link), '--truth', str(truth),
-        '--seed', str(args.seed),
+        '--seed', str(args.seed), '--exit-with-parent',
     ]  # fmt: skip
-    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    # its own session (its own CPU share under autogroup scheduling, docs/boards.md)
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True)
     path = child.stdout.readline().strip()
     if not path:
         raise SystemExit('the virtual board did not start')

@@ -273,6 +273,13 @@ def build_parser() -> argparse.ArgumentParser:
         'child process and run the driver on it',
     )
     p.add_argument(
+        '--board-params',
+        metavar='PARAMS',
+        default=None,
+        help='--firmware v4x_pc --virtual-board: the virtual board\'s physics set (preset or '
+        'YAML; default --params): a magnet that is not the one the loop believes (--params)',
+    )
+    p.add_argument(
         '--board-sensors',
         type=int,
         default=None,

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 import threading
@@ -159,6 +160,11 @@ def build_parser() -> argparse.ArgumentParser:
         '--truth',
         metavar='FILE',
         help="physics: write the magnet's true pose as CSV every 2 ms (see above)",
+    )
+    parser.add_argument(
+        '--exit-with-parent',
+        action='store_true',
+        help='stop when the process that started it ends (a host running it as its child)',
     )
     parser.add_argument('--startup-delay', type=_seconds, default=2.0, help='s after open')
     parser.add_argument('--watchdog', type=_seconds, default=1.0, help='s (V2x)')
@@ -326,6 +332,7 @@ def _run(args: argparse.Namespace) -> int:
     previous = {}
     for signum in (signal.SIGINT, signal.SIGTERM):
         previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    parent = os.getppid()
     out = open(args.truth, 'w', encoding='utf-8') if truth else None  # noqa: SIM115
     try:
         if out:
@@ -335,6 +342,8 @@ def _run(args: argparse.Namespace) -> int:
         with frozen_heap(), board:
             print(board.path, flush=True)
             while not stop.wait(0.2):
+                if args.exit_with_parent and os.getppid() != parent:
+                    break  # the host is gone (a child in its own session gets no signal)
                 board.check()
                 if out:
                     truth.write(out, board.lock)

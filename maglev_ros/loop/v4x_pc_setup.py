@@ -50,7 +50,10 @@ class V4xPcLoopSettings:
     supply_voltage, coil_resistance : float
         V and ohm: the PWM scaling (255 counts at full duty).
     current_limit : float
-        Largest commanded |current| per coil, A.
+        Largest commanded |current| per coil, A (default 1.7: the lab's host
+        clamps the PWM at 150 of 255 counts, 1.76 A at 12 V and 4 ohm; at 1 A
+        the LQR's noise-driven commands saturate, and a few late periods
+        then lose the magnet: docs/benchmarks.md, ``v4x_pc_hold.py``).
     bias_states : bool
         Estimate a constant offset per axis (the baseline's error, a
         feedthrough slope's error).
@@ -64,6 +67,9 @@ class V4xPcLoopSettings:
     angular_acceleration_noise : float
         The estimator's unmodelled torque per inertia, rad/s^2 rms
         (:class:`~maglev_ros.estimation.EstimatorConfig`).
+    position_scale, current_scale : float
+        The LQR's Bryson scales of x y z (m) and of the commands (A)
+        (:class:`~maglev_ros.control.ControllerConfig`).
     """
 
     params: str = 'maggy_v2'
@@ -71,12 +77,14 @@ class V4xPcLoopSettings:
     sample_rate: float = DEFAULT_RATE
     supply_voltage: float = 12.0
     coil_resistance: float = 4.0
-    current_limit: float = 1.0
+    current_limit: float = 1.7
     bias_states: bool = True
     coil_dynamics: bool = False
     command_delay: int = 1
     sensor_noise: float = 1.0e-4
     angular_acceleration_noise: float = 50.0
+    position_scale: float = 1.0e-4
+    current_scale: float = 1.0
 
     @property
     def scaling(self) -> CurrentScaling:
@@ -152,6 +160,8 @@ def build_v4x_pc_loop(
             sensor_delay=0,
             coil_dynamics=s.coil_dynamics,
             current_limit=s.current_limit,
+            position_scale=s.position_scale,
+            current_scale=s.current_scale,
         ),
         linear=linear,
     )
