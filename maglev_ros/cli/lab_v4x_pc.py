@@ -67,8 +67,6 @@ def check_v4x_pc(args: argparse.Namespace) -> None:
         )
     if args.samples is not None and args.samples < 2:
         raise UsageError(f'--samples must be >= 2, got {args.samples}')
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError(f'--duration must be > 0 s, got {args.duration:g}')
     if getattr(args, 'board_params', None) is not None and not args.virtual_board:
         raise UsageError("--board-params is the virtual board's set: add --virtual-board")
 

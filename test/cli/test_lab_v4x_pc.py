@@ -15,7 +15,7 @@ from maglev_ros.cli import lab
         (['--virtual-board', '--samples', '1'], '--samples must be >= 2, got 1'),
         (['--board', '/nonexistent/ttyACM9'], '--board /nonexistent/ttyACM9: no such device'),
         (['--board', '/dev/null', '--board-params', 'maggy_v4'], 'add --virtual-board'),
-        (['--virtual-board', '--duration', '0'], '--duration must be > 0 s, got 0'),
+        (['--virtual-board', '--duration', '0'], 'argument --duration: must be positive'),
     ],
 )
 def test_bad_v4x_pc_sessions_give_one_line(argv, message, tmp_path, capsys):
