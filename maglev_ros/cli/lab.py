@@ -276,8 +276,17 @@ def build_parser() -> argparse.ArgumentParser:
         '--board-params',
         metavar='PARAMS',
         default=None,
-        help='--firmware v4x_pc --virtual-board: the virtual board\'s physics set (preset or '
+        help="--firmware v4x_pc --virtual-board: the virtual board's physics set (preset or "
         'YAML; default --params): a magnet that is not the one the loop believes (--params)',
+    )
+    p.add_argument(
+        '--realtime-priority',
+        type=int,
+        default=0,
+        metavar='N',
+        help='--firmware v4x_pc: SCHED_FIFO priority 1-99 of the loop (and of a virtual '
+        "board's emulator), as ros2_control's node runs its loop; needs the right to "
+        '(an rtprio limit, CAP_SYS_NICE); default 0: the normal policy',
     )
     p.add_argument(
         '--board-sensors',

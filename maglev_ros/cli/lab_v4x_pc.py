@@ -67,6 +67,8 @@ def check_v4x_pc(args: argparse.Namespace) -> None:
         )
     if args.samples is not None and args.samples < 2:
         raise UsageError(f'--samples must be >= 2, got {args.samples}')
+    if not 0 <= getattr(args, 'realtime_priority', 0) <= 99:
+        raise UsageError(f'--realtime-priority must be 0 to 99, got {args.realtime_priority}')
     if getattr(args, 'board_params', None) is not None and not args.virtual_board:
         raise UsageError("--board-params is the virtual board's set: add --virtual-board")
 
@@ -96,7 +98,9 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     amplitude = V4X_PC_AMPLITUDE if args.amplitude is None else args.amplitude
     band = V4X_PC_BAND if args.band is None else tuple(args.band)
     try:
-        settings = V4xPcLoopSettings(params=args.params, sample_rate=rate)
+        settings = V4xPcLoopSettings(
+            params=args.params, sample_rate=rate, realtime_priority=args.realtime_priority
+        )
         excitation = CommandExcitation(
             args.excitation, amplitude, band, 'pairs', seed=args.seed, length=samples
         )
@@ -132,6 +136,8 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         f'{run.late} late periods; board round trips {run.round_trip_rate:.0f} /s (median)'
         + (f'; stopped: {run.reason}' if run.reason else '')
     )
+    if run.priority_note:
+        print(f'{PROG}: {run.priority_note}')
     write_sample_bag(
         bag,
         run.log,
@@ -228,6 +234,7 @@ def _start_board(args: argparse.Namespace, link: str, params: str, truth: Path):
         sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
         '--magnet', 'free', '--params', params, '--link', link, '--seed', str(args.seed),
         '--truth', str(truth), '--exit-with-parent',
+        '--realtime-priority', str(args.realtime_priority),
     ]  # fmt: skip
     # its own session: under Linux's autogroup scheduling the board's emulator then gets its
     # own share of the CPU, as a board has its own processor, instead of half the loop's

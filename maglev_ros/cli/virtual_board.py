@@ -162,6 +162,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="physics: write the magnet's true pose as CSV every 2 ms (see above)",
     )
     parser.add_argument(
+        '--realtime-priority',
+        type=_integer_from(0),
+        default=0,
+        help='SCHED_FIFO priority of the emulator thread, 1-99 (needs the right to; '
+        'default 0: the normal policy)',
+    )
+    parser.add_argument(
         '--exit-with-parent',
         action='store_true',
         help='stop when the process that started it ends (a host running it as its child)',
@@ -327,7 +334,11 @@ def _run(args: argparse.Namespace) -> int:
             raise UsageError('--truth needs the physics plant (--plant physics)')
         check_output_file('--truth', args.truth)
         plant = truth = TruthRecorder(plant)
-    board = VirtualBoard(_firmware_factory(args, plant), link=args.link)
+    if args.realtime_priority > 99:
+        raise UsageError(f'--realtime-priority must be 0 to 99, got {args.realtime_priority}')
+    board = VirtualBoard(
+        _firmware_factory(args, plant), link=args.link, realtime_priority=args.realtime_priority
+    )
     stop = threading.Event()
     previous = {}
     for signum in (signal.SIGINT, signal.SIGTERM):
@@ -341,6 +352,8 @@ def _run(args: argparse.Namespace) -> int:
         # (the physics model, numba) stalls it (maglev_ros.frozen_heap)
         with frozen_heap(), board:
             print(board.path, flush=True)
+            if args.realtime_priority and board.wait_until(lambda b: b.priority_note, 0.5):
+                print(f'{PROG}: {board.priority_note}', file=sys.stderr, flush=True)
             while not stop.wait(0.2):
                 if args.exit_with_parent and os.getppid() != parent:
                     break  # the host is gone (a child in its own session gets no signal)

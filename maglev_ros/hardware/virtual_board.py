@@ -35,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..realtime_priority import fifo_priority
 from .firmware import V2xFirmware, V4xFirmware
 from .v4x_pc_firmware import V4xPcFirmware
 
@@ -89,6 +90,10 @@ class VirtualBoard:
     link : str or Path, optional
         Stable device path (a symlink to the current pty). Default: a new
         temporary directory holding ``ttyMAGGY0``, removed on ``close``.
+    realtime_priority : int, optional
+        ``SCHED_FIFO`` priority of the pacing thread, 1-99
+        (:func:`~maglev_ros.realtime_priority.fifo_priority`); 0 (default): the
+        normal policy. :attr:`priority_note` says why it was not applied.
     """
 
     def __init__(
@@ -96,12 +101,19 @@ class VirtualBoard:
         firmware_factory: Callable[[], Firmware],
         *,
         link: str | os.PathLike | None = None,
+        realtime_priority: int = 0,
     ) -> None:
         if not callable(firmware_factory):
             raise VirtualBoardError(
                 f'firmware_factory must be callable, got {type(firmware_factory).__name__}'
             )
         self._factory = firmware_factory
+        if not 0 <= realtime_priority <= 99:
+            raise VirtualBoardError(
+                f'realtime_priority must be 0 (none) to 99, got {realtime_priority!r}'
+            )
+        self._priority = int(realtime_priority)
+        self.priority_note = ''
         self._link_arg = Path(link) if link is not None else None
         if self._link_arg is not None and not self._link_arg.parent.is_dir():
             raise VirtualBoardError(f'link directory does not exist: {self._link_arg.parent}')
@@ -382,6 +394,11 @@ class VirtualBoard:
         return bool(data)
 
     def _run(self) -> None:
+        with fifo_priority(self._priority) as note:
+            self.priority_note = note
+            self._pace()
+
+    def _pace(self) -> None:
         try:
             while not self._stop.is_set():
                 with self._lock:

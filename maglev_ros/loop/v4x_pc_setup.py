@@ -70,6 +70,10 @@ class V4xPcLoopSettings:
     position_scale, current_scale : float
         The LQR's Bryson scales of x y z (m) and of the commands (A)
         (:class:`~maglev_ros.control.ControllerConfig`).
+    realtime_priority : int
+        ``SCHED_FIFO`` priority of the loop's thread while it runs, 1-99
+        (:func:`~maglev_ros.realtime_priority.fifo_priority`); 0 (default): the
+        normal policy.
     """
 
     params: str = 'maggy_v2'
@@ -85,6 +89,7 @@ class V4xPcLoopSettings:
     angular_acceleration_noise: float = 50.0
     position_scale: float = 1.0e-4
     current_scale: float = 1.0
+    realtime_priority: int = 0
 
     @property
     def scaling(self) -> CurrentScaling:
@@ -260,6 +265,8 @@ class V4xPcRun:
         Every sample (for :func:`~maglev_ros.loop.sample_log.write_sample_bag`).
     started, ended : float
         The plant clock at the first sample's request and after the last, s.
+    priority_note : str
+        Why ``realtime_priority`` was not applied ('' if it was, or was 0).
     """
 
     samples: int
@@ -271,6 +278,7 @@ class V4xPcRun:
     log: object
     started: float
     ended: float
+    priority_note: str = ''
 
 
 def run_v4x_pc_loop(
@@ -317,6 +325,7 @@ def run_v4x_pc_loop(
     import time as _time
 
     from ..frozen_heap import frozen_heap
+    from ..realtime_priority import fifo_priority
     from .sample_log import SampleLog
 
     ex = None
@@ -330,7 +339,8 @@ def run_v4x_pc_loop(
     now = clock or _time.monotonic
     if ready is not None:
         ready()
-    with frozen_heap():  # no collection of the whole heap stalls the loop (frozen_heap)
+    # no collection of the whole heap stalls the loop; SCHED_FIFO if asked for and allowed
+    with frozen_heap(), fifo_priority(s.realtime_priority) as priority_note:
         plant.open()
         try:
             started = now()
@@ -352,4 +362,5 @@ def run_v4x_pc_loop(
         log,
         started,
         ended,
+        priority_note,
     )
