@@ -45,6 +45,7 @@ from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make
 from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
 from maglev_ros.hardware.virtual_board import VirtualBoard
+from maglev_ros.realtime_priority import fifo_priority
 
 from .usage import Parser, UsageError, check_output_file, non_negative_float, run_command
 
@@ -350,7 +351,9 @@ def _run(args: argparse.Namespace) -> int:
             out.write('t_s,x_m,y_m,z_m,alpha_rad,beta_rad,crashed,monotonic_s\n')
         # the board's thread must keep real time: no collection of the whole heap
         # (the physics model, numba) stalls it (maglev_ros.frozen_heap)
-        with frozen_heap(), board:
+        # the main thread at the pacing thread's priority too: holding the GIL (the truth
+        # file) while descheduled, it would stall the pacing thread (priority inversion)
+        with frozen_heap(), fifo_priority(args.realtime_priority), board:
             print(board.path, flush=True)
             if args.realtime_priority and board.wait_until(lambda b: b.priority_note, 0.5):
                 print(f'{PROG}: {board.priority_note}', file=sys.stderr, flush=True)

@@ -267,6 +267,9 @@ class V4xPcRun:
         The plant clock at the first sample's request and after the last, s.
     priority_note : str
         Why ``realtime_priority`` was not applied ('' if it was, or was 0).
+    settled_from : float
+        The plant clock at the first sample of the settling (``started`` when
+        there was none), s.
     """
 
     samples: int
@@ -279,6 +282,7 @@ class V4xPcRun:
     started: float
     ended: float
     priority_note: str = ''
+    settled_from: float = float('nan')
 
 
 def run_v4x_pc_loop(
@@ -290,6 +294,7 @@ def run_v4x_pc_loop(
     sleep=None,
     progress=None,
     ready=None,
+    settle: int = 0,
 ) -> V4xPcRun:
     """Open the board, run the closed loop for ``samples`` samples, zero the coils.
 
@@ -310,6 +315,10 @@ def run_v4x_pc_loop(
         Called once the loop is built (seconds of model set-up and compiling)
         and before the board is opened: e.g. to start a virtual board, whose
         free magnet falls from the end of its set-up unless the loop runs.
+    settle : int, optional
+        Samples the loop holds the magnet first, without excitation and not
+        logged (the estimator's start and the magnet's first correction are
+        not in the record); the excitation and the record start after them.
 
     Returns
     -------
@@ -333,7 +342,8 @@ def run_v4x_pc_loop(
         from ..control.excitation import ExcitationSchedule
 
         ex = ExcitationSchedule(excitation, s.sample_rate).sequence(samples)
-    log = SampleLog()
+        ex = np.concatenate([np.zeros((settle, ex.shape[1])), ex])
+    log = SampleLog(first=settle)
     loop, plant = build_v4x_pc_loop(s, link, [log], ex, clock, sleep)
     log.applied_of = plant.applied
     now = clock or _time.monotonic
@@ -343,13 +353,16 @@ def run_v4x_pc_loop(
     with frozen_heap(), fifo_priority(s.realtime_priority) as priority_note:
         plant.open()
         try:
-            started = now()
-            done, chunk = 0, max(1, int(s.sample_rate))
-            while done < samples and not loop.stopped:
-                done += loop.run(min(chunk, samples - done))
-                if progress is not None:
-                    progress(done)
+            started = settled_from = now()
+            done, chunk, total = 0, max(1, int(s.sample_rate)), settle + samples
+            while done < total and not loop.stopped:
+                done += loop.run(min(chunk, (settle if done < settle else total) - done))
+                if done == settle:
+                    started = now()  # the record's start
+                if progress is not None and done > settle:
+                    progress(done - settle)
             ended = now()
+            done = max(0, done - settle)
         finally:
             plant.close()  # 04: the board has no watchdog
     return V4xPcRun(
@@ -363,4 +376,5 @@ def run_v4x_pc_loop(
         started,
         ended,
         priority_note,
+        settled_from,
     )
