@@ -411,7 +411,11 @@ class VirtualBoard:
                         # (and a command applied) up to a wait earlier than it was sent
                         now_us = int((time.monotonic() - self._t0) * 1e6)
                         out = self._firmware.advance_to(now_us)
-                        if self._poll_input():
+                        was_open = self._port_open
+                        got = self._poll_input()
+                        if not was_open:
+                            out = b''  # written before the host opened the port: lost
+                        if got:
                             out += self._firmware.advance_to(now_us)
                         if out and self._port_open:
                             if self._tampers:
