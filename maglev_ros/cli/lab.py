@@ -198,9 +198,10 @@ def build_parser() -> argparse.ArgumentParser:
     closed = p.add_argument_group('closed loop (--magnet free)')
     closed.add_argument(
         '--settle',
-        type=positive_float,
-        default=1.0,
-        help='s of simulated levitation before the recording (default 1)',
+        type=non_negative_float,
+        default=None,
+        help='s of levitation before the recording (default 1; --firmware v4x_pc: 0, the '
+        'record starts at the start pose, which maglev-calibrate needs)',
     )
     closed.add_argument(
         '--filter', choices=('kf', 'ekf', 'ukf'), default='kf', help='estimator (default kf)'
@@ -494,6 +495,10 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
+    if args.settle is None:
+        args.settle = 1.0
+    elif args.settle <= 0:
+        raise UsageError(f'--settle must be > 0 s for the simulated session, got {args.settle:g}')
     if args.magnet is None:  # the closed loop, except on a board (the open-loop session)
         args.magnet = 'fixed' if on_board(args) else 'free'
     if args.samples is not None and args.samples < 2:

@@ -6,8 +6,10 @@ sensor noise 0.1 mT, the board's processing on), and ``--magnet free``: the loop
 :func:`maglev_ros.loop.v4x_pc_setup.run_v4x_pc_loop` (one ``03 01 02`` round
 trip per sample at ``--control-rate``, default 1000 Hz; the KF with the board's
 measurement model; the LQR on the pairs) holds the magnet for ``--samples``
-samples (or ``--duration`` s; default 25 s) after ``--settle`` s (default 1) of
-levitation without excitation, with the excitation (``--excitation``,
+samples (or ``--duration`` s; default 25 s), after ``--settle`` s of levitation
+without excitation (default 0: the record starts at the start pose, from which
+``maglev-calibrate`` separates the magnet's mass and polarisation; after a 1 s settle
+it did not), with the excitation (``--excitation``,
 ``--amplitude``, default 0.3 A, ``--band``, default 0-0.05 of Nyquist) on the pairs
 from the first sample, writes ``bag/`` and runs the identification with the physics
 check through the board's processing
@@ -125,9 +127,8 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     link = V4xPcLink(port, timeout=REPLY_TIMEOUT_S, open_timeout=30.0)
     t0 = time.monotonic()
     try:
-        run = run_v4x_pc_loop(
-            settings, link, samples, excitation, ready=start, settle=round(args.settle * rate)
-        )
+        settle = round((args.settle or 0.0) * rate)
+        run = run_v4x_pc_loop(settings, link, samples, excitation, ready=start, settle=settle)
     except (OSError, ValueError) as err:
         raise UsageError(str(err)) from None
     finally:
