@@ -128,6 +128,8 @@ class V4xPcFirmware:
     #: s between a pacing layer's wake-ups (one sample period: a request finds the
     #: board caught up, as the firmware is between its samples)
     pacing_period = SAMPLE_US * 1e-6
+    #: a pacing layer runs the samples up to a request's arrival before handing it over
+    answers_on_arrival = True
 
     def __init__(
         self,

@@ -133,6 +133,7 @@ class VirtualBoard:
         self._device: str | None = None
         self._firmware: Firmware | None = None
         self._poll_s = _POLL_S
+        self._on_arrival = False
         self._t0 = 0.0
         self._port_open = False
         self._port_opens = 0
@@ -288,6 +289,7 @@ class VirtualBoard:
             # a firmware that samples faster than the default poll is paced at its
             # own rate (V4x PC control: 200 us), so a request finds it caught up
             self._poll_s = min(_POLL_S, getattr(self._firmware, 'pacing_period', _POLL_S))
+            self._on_arrival = bool(getattr(self._firmware, 'answers_on_arrival', False))
             self._master = master
             self._device = device
             self._t0 = time.monotonic()
@@ -404,19 +406,25 @@ class VirtualBoard:
                 with self._lock:
                     master = self._master
                     if master is not None and not self._paused.is_set():
-                        # the board's samples up to now first, with the commands it had:
-                        # the thread wakes when the host's bytes come (select), so they
-                        # arrived now, and the firmware answers them now, from its latest
-                        # sample; taken before the catch-up, a request would be answered
-                        # (and a command applied) up to a wait earlier than it was sent
+                        # a request/response firmware (V4x PC control): the board's samples
+                        # up to now first, with the commands it had: the thread wakes when
+                        # the host's bytes come (select), so they arrived now, and the
+                        # firmware answers them now, from its latest sample; taken before
+                        # the catch-up, a request would be answered (and a command applied)
+                        # up to a wait earlier than it was sent. A streaming firmware (V2x)
+                        # takes them first: a command drives the samples computed now.
                         now_us = int((time.monotonic() - self._t0) * 1e6)
-                        out = self._firmware.advance_to(now_us)
-                        was_open = self._port_open
-                        got = self._poll_input()
-                        if not was_open:
-                            out = b''  # written before the host opened the port: lost
-                        if got:
-                            out += self._firmware.advance_to(now_us)
+                        if self._on_arrival:
+                            out = self._firmware.advance_to(now_us)
+                            was_open = self._port_open
+                            got = self._poll_input()
+                            if not was_open:
+                                out = b''  # written before the host opened the port: lost
+                            if got:
+                                out += self._firmware.advance_to(now_us)
+                        else:  # a streaming firmware: the bytes drive the samples of now
+                            self._poll_input()
+                            out = self._firmware.advance_to(now_us)
                         if out and self._port_open:
                             if self._tampers:
                                 out = self._tampers.popleft()(out)

@@ -24,6 +24,9 @@ from ..hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from .control_loop import ControlLoop
 from .v4x_pc_plant import DEFAULT_RATE, V4xPcPlant
 
+#: s over which the excitation fades in at the start of the record (linearly).
+EXCITATION_RAMP = 0.5
+
 __all__ = [
     'V4xPcLoopSettings',
     'V4xPcRun',
@@ -306,7 +309,8 @@ def run_v4x_pc_loop(
     samples : int
         Samples to run.
     excitation : CommandExcitation, optional
-        Added to the command from the first sample (identification).
+        Added to the command from the record's first sample (identification),
+        faded in over :data:`EXCITATION_RAMP` s.
     clock, sleep : callable, optional
         The plant's clock (default the wall clock).
     progress : callable, optional
@@ -342,6 +346,8 @@ def run_v4x_pc_loop(
         from ..control.excitation import ExcitationSchedule
 
         ex = ExcitationSchedule(excitation, s.sample_rate).sequence(samples)
+        ramp = min(len(ex), round(EXCITATION_RAMP * s.sample_rate))
+        ex[:ramp] *= np.linspace(0.0, 1.0, ramp)[:, None]  # faded in: no step at the start
         ex = np.concatenate([np.zeros((settle, ex.shape[1])), ex])
     log = SampleLog(first=settle)
     loop, plant = build_v4x_pc_loop(s, link, [log], ex, clock, sleep)

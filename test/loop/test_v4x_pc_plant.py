@@ -97,6 +97,7 @@ def test_the_run_is_not_stalled_by_collecting_the_heap_or_loading_kernels(monkey
 
     built = []  # kernels loaded while the loop was built (allowed), then the run's
     monkeypatch.setattr(Dispatcher, '_compile_for_args', record)
+    gc.unfreeze()  # a session run earlier in this process may have left its heap frozen
     heap = len(gc.get_objects())
     run = run_v4x_pc_loop(
         SETTINGS, link, 300, clock=port.clock, sleep=sleep, ready=lambda: built.extend(loaded)
