@@ -63,9 +63,10 @@ def start_board(args, out: Path) -> tuple[subprocess.Popen, str, Path, str]:
     cmd = [
         sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
         '--magnet', 'free', '--params', params, '--link', str(link), '--truth', str(truth),
-        '--seed', str(args.seed),
+        '--seed', str(args.seed), '--exit-with-parent',
     ]  # fmt: skip
-    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True)
+    # its own session (its own CPU share under autogroup scheduling, docs/boards.md)
+    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True)
     path = child.stdout.readline().strip()
     if not path:
         raise SystemExit('the virtual board did not start')
@@ -167,7 +168,7 @@ def main() -> int:
     p.add_argument('--duration', type=float, default=60.0, help='s of loop (default 60)')
     p.add_argument('--rate', type=float, default=1000.0, help='samples per second (Hz)')
     p.add_argument('--params', default='maggy_v2', help='believed set (and the board plant)')
-    p.add_argument('--amplitude', type=float, default=0.05, help='PRBS per pair, A (0: none)')
+    p.add_argument('--amplitude', type=float, default=0.3, help='PRBS per pair, A (0: none)')
     p.add_argument(
         '--band', type=float, nargs=2, default=(0.0, 0.05), help='of Nyquist (default 0-25 Hz)'
     )
@@ -230,7 +231,7 @@ def main() -> int:
         from maglev_ros.sysid.board_check import check_board_bag
 
         data, results, checks = check_board_bag(bag, plant_params, settings.sensor)
-        print(f'identification on {data.N} samples, Ts = {data.Ts * 1e3:.4f} ms:')
+        print(f'identification on {data.N} samples decimated to Ts = {data.Ts * 1e3:.4f} ms:')
         for item in results:
             for row in item.result.rows:
                 check = checks.get((item.group.name, row.label))

@@ -194,9 +194,10 @@ def build_parser() -> argparse.ArgumentParser:
     closed = p.add_argument_group('closed loop (--magnet free)')
     closed.add_argument(
         '--settle',
-        type=positive_float,
-        default=1.0,
-        help='s of simulated levitation before the recording (default 1)',
+        type=non_negative_float,
+        default=None,
+        help='s of levitation before the recording (default 1; --firmware v4x_pc: 0, the '
+        'record starts at the start pose, which maglev-calibrate needs)',
     )
     closed.add_argument(
         '--filter', choices=('kf', 'ekf', 'ukf'), default='kf', help='estimator (default kf)'
@@ -267,6 +268,22 @@ def build_parser() -> argparse.ArgumentParser:
         action='store_true',
         help='start a virtual board (physics plant, --params, --magnet) in a '
         'child process and run the driver on it',
+    )
+    p.add_argument(
+        '--board-params',
+        metavar='PARAMS',
+        default=None,
+        help="--firmware v4x_pc --virtual-board: the virtual board's physics set (preset or "
+        'YAML; default --params): a magnet that is not the one the loop believes (--params)',
+    )
+    p.add_argument(
+        '--realtime-priority',
+        type=int,
+        default=0,
+        metavar='N',
+        help='--firmware v4x_pc: SCHED_FIFO priority 1-99 of the loop (and of a virtual '
+        "board's emulator), as ros2_control's node runs its loop; needs the right to "
+        '(an rtprio limit, CAP_SYS_NICE); default 0: the normal policy',
     )
     p.add_argument(
         '--board-sensors',
@@ -474,6 +491,10 @@ def _check_closed_loop(args: argparse.Namespace) -> None:
 
 
 def _check(args: argparse.Namespace) -> None:
+    if args.settle is None:
+        args.settle = 1.0
+    elif args.settle <= 0:
+        raise UsageError(f'--settle must be > 0 s for the simulated session, got {args.settle:g}')
     if args.magnet is None:  # the closed loop, except on a board (the open-loop session)
         args.magnet = 'fixed' if on_board(args) else 'free'
     if args.samples is not None and args.samples < 2:

@@ -6,14 +6,27 @@ sensor noise 0.1 mT, the board's processing on), and ``--magnet free``: the loop
 :func:`maglev_ros.loop.v4x_pc_setup.run_v4x_pc_loop` (one ``03 01 02`` round
 trip per sample at ``--control-rate``, default 1000 Hz; the KF with the board's
 measurement model; the LQR on the pairs) holds the magnet for ``--samples``
-samples with the excitation (``--excitation``, ``--amplitude``, default 0.05 A,
-``--band``, default 0-0.05 of Nyquist) on the pairs from the first sample, writes
-``bag/`` and runs the identification with the physics check through the board's
-processing (:func:`maglev_ros.sysid.board_check.check_board_bag`): ``models.json``.
+samples (or ``--duration`` s; default 25 s), after ``--settle`` s of levitation
+without excitation (default 0: the record starts at the start pose, from which
+``maglev-calibrate`` separates the magnet's mass and polarisation; after a 1 s settle
+it did not), with the excitation (``--excitation``,
+``--amplitude``, default 0.3 A, ``--band``, default 0-0.05 of Nyquist) on the pairs
+from the first sample, writes ``bag/`` and runs the identification with the physics
+check through the board's processing
+(:func:`maglev_ros.sysid.board_check.check_board_bag`): ``models.json``.
+
+With ``--virtual-board`` the board runs in its own process and session (under
+Linux's autogroup scheduling it then has its own share of the CPU, as a board
+has its own processor) and writes the magnet's true pose to ``truth.csv``: the
+largest true |x|, |y| over the run is printed and kept in ``models.json``.
+``--board-params`` gives the virtual board another physics set than the one
+the loop believes (``--params``): a bag for ``maglev-calibrate --measurement
+board`` to recover.
 
 Exit status 0 when all samples were run and identified, 1 when the loop stopped
-early or the record could not be identified (e.g. gaps: periods the host started
-late; the reason is printed, the bag keeps what was recorded), 2 on bad input.
+early, the virtual board's magnet crashed or the record could not be identified
+(e.g. gaps: periods the host started late; the reason is printed, the bag keeps
+what was recorded), 2 on bad input.
 """
 
 from __future__ import annotations
@@ -31,7 +44,8 @@ __all__ = ['check_v4x_pc', 'run_v4x_pc_session']
 
 PROG = 'maglev-lab'
 V4X_PC_RATE = 1000.0  # Hz, samples (and commands) per second by default
-V4X_PC_AMPLITUDE = 0.05  # A per pair: the hold stays within 0.5 mm (docs/benchmarks.md)
+V4X_PC_SECONDS = 25.0  # s of samples by default (--duration, --samples)
+V4X_PC_AMPLITUDE = 0.3  # A per pair: the loop rejects most of it; the hold is noise-bound
 V4X_PC_BAND = (0.0, 0.05)  # of Nyquist: 0-25 Hz at 1 kHz, where the field sees the motion
 
 
@@ -56,6 +70,10 @@ def check_v4x_pc(args: argparse.Namespace) -> None:
         )
     if args.samples is not None and args.samples < 2:
         raise UsageError(f'--samples must be >= 2, got {args.samples}')
+    if not 0 <= getattr(args, 'realtime_priority', 0) <= 99:
+        raise UsageError(f'--realtime-priority must be 0 to 99, got {args.realtime_priority}')
+    if getattr(args, 'board_params', None) is not None and not args.virtual_board:
+        raise UsageError("--board-params is the virtual board's set: add --virtual-board")
 
 
 def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
@@ -77,17 +95,21 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     from maglev_ros.sysid.board_check import check_board_bag
 
     rate = args.control_rate or V4X_PC_RATE
-    samples = args.samples or int(round(25.0 * rate))
+    seconds = V4X_PC_SECONDS if args.duration is None else args.duration
+    samples = args.samples or max(2, int(round(seconds * rate)))
+    board_params = getattr(args, 'board_params', None) or args.params
     amplitude = V4X_PC_AMPLITUDE if args.amplitude is None else args.amplitude
     band = V4X_PC_BAND if args.band is None else tuple(args.band)
     try:
-        settings = V4xPcLoopSettings(params=args.params, sample_rate=rate)
+        settings = V4xPcLoopSettings(
+            params=args.params, sample_rate=rate, realtime_priority=args.realtime_priority
+        )
         excitation = CommandExcitation(
             args.excitation, amplitude, band, 'pairs', seed=args.seed, length=samples
         )
     except ValueError as err:
         raise UsageError(str(err)) from None
-    where = args.board or f'a virtual V4x PC-control board ({args.params}, magnet free)'
+    where = args.board or f'a virtual V4x PC-control board ({board_params}, magnet free)'
     print(
         f'{PROG}: {samples} samples at {rate:g} Hz on {where}, {args.excitation} '
         f'{amplitude:g} A on the pairs, seed {args.seed}',
@@ -95,16 +117,18 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     )
     child = None
     port = args.board or str(out / 'ttyMAGGY')
+    truth = out / 'truth.csv' if args.virtual_board else None
 
     def start() -> None:  # after the loop is built: a free magnet falls from set-up's end
         nonlocal child
         if args.virtual_board:
-            child = _start_board(args, port)
+            child = _start_board(args, port, board_params, truth)
 
     link = V4xPcLink(port, timeout=REPLY_TIMEOUT_S, open_timeout=30.0)
     t0 = time.monotonic()
     try:
-        run = run_v4x_pc_loop(settings, link, samples, excitation, ready=start)
+        settle = round((args.settle or 0.0) * rate)
+        run = run_v4x_pc_loop(settings, link, samples, excitation, ready=start, settle=settle)
     except (OSError, ValueError) as err:
         raise UsageError(str(err)) from None
     finally:
@@ -116,13 +140,38 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         f'{run.late} late periods; board round trips {run.round_trip_rate:.0f} /s (median)'
         + (f'; stopped: {run.reason}' if run.reason else '')
     )
+    if run.priority_note:
+        print(f'{PROG}: {run.priority_note}')
     write_sample_bag(
         bag,
         run.log,
         (settings.sensor,),
-        {'magnet': 'free', 'params': args.params, 'firmware': 'v4x_pc', 'seed': args.seed},
+        {
+            'magnet': 'free',
+            'params': board_params,
+            'believed_params': args.params,
+            'firmware': 'v4x_pc',
+            'measurement': 'board',
+            'sample_rate': rate,
+            'seed': args.seed,
+        },
     )
     print(f'wrote {bag}')
+    true_max, crashed, settling = None, False, None
+    if truth is not None and truth.exists():
+        true_max, crashed = _true_excursion(truth, run.started, run.ended)
+        settling, _ = _true_excursion(truth, run.settled_from, run.started)
+        if true_max is not None:
+            print(
+                f"magnet (the virtual board's truth, {truth}) over the record: max |x| "
+                f'{1e3 * true_max[0]:.3f} mm, max |y| {1e3 * true_max[1]:.3f} mm'
+                + (
+                    f' (settling: {1e3 * settling[0]:.3f}, {1e3 * settling[1]:.3f} mm)'
+                    if settling
+                    else ''
+                )
+                + ('; it crashed' if crashed else '')
+            )
     est = run.log.arrays()['estimates']
     summary = {
         'samples': run.samples,
@@ -133,17 +182,27 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         'estimated_max_abs_xy_m': np.nanmax(np.abs(est[:, :2]), axis=0).tolist()
         if len(est)
         else None,
+        'true_max_abs_xy_m': true_max,
+        'true_max_abs_xy_settling_m': settling if truth is not None else None,
+        'crashed': crashed,
+        'board_params': board_params,
         'models': [],
     }
     if run.samples == samples:
         from maglev_ros.bags import BagError
 
         try:
-            data, results, checks = check_board_bag(bag, args.params, settings.sensor)
+            data, results, checks = check_board_bag(bag, board_params, settings.sensor)
         except (BagError, ValueError) as err:
             summary['identification'] = f'not run: {err}'
             print(f'identification not run: {err}')
             results, checks = (), {}
+        if results:
+            print(
+                f'identified on the record decimated to {1 / data.Ts:.0f} Hz '
+                '(the seed orders on the band the data carry)'
+            )
+            summary['identification_rate_hz'] = 1 / data.Ts
         print(f'{"model":<28} {"fit val. %":>10}  {"physics check (1-10 Hz)":<24} status')
         for item in results:
             for row in item.result.rows:
@@ -169,19 +228,37 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
                 )
     (out / 'models.json').write_text(json.dumps(summary, indent=1))
     print(f'wrote {out / "models.json"}')
-    return 0 if run.samples == samples and 'identification' not in summary else 1
+    return 0 if run.samples == samples and 'identification' not in summary and not crashed else 1
 
 
-def _start_board(args: argparse.Namespace, link: str):
+def _true_excursion(truth: Path, started: float, ended: float):
+    """Largest true |x|, |y| (m) over the loop's run, and whether the magnet crashed.
+
+    Returns ``(None, False)`` when the truth file has no row in the run.
+    """
+    rows = np.loadtxt(truth, delimiter=',', skiprows=1, ndmin=2)
+    during = rows[(rows[:, 7] >= started) & (rows[:, 7] <= ended)] if rows.size else rows
+    if not len(during):
+        return None, False
+    return np.abs(during[:, 1:3]).max(axis=0).tolist(), bool(during[:, 6].any())
+
+
+def _start_board(args: argparse.Namespace, link: str, params: str, truth: Path):
     """Start ``maglev-virtual-board --firmware v4x_pc --magnet free`` on ``link``."""
     import subprocess
     import sys
 
     cmd = [
         sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
-        '--magnet', 'free', '--params', args.params, '--link', link, '--seed', str(args.seed),
+        '--magnet', 'free', '--params', params, '--link', link, '--seed', str(args.seed),
+        '--truth', str(truth), '--exit-with-parent',
+        '--realtime-priority', str(args.realtime_priority),
     ]  # fmt: skip
-    child = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    # its own session: under Linux's autogroup scheduling the board's emulator then gets its
+    # own share of the CPU, as a board has its own processor, instead of half the loop's
+    child = subprocess.Popen(
+        cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True
+    )
     if not child.stdout.readline().strip():
         child.wait(timeout=60)
         raise UsageError(f'the virtual board did not start: {child.stderr.read().strip()}')

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import signal
 import sys
 import threading
@@ -38,11 +39,13 @@ from collections.abc import Callable, Sequence
 from functools import partial
 from time import monotonic
 
+from maglev_ros.frozen_heap import frozen_heap
 from maglev_ros.hardware.firmware import LinearPlant, Plant, V2xFirmware, V4xFirmware
 from maglev_ros.hardware.physics_plant import MAGNET_MODES, SimulatorPlant, make_simulator_plant
 from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
 from maglev_ros.hardware.virtual_board import VirtualBoard
+from maglev_ros.realtime_priority import fifo_priority
 
 from .usage import Parser, UsageError, check_output_file, non_negative_float, run_command
 
@@ -158,6 +161,18 @@ def build_parser() -> argparse.ArgumentParser:
         '--truth',
         metavar='FILE',
         help="physics: write the magnet's true pose as CSV every 2 ms (see above)",
+    )
+    parser.add_argument(
+        '--realtime-priority',
+        type=_integer_from(0),
+        default=0,
+        help='SCHED_FIFO priority of the emulator thread, 1-99 (needs the right to; '
+        'default 0: the normal policy)',
+    )
+    parser.add_argument(
+        '--exit-with-parent',
+        action='store_true',
+        help='stop when the process that started it ends (a host running it as its child)',
     )
     parser.add_argument('--startup-delay', type=_seconds, default=2.0, help='s after open')
     parser.add_argument('--watchdog', type=_seconds, default=1.0, help='s (V2x)')
@@ -320,18 +335,31 @@ def _run(args: argparse.Namespace) -> int:
             raise UsageError('--truth needs the physics plant (--plant physics)')
         check_output_file('--truth', args.truth)
         plant = truth = TruthRecorder(plant)
-    board = VirtualBoard(_firmware_factory(args, plant), link=args.link)
+    if args.realtime_priority > 99:
+        raise UsageError(f'--realtime-priority must be 0 to 99, got {args.realtime_priority}')
+    board = VirtualBoard(
+        _firmware_factory(args, plant), link=args.link, realtime_priority=args.realtime_priority
+    )
     stop = threading.Event()
     previous = {}
     for signum in (signal.SIGINT, signal.SIGTERM):
         previous[signum] = signal.signal(signum, lambda *_: stop.set())
+    parent = os.getppid()
     out = open(args.truth, 'w', encoding='utf-8') if truth else None  # noqa: SIM115
     try:
         if out:
             out.write('t_s,x_m,y_m,z_m,alpha_rad,beta_rad,crashed,monotonic_s\n')
-        with board:
+        # the board's thread must keep real time: no collection of the whole heap
+        # (the physics model, numba) stalls it (maglev_ros.frozen_heap)
+        # the main thread at the pacing thread's priority too: holding the GIL (the truth
+        # file) while descheduled, it would stall the pacing thread (priority inversion)
+        with frozen_heap(), fifo_priority(args.realtime_priority), board:
             print(board.path, flush=True)
+            if args.realtime_priority and board.wait_until(lambda b: b.priority_note, 0.5):
+                print(f'{PROG}: {board.priority_note}', file=sys.stderr, flush=True)
             while not stop.wait(0.2):
+                if args.exit_with_parent and os.getppid() != parent:
+                    break  # the host is gone (a child in its own session gets no signal)
                 board.check()
                 if out:
                     truth.write(out, board.lock)

@@ -11,7 +11,8 @@ The magnet is ``free`` (it levitates only if the host closes the loop; it
 falls within a fraction of a second otherwise), ``fixed`` (held at its
 start pose) or ``absent``. After a crash (the free magnet touched the base
 or left the workspace) the magnet stays where it crashed: readings are then
-the model's measurement at that pose with the applied currents.
+the model's measurement at that pose with the applied currents, read through
+the sensor effects (noise, quantisation) as before.
 """
 
 from __future__ import annotations
@@ -68,7 +69,9 @@ class SimulatorPlant:
         sim = self.simulator
         if sim.crashed:
             pose = sim.crash_state if sim.crash_state is not None else sim.state
-            reading = sim.model.measurement(pose, current)
+            # the sensors keep their noise: a noiseless reading repeated would also
+            # trip the V4x firmware's freeze reset (160 ms without replies) every 20 samples
+            reading = sim.observe(sim.model.measurement(pose, current))
         else:
             reading = sim.step(current)
         return np.asarray(reading, dtype=float).reshape(self.n_sensors, 3) * 1e3  # T -> mT

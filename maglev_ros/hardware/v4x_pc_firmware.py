@@ -125,6 +125,12 @@ class V4xPcFirmware:
         Identical readings in a row that reset the sensor.
     """
 
+    #: s between a pacing layer's wake-ups (one sample period: a request finds the
+    #: board caught up, as the firmware is between its samples)
+    pacing_period = SAMPLE_US * 1e-6
+    #: a pacing layer runs the samples up to a request's arrival before handing it over
+    answers_on_arrival = True
+
     def __init__(
         self,
         plant: Plant,

@@ -35,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..realtime_priority import fifo_priority
 from .firmware import V2xFirmware, V4xFirmware
 from .v4x_pc_firmware import V4xPcFirmware
 
@@ -89,6 +90,10 @@ class VirtualBoard:
     link : str or Path, optional
         Stable device path (a symlink to the current pty). Default: a new
         temporary directory holding ``ttyMAGGY0``, removed on ``close``.
+    realtime_priority : int, optional
+        ``SCHED_FIFO`` priority of the pacing thread, 1-99
+        (:func:`~maglev_ros.realtime_priority.fifo_priority`); 0 (default): the
+        normal policy. :attr:`priority_note` says why it was not applied.
     """
 
     def __init__(
@@ -96,12 +101,19 @@ class VirtualBoard:
         firmware_factory: Callable[[], Firmware],
         *,
         link: str | os.PathLike | None = None,
+        realtime_priority: int = 0,
     ) -> None:
         if not callable(firmware_factory):
             raise VirtualBoardError(
                 f'firmware_factory must be callable, got {type(firmware_factory).__name__}'
             )
         self._factory = firmware_factory
+        if not 0 <= realtime_priority <= 99:
+            raise VirtualBoardError(
+                f'realtime_priority must be 0 (none) to 99, got {realtime_priority!r}'
+            )
+        self._priority = int(realtime_priority)
+        self.priority_note = ''
         self._link_arg = Path(link) if link is not None else None
         if self._link_arg is not None and not self._link_arg.parent.is_dir():
             raise VirtualBoardError(f'link directory does not exist: {self._link_arg.parent}')
@@ -120,6 +132,8 @@ class VirtualBoard:
         self._master: int | None = None
         self._device: str | None = None
         self._firmware: Firmware | None = None
+        self._poll_s = _POLL_S
+        self._on_arrival = False
         self._t0 = 0.0
         self._port_open = False
         self._port_opens = 0
@@ -272,6 +286,10 @@ class VirtualBoard:
             os.symlink(device, tmp)
             os.replace(tmp, self._link)
             self._firmware = self._factory()
+            # a firmware that samples faster than the default poll is paced at its
+            # own rate (V4x PC control: 200 us), so a request finds it caught up
+            self._poll_s = min(_POLL_S, getattr(self._firmware, 'pacing_period', _POLL_S))
+            self._on_arrival = bool(getattr(self._firmware, 'answers_on_arrival', False))
             self._master = master
             self._device = device
             self._t0 = time.monotonic()
@@ -357,8 +375,8 @@ class VirtualBoard:
         self._port_open = False  # no process holds the slave open
         self._backlog.clear()  # what a closed port was sent is lost
 
-    def _poll_input(self) -> None:
-        """Read host bytes; track port open/close through EIO."""
+    def _poll_input(self) -> bool:
+        """Read host bytes; track port open/close through EIO; return whether bytes came."""
         try:
             data = os.read(self._master, 4096)
         except BlockingIOError:
@@ -367,7 +385,7 @@ class VirtualBoard:
             if err.errno != errno.EIO:
                 raise
             self._port_closed()
-            return
+            return False
         if not self._port_open:
             self._port_open = True
             self._port_opens += 1
@@ -375,19 +393,38 @@ class VirtualBoard:
         if data:
             self._received += len(data)
             self._firmware.receive(data)
+        return bool(data)
 
     def _run(self) -> None:
+        with fifo_priority(self._priority) as note:
+            self.priority_note = note
+            self._pace()
+
+    def _pace(self) -> None:
         try:
             while not self._stop.is_set():
                 with self._lock:
                     master = self._master
                     if master is not None and not self._paused.is_set():
-                        # the host's bytes first: a command that came while this thread
-                        # waited drives the samples computed now (the board reads its
-                        # serial input every loop, before its samples)
-                        self._poll_input()
+                        # a request/response firmware (V4x PC control): the board's samples
+                        # up to now first, with the commands it had: the thread wakes when
+                        # the host's bytes come (select), so they arrived now, and the
+                        # firmware answers them now, from its latest sample; taken before
+                        # the catch-up, a request would be answered (and a command applied)
+                        # up to a wait earlier than it was sent. A streaming firmware (V2x)
+                        # takes them first: a command drives the samples computed now.
                         now_us = int((time.monotonic() - self._t0) * 1e6)
-                        out = self._firmware.advance_to(now_us)
+                        if self._on_arrival:
+                            out = self._firmware.advance_to(now_us)
+                            was_open = self._port_open
+                            got = self._poll_input()
+                            if not was_open:
+                                out = b''  # written before the host opened the port: lost
+                            if got:
+                                out += self._firmware.advance_to(now_us)
+                        else:  # a streaming firmware: the bytes drive the samples of now
+                            self._poll_input()
+                            out = self._firmware.advance_to(now_us)
                         if out and self._port_open:
                             if self._tampers:
                                 out = self._tampers.popleft()(out)
@@ -400,7 +437,7 @@ class VirtualBoard:
                     time.sleep(_CLOSED_POLL_S)
                     continue
                 try:
-                    select.select([master], waiting, [], _POLL_S)
+                    select.select([master], waiting, [], self._poll_s)
                 except (OSError, ValueError):  # closed by unplug meanwhile
                     continue
         except BaseException as err:  # surfaced by check()

@@ -47,10 +47,14 @@ class SampleLog:
     applied : callable, optional
         ``applied(command) -> currents``: what the plant really applies for a
         command (a board's guard: pairs, clamp, PWM steps); default the command.
+    first : int, optional
+        Samples with a smaller index are not kept (a settling time before the
+        record).
     """
 
-    def __init__(self, applied=None) -> None:
+    def __init__(self, applied=None, first: int = 0) -> None:
         self.applied_of = applied
+        self.first = int(first)
         self.skipped = 0
         self.index: list[int] = []
         self.stamps_ns: list[int] = []
@@ -65,6 +69,8 @@ class SampleLog:
 
     def __call__(self, s) -> None:
         """Keep one :class:`~maglev_ros.loop.LoopSample` (not a period without readings)."""
+        if s.index < self.first:
+            return
         if not np.isfinite(s.reading).any():
             self.skipped += 1  # a period the host missed: a gap in the bag
             return

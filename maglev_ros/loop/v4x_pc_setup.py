@@ -18,11 +18,23 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..hardware.scaling import V4X_PWM_FULL_SCALE, CurrentScaling
 from .control_loop import ControlLoop
 from .v4x_pc_plant import DEFAULT_RATE, V4xPcPlant
 
-__all__ = ['V4xPcLoopSettings', 'V4xPcRun', 'board_model', 'build_v4x_pc_loop', 'run_v4x_pc_loop']
+#: s over which the excitation fades in at the start of the record (linearly).
+EXCITATION_RAMP = 0.5
+
+__all__ = [
+    'V4xPcLoopSettings',
+    'V4xPcRun',
+    'board_model',
+    'build_v4x_pc_loop',
+    'run_v4x_pc_loop',
+    'warm_up',
+]
 
 
 @dataclass(frozen=True)
@@ -41,7 +53,10 @@ class V4xPcLoopSettings:
     supply_voltage, coil_resistance : float
         V and ohm: the PWM scaling (255 counts at full duty).
     current_limit : float
-        Largest commanded |current| per coil, A.
+        Largest commanded |current| per coil, A (default 1.7: the lab's host
+        clamps the PWM at 150 of 255 counts, 1.76 A at 12 V and 4 ohm; at 1 A
+        the LQR's noise-driven commands saturate, and a few late periods
+        then lose the magnet: docs/benchmarks.md, ``v4x_pc_hold.py``).
     bias_states : bool
         Estimate a constant offset per axis (the baseline's error, a
         feedthrough slope's error).
@@ -55,6 +70,13 @@ class V4xPcLoopSettings:
     angular_acceleration_noise : float
         The estimator's unmodelled torque per inertia, rad/s^2 rms
         (:class:`~maglev_ros.estimation.EstimatorConfig`).
+    position_scale, current_scale : float
+        The LQR's Bryson scales of x y z (m) and of the commands (A)
+        (:class:`~maglev_ros.control.ControllerConfig`).
+    realtime_priority : int
+        ``SCHED_FIFO`` priority of the loop's thread while it runs, 1-99
+        (:func:`~maglev_ros.realtime_priority.fifo_priority`); 0 (default): the
+        normal policy.
     """
 
     params: str = 'maggy_v2'
@@ -62,12 +84,15 @@ class V4xPcLoopSettings:
     sample_rate: float = DEFAULT_RATE
     supply_voltage: float = 12.0
     coil_resistance: float = 4.0
-    current_limit: float = 1.0
+    current_limit: float = 1.7
     bias_states: bool = True
     coil_dynamics: bool = False
     command_delay: int = 1
     sensor_noise: float = 1.0e-4
     angular_acceleration_noise: float = 50.0
+    position_scale: float = 1.0e-4
+    current_scale: float = 1.0
+    realtime_priority: int = 0
 
     @property
     def scaling(self) -> CurrentScaling:
@@ -143,6 +168,8 @@ def build_v4x_pc_loop(
             sensor_delay=0,
             coil_dynamics=s.coil_dynamics,
             current_limit=s.current_limit,
+            position_scale=s.position_scale,
+            current_scale=s.current_scale,
         ),
         linear=linear,
     )
@@ -162,11 +189,61 @@ def build_v4x_pc_loop(
     timing = {k: v for k, v in (('clock', clock), ('sleep', sleep)) if v is not None}
     plant = V4xPcPlant(link, s.scaling, s.current_limit, s.sample_rate, **timing)
     loop = ControlLoop(plant, controller, estimator, excitation=excitation, observers=observers)
-    # compile the estimator's and the controller's kernels now, not in the first period
-    x_hat = estimator.step(estimator.y_eq, estimator.u_eq)
-    controller.command(0.0, x_hat, estimator.u_eq)
-    loop.reset()
+    warm_up(loop, V4xPcPlant(link, s.scaling, s.current_limit, s.sample_rate, **timing))
     return loop, plant
+
+
+class _WarmUpPlant:
+    """Stands in for the board while the loop's path runs once (no I/O)."""
+
+    lockstep = True
+    n_inputs = 4
+
+    def __init__(self, writer: V4xPcPlant) -> None:
+        self.writer = writer  # a plant never opened: its write touches no link
+
+    def write(self, command, stamp_ns: int) -> None:
+        self.writer.write(command, stamp_ns)
+
+
+def warm_up(loop: ControlLoop, spare: V4xPcPlant) -> None:
+    """Run the loop's own path once, a missed period and a sample, then reset it.
+
+    Every compiled kernel the loop calls (the estimator's update and its
+    predict-only step, the controller, the estimate's round trip through its
+    message layout) loads now, not in the first control periods of the run:
+    loading them there took 25-31 ms, 25-31 missed periods with the magnet
+    uncontrolled. The observers are not called.
+
+    Parameters
+    ----------
+    loop : ControlLoop
+        The loop (its estimator and controller are reset afterwards).
+    spare : V4xPcPlant
+        A plant of the same settings, never opened: the commands go through its
+        guard (no link is touched).
+    """
+    from .observers import ObserverSet
+    from .plant import SampleBlock
+
+    est = loop.estimator
+    y = np.vstack([np.full_like(est.y_eq, np.nan), est.y_eq])
+    block = SampleBlock(
+        index=np.arange(2),
+        times=np.arange(2) * 1e-3,
+        stamps_ns=np.arange(2, dtype=np.int64) * 1_000_000,
+        readings=y,
+        currents=np.zeros((2, 4)),
+        valid=np.ones(2, dtype=bool),
+    )
+    plant, observers = loop.plant, loop.observers
+    loop.plant, loop.observers = _WarmUpPlant(spare), ObserverSet(())
+    try:
+        for _ in range(2):
+            loop._handle(block, len(block))
+    finally:
+        loop.plant, loop.observers = plant, observers
+        loop.reset()
 
 
 @dataclass
@@ -191,6 +268,11 @@ class V4xPcRun:
         Every sample (for :func:`~maglev_ros.loop.sample_log.write_sample_bag`).
     started, ended : float
         The plant clock at the first sample's request and after the last, s.
+    priority_note : str
+        Why ``realtime_priority`` was not applied ('' if it was, or was 0).
+    settled_from : float
+        The plant clock at the first sample of the settling (``started`` when
+        there was none), s.
     """
 
     samples: int
@@ -202,6 +284,8 @@ class V4xPcRun:
     log: object
     started: float
     ended: float
+    priority_note: str = ''
+    settled_from: float = float('nan')
 
 
 def run_v4x_pc_loop(
@@ -213,6 +297,7 @@ def run_v4x_pc_loop(
     sleep=None,
     progress=None,
     ready=None,
+    settle: int = 0,
 ) -> V4xPcRun:
     """Open the board, run the closed loop for ``samples`` samples, zero the coils.
 
@@ -224,7 +309,8 @@ def run_v4x_pc_loop(
     samples : int
         Samples to run.
     excitation : CommandExcitation, optional
-        Added to the command from the first sample (identification).
+        Added to the command from the record's first sample (identification),
+        faded in over :data:`EXCITATION_RAMP` s.
     clock, sleep : callable, optional
         The plant's clock (default the wall clock).
     progress : callable, optional
@@ -233,6 +319,10 @@ def run_v4x_pc_loop(
         Called once the loop is built (seconds of model set-up and compiling)
         and before the board is opened: e.g. to start a virtual board, whose
         free magnet falls from the end of its set-up unless the loop runs.
+    settle : int, optional
+        Samples the loop holds the magnet first, without excitation and not
+        logged (the estimator's start and the magnet's first correction are
+        not in the record); the excitation and the record start after them.
 
     Returns
     -------
@@ -247,6 +337,8 @@ def run_v4x_pc_loop(
     """
     import time as _time
 
+    from ..frozen_heap import frozen_heap
+    from ..realtime_priority import fifo_priority
     from .sample_log import SampleLog
 
     ex = None
@@ -254,23 +346,31 @@ def run_v4x_pc_loop(
         from ..control.excitation import ExcitationSchedule
 
         ex = ExcitationSchedule(excitation, s.sample_rate).sequence(samples)
-    log = SampleLog()
+        ramp = min(len(ex), round(EXCITATION_RAMP * s.sample_rate))
+        ex[:ramp] *= np.linspace(0.0, 1.0, ramp)[:, None]  # faded in: no step at the start
+        ex = np.concatenate([np.zeros((settle, ex.shape[1])), ex])
+    log = SampleLog(first=settle)
     loop, plant = build_v4x_pc_loop(s, link, [log], ex, clock, sleep)
     log.applied_of = plant.applied
     now = clock or _time.monotonic
     if ready is not None:
         ready()
-    plant.open()
-    try:
-        started = now()
-        done, chunk = 0, max(1, int(s.sample_rate))
-        while done < samples and not loop.stopped:
-            done += loop.run(min(chunk, samples - done))
-            if progress is not None:
-                progress(done)
-        ended = now()
-    finally:
-        plant.close()  # 04: the board has no watchdog
+    # no collection of the whole heap stalls the loop; SCHED_FIFO if asked for and allowed
+    with frozen_heap(), fifo_priority(s.realtime_priority) as priority_note:
+        plant.open()
+        try:
+            started = settled_from = now()
+            done, chunk, total = 0, max(1, int(s.sample_rate)), settle + samples
+            while done < total and not loop.stopped:
+                done += loop.run(min(chunk, (settle if done < settle else total) - done))
+                if done == settle:
+                    started = now()  # the record's start
+                if progress is not None and done > settle:
+                    progress(done - settle)
+            ended = now()
+            done = max(0, done - settle)
+        finally:
+            plant.close()  # 04: the board has no watchdog
     return V4xPcRun(
         done,
         loop.reason,
@@ -281,4 +381,6 @@ def run_v4x_pc_loop(
         log,
         started,
         ended,
+        priority_note,
+        settled_from,
     )

@@ -571,6 +571,25 @@ class Simulator:
             self._xe[:12], self.currents, with_magnet=self.magnet != 'absent'
         )
 
+    def observe(self, y) -> np.ndarray:
+        """Return what the sensors read for the true field ``y`` (this simulator's effects).
+
+        The offset, noise, quantisation, freeze and delay of the sensors, as
+        :meth:`step` applies them, drawing from the same noise stream: e.g. the
+        readings of a crashed magnet, which a real sensor still reads with its noise.
+
+        Parameters
+        ----------
+        y : array_like, shape (3 k,)
+            True fields, T.
+
+        Returns
+        -------
+        ndarray, shape (3 k,)
+            Readings, T.
+        """
+        return self._observe(np.asarray(y, dtype=float))
+
     def _observe(self, y: np.ndarray) -> np.ndarray:
         fx = self.sensor
         if self._ideal_sensor:

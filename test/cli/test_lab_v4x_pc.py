@@ -14,6 +14,8 @@ from maglev_ros.cli import lab
         (['--virtual-board', '--magnet', 'fixed'], 'runs the closed loop: --magnet free'),
         (['--virtual-board', '--samples', '1'], '--samples must be >= 2, got 1'),
         (['--board', '/nonexistent/ttyACM9'], '--board /nonexistent/ttyACM9: no such device'),
+        (['--board', '/dev/null', '--board-params', 'maggy_v4'], 'add --virtual-board'),
+        (['--virtual-board', '--duration', '0'], 'argument --duration: must be positive'),
     ],
 )
 def test_bad_v4x_pc_sessions_give_one_line(argv, message, tmp_path, capsys):

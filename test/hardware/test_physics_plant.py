@@ -71,3 +71,27 @@ def test_sensor_effects_reach_the_readings(model):
     np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)  # whole LSBs
     np.testing.assert_array_equal(readings[0], readings[1])  # the seed fixes the noise
     assert not np.array_equal(readings[0], readings[2])
+
+
+def test_a_crashed_magnet_is_still_read_through_the_sensor_noise():
+    """A noiseless reading repeated 20 times trips the V4x firmware's freeze reset.
+
+    After a crash the readings were the model's noiseless measurement: the
+    virtual V4x board then reset its sensor (160 ms without replies) every 20
+    samples, and a host's loop crawled at about 30 samples per second.
+    """
+    from maglev_ros.hardware.scaling import V4X_PWM_FULL_SCALE
+    from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
+    from maglev_ros.hardware.v4x_pc_protocol import set_pwm_request
+
+    scaling = CurrentScaling.from_supply(12.0, 4.0, V4X_PWM_FULL_SCALE)
+    sensor = physics.SensorEffects(noise_rms=1e-4, quantization=0.098e-3)
+    plant = make_simulator_plant('free', scaling=scaling, sensor=sensor, seed=3)
+    firmware = V4xPcFirmware(plant, scaling=scaling, init_delay=0.0)
+    firmware.advance_to(firmware.setup_us)
+    firmware.receive(set_pwm_request(70, 0))  # x+ at 70 counts, no control: it crashes
+    firmware.advance_to(firmware.setup_us + 1_500_000)
+    assert plant.crashed
+    readings = np.array([plant(np.zeros(4, dtype=int), 0.0) for _ in range(200)])
+    assert np.std(readings[:, 0, 0]) > 0.05  # mT: the sensor's 0.1 mT of noise
+    assert firmware.freeze_resets == 0

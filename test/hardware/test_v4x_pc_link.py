@@ -56,6 +56,31 @@ def test_every_pwm_difference_reaches_the_board(board):
         assert link.counts.resyncs == 1  # the one of open
 
 
+def test_a_request_is_answered_when_it_arrives_not_when_the_board_last_ran(board):
+    """The pacing runs the board's samples up to now before it hands over the host's bytes.
+
+    Handed over first, a request that came while the pacing thread waited (or
+    was descheduled) was answered from the sample of the thread's previous
+    pass and its command applied from then: up to a whole wait earlier than it
+    was sent, on the board's clock. Here the wait is a pause of 0.1 s.
+    """
+    with V4xPcLink(board.path, timeout=TIMEOUT) as link:
+        board.pause()
+        with board.lock:
+            paused_at = board.firmware.now_us
+        resume = threading.Timer(0.1, board.resume)
+        resume.start()
+        try:
+            time.sleep(0.05)
+            link.command(40, 0)  # waits for the board to come back
+        finally:
+            resume.join()
+        with board.lock:
+            applied_us, p_x, _ = board.firmware.applied[-1]
+    assert p_x == 40
+    assert applied_us - paused_at >= 100_000  # us: when the board took it, after the pause
+
+
 def test_fields_and_currents_in_our_order(board):
     with V4xPcLink(board.path, timeout=1.0) as link:
         link.command(85, -170)  # 1 A on x+, -2 A on y+

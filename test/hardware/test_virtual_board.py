@@ -125,6 +125,19 @@ def test_port_reopen_is_detected():
         assert board.status.port_opens == 2
 
 
+def test_nothing_written_before_the_host_opened_reaches_it():
+    """An open restarts the V2x start-up delay: no byte comes before it ends."""
+    with VirtualBoard(v2x(startup_delay=0.5)) as board:
+        time.sleep(0.8)  # the board streams into the closed port meanwhile
+        with serial.Serial(board.path, 9600, timeout=0.05) as port:
+            opened = time.monotonic()
+            first = b''
+            while not first and time.monotonic() - opened < TIMEOUT:
+                first = port.read(1)
+            waited = time.monotonic() - opened
+    assert first and waited >= 0.45, waited
+
+
 def test_faults_over_the_pty_cost_only_damaged_records():
     clock_start = (1 << 32) - 700_000  # wraps about 0.6 s after the data starts
     with VirtualBoard(v2x(clock_start_us=clock_start)) as board:

@@ -68,6 +68,47 @@ def test_the_magnet_levitates_and_the_coils_end_at_zero():
     assert np.allclose(log['currents'][:, 0], -log['currents'][:, 1], atol=0.02)
 
 
+def test_the_run_is_not_stalled_by_collecting_the_heap_or_loading_kernels(monkeypatch):
+    """What stalled the real-time loop 25-270 ms, on the emulated timing (no clock involved).
+
+    A collection of the whole heap (the model, the estimator, numba: 150 000+
+    objects; 45-270 ms) came after 0.6-0.7 s of the run, and the first control
+    period loaded a compiled kernel (25-31 ms): the magnet was lost during
+    either. During the run, a collection traverses only what the loop
+    allocated, and no kernel is compiled or loaded.
+    """
+    import gc
+
+    from numba.core.dispatcher import Dispatcher
+
+    _, _, port, link = emulated_board()
+    loaded = []
+    compile_for_args = Dispatcher._compile_for_args
+
+    def record(self, *args, **kwargs):
+        loaded.append(self.py_func.__name__)
+        return compile_for_args(self, *args, **kwargs)
+
+    traversed = []
+
+    def sleep(seconds):
+        port.sleep(seconds)
+        traversed.append(len(gc.get_objects()))  # what a full collection would traverse
+
+    built = []  # kernels loaded while the loop was built (allowed), then the run's
+    monkeypatch.setattr(Dispatcher, '_compile_for_args', record)
+    gc.unfreeze()  # a session run earlier in this process may have left its heap frozen
+    heap = len(gc.get_objects())
+    run = run_v4x_pc_loop(
+        SETTINGS, link, 300, clock=port.clock, sleep=sleep, ready=lambda: built.extend(loaded)
+    )
+    monkeypatch.undo()
+    assert run.samples == 300 and run.reason == ''
+    assert heap > 100_000 and max(traversed) < 10_000, (heap, max(traversed))
+    assert len(gc.get_objects()) > 100_000  # unfrozen after the run
+    assert loaded[len(built) :] == []
+
+
 def test_a_board_too_slow_for_the_rate_is_refused_with_its_coils_reset():
     _, firmware, port, link = emulated_board()
     port.read_step_us = 2000  # every read waits 2 ms: ~500 round trips per second
