@@ -59,6 +59,7 @@ class KalmanEstimator(Estimator):
         self._x = None
         self._P = None
         super().__init__(model, config, linear)
+        lk.load_packed_step()  # compiled (or loaded) now, not at import or first sample
 
     def _build(self) -> None:
         """Build the model matrices and the packed arrays (:func:`linear_kernels.packed_sizes`)."""

@@ -59,6 +59,8 @@ __all__ = [
     'kf_predict_into',
     'kf_sample_into',
     'kf_packed_step',
+    'load_packed_step',
+    'PACKED_STEP_SIGNATURE',
     'kf_packed_steps',
 ]
 
@@ -554,12 +556,7 @@ def _sample(y, currents, fl, ints, frozen, out):  # pragma: no cover - jitted
     return True
 
 
-@njit(
-    'boolean(float64[::1], float64[::1], float64[::1], int64[::1], boolean[::1], float64[::1])',
-    cache=True,
-    fastmath=FAST,
-    error_model='numpy',
-)
+@njit(cache=True, fastmath=FAST, error_model='numpy')
 def kf_packed_step(y, currents, fl, ints, frozen, out):  # pragma: no cover - jitted
     """One whole KF sample on the packed arrays (see :func:`packed_sizes`), in place.
 
@@ -598,6 +595,26 @@ def kf_packed_step(y, currents, fl, ints, frozen, out):  # pragma: no cover - ji
         state (its H is linearised in Python each sample).
     """
     return _sample(y, currents, fl, ints, frozen, out)
+
+
+#: The one signature of :func:`kf_packed_step`: float64, int64 and bool C arrays.
+PACKED_STEP_SIGNATURE = (
+    'boolean(float64[::1], float64[::1], float64[::1], int64[::1], boolean[::1], float64[::1])'
+)
+
+
+def load_packed_step() -> None:
+    """Compile (or load from the cache) :func:`kf_packed_step` for its one signature, once.
+
+    Called when a KF is built, not at import: a compile then happens where the
+    first run's progress line and stop signals are watched
+    (:mod:`maglev_ros.compile_watch`). Further compiles are disabled, so a call
+    with other types (a list, a strided row) raises ``TypeError`` instead of
+    compiling a second signature.
+    """
+    if not kf_packed_step.signatures:
+        kf_packed_step.compile(PACKED_STEP_SIGNATURE)
+        kf_packed_step.disable_compile()
 
 
 @njit(cache=True, fastmath=FAST, error_model='numpy')

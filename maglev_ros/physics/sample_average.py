@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .session import SampleBatch
+from .sample_batch import SampleBatch
 
 __all__ = ['SampleAverager']
 

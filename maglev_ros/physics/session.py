@@ -61,11 +61,12 @@ import math
 import time
 from collections import deque
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import NamedTuple
 
 import numpy as np
 
+from .sample_average import SampleAverager
+from .sample_batch import SampleBatch
 from .simulation import Simulator
 
 __all__ = [
@@ -99,39 +100,6 @@ _ZERO = np.zeros(4)
 
 class CommandError(ValueError):
     """A command is not 4 finite currents."""
-
-
-@dataclass(frozen=True)
-class SampleBatch:
-    """Samples to publish, in order (n may be 0 when only a crash happened).
-
-    Attributes
-    ----------
-    indices : ndarray of int64, shape (n,)
-        Sample numbers within the run (0: the run's initial sample).
-    stamps_ns : ndarray of int64, shape (n,)
-        Simulated time of each sample, ns.
-    readings : ndarray, shape (n, 3 K)
-        Sensor readings of all K sensors of the parameter set, T.
-    states : ndarray, shape (n, 12)
-        State after each sample: position (m), ZYX Euler angles (rad), world
-        velocity (m/s), body rates (rad/s).
-    currents : ndarray, shape (n, 4)
-        Coil currents, A (x+ x- y+ y-).
-    crashed : bool
-        The integration crashed after these samples (the crashing step is not
-        among them; see the simulator's ``crash_time`` and ``reason``).
-    """
-
-    indices: np.ndarray
-    stamps_ns: np.ndarray
-    readings: np.ndarray
-    states: np.ndarray
-    currents: np.ndarray
-    crashed: bool = False
-
-    def __len__(self) -> int:
-        return int(self.indices.shape[0])
 
 
 class Tick(NamedTuple):
@@ -200,8 +168,6 @@ class SimulationSession:
         now: float | None = None,
         average: int = 1,
     ) -> None:
-        from .sample_average import SampleAverager
-
         if mode not in MODES:
             raise ValueError(f'mode must be one of {", ".join(MODES)}, got {mode!r}')
         self.averager = SampleAverager(average)

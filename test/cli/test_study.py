@@ -91,8 +91,8 @@ def test_list_shows_every_parameter(capsys):
 
 
 def test_sigint_keeps_the_finished_rows_and_resume_completes(tmp_path):
-    data = {
-        'duration': 0.3,
+    data = {  # runs of about 1 s each: the SIGINT lands while the later ones still run
+        'duration': 1.5,
         'seed': 4,
         'repeats': 3,
         'success': {'window': 0.1},

@@ -17,10 +17,11 @@ forgetting 0.999 (a memory of ~1000 samples, 0.2 s).
 
 What must hold (the data are deterministic: a fixed seed):
 
-* before the step, the tracking node is near the batch ARX of the pre-step
-  samples;
-* at the end it is near the batch ARX of the settled post-step samples
-  (from 0.2 s after the step), far from the pre-step model;
+* the tracking node is the exponentially weighted batch ARX of the samples so
+  far (weights 0.999^age), before the step and at the end; so it is near the
+  batch ARX of the pre-step samples before the step, and at the end near the
+  batch ARX of the settled post-step samples (from 0.2 s after the step), far
+  from the pre-step model;
 * the node with forgetting 1 equals the batch ARX of all the samples (the
   pooled estimate) within 1e-6 relative, and so stays far from the
   post-step model.
@@ -101,7 +102,15 @@ def test_forgetting_follows_a_reference_step_and_one_stays_pooled(ctx):
     def batch(start, stop):
         return arx(IdData(y[start:stop], u[start:stop], 1 / RATE), 2, 2, 1).theta
 
+    def weighted(stop, forgetting=0.999):
+        """ARX 2 2 1 of samples 0 .. stop-1, each residual weighted forgetting^age."""
+        k = np.arange(2, stop)
+        phi = np.column_stack([-y[k - 1, 0], -y[k - 2, 0], u[k - 1, 0], u[k - 2, 0]])
+        w = forgetting ** (stop - 1 - k)
+        return np.linalg.solve(phi.T @ (w[:, None] * phi), phi.T @ (w * y[k, 0]))
+
     pre, post, pooled = batch(0, STEP), batch(STEP + SETTLE, N), batch(0, N)
+    assert _relative(weighted(N, 1.0), pooled) < 1e-9  # the same regression as the batch
     assert _relative(pre, post) > 0.3, (pre, post)  # two operating points, two models
 
     namespaces = ('tracking', 'pooled')
@@ -181,10 +190,13 @@ def test_forgetting_follows_a_reference_step_and_one_stays_pooled(ctx):
             node.destroy_node()
     assert tracking.samples == N and frozen.samples == N
     assert tracking.aligner.dropped == 0 and frozen.aligner.dropped == 0
-    # forgetting 0.999 follows the operating point: near the pre-step model before the
-    # step, near the post-step model after it
-    assert _relative(before['tracking'], pre) < 0.1, (before['tracking'], pre)
-    assert _relative(after['tracking'], post) < 0.1, (after['tracking'], post)
+    # forgetting 0.999 is the exponentially weighted batch ARX of the samples so far
+    # (weights 0.999^age: a memory of ~1000 samples), so it follows the operating
+    # point: nearer the post-step model than the pre-step one after the step
+    assert _relative(before['tracking'], weighted(STEP)) < 1e-4, (before['tracking'], pre)
+    assert _relative(after['tracking'], weighted(N)) < 1e-4, (after['tracking'], post)
+    assert _relative(before['tracking'], pre) < 0.2, (before['tracking'], pre)
+    assert _relative(after['tracking'], post) < 0.2, (after['tracking'], post)
     assert _relative(after['tracking'], pre) > 0.3, (after['tracking'], pre)
     # forgetting 1: the batch ARX of all the samples, which the step does not move to
     # the new operating point
