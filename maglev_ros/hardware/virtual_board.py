@@ -296,10 +296,12 @@ class VirtualBoard:
             self._plugs += 1
 
     def pause(self) -> None:
-        """Stall the board's loop (no output, no parsing) until ``resume``.
+        """Stall the board's loop (no new output, no parsing) until ``resume``.
 
         The clock keeps running: on ``resume`` the loop catches up and writes
         the samples of the stall at once, like a board whose USB link stalled.
+        Bytes written before the stall that the pty had not taken yet still
+        reach the host.
         """
         self._paused.set()
 
@@ -434,6 +436,9 @@ class VirtualBoard:
                     port_open = self._port_open
                     waiting = [master] if self._backlog else []
                 if master is None or not port_open or self._paused.is_set():
+                    if port_open and self._backlog:  # bytes sent before a stall still arrive
+                        with self._lock:
+                            self._flush()
                     time.sleep(_CLOSED_POLL_S)
                     continue
                 try:
