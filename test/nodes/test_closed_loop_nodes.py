@@ -263,7 +263,12 @@ def test_pd_node_steps_exactly_as_the_ros_free_loop(ctx):
         sim, [sim, ctrl, peer.node], ctx, ctrl=ctrl
     )  # no estimator: the PD reads the fields
     try:
-        wait_for(lambda: len(peer.true) >= n, timeout=240.0, what=f'{n} samples')
+        # the samples and the commands answering them (a command arrives after its sample)
+        wait_for(
+            lambda: len(peer.true) >= n and len(peer.commands) >= n,
+            timeout=240.0,
+            what=f'{n} samples and their commands',
+        )
     finally:
         sim.set_paused(True)
         spinner.close()
