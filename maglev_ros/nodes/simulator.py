@@ -12,15 +12,18 @@ the timing contract; a crash stops it until a reset):
 ``realtime``
     A steady-clock timer (every ``pace_period``) publishes the samples due; a
     command holds from the next burst. With ``wait_for_controller`` the run
-    starts once a command came and ``start_subscribers`` subscribe.
+    starts once a command came, ``start_subscribers`` subscribe and the
+    ``start_reader`` node (a recorder) reads the commands.
 ``lockstep``
     Each command steps and publishes the next sample (early ones queue). A
-    timer starts the run once a command publisher and ``start_subscribers``
-    subscribers exist, and holds the last command after ``command_timeout``.
+    timer starts the run once a command publisher, ``start_subscribers``
+    subscribers and the ``start_reader`` exist, and holds the last command
+    after ``command_timeout``.
 """
 
 from __future__ import annotations
 
+import re
 import time
 from functools import partial
 
@@ -63,6 +66,17 @@ class SimulatorParameterError(NodeParameterError):
 
 
 _CHECK = {'error': SimulatorParameterError}  # the config's checks raise the node's error
+_NODE_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
+
+
+def _node_name(name: str, value: str) -> str:
+    """Check a node name without namespace (what a node's ``get_name()`` gives), or ''."""
+    if value and not _NODE_NAME.fullmatch(value):
+        raise SimulatorParameterError(
+            f'{name} must be a node name (letters, digits, _) or empty, got {value!r}'
+        )
+    return value
+
 
 # fmt: off
 PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
@@ -99,6 +113,10 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
     'wait_for_controller': Param(False, f'realtime: start only once a first '
                                  f'{contract.COMMAND_TOPIC} arrived and start_subscribers '
                                  'subscribers exist (a free magnet waits for its controller)'),
+    'start_reader': Param('', f'a node that must subscribe to {contract.COMMAND_TOPIC} before '
+                          'the start (lockstep; real time with wait_for_controller), e.g. a '
+                          "recorder: its bag then begins at the first command; '': none",
+                          check=_node_name),
     'sensors': Param([], 'indices of the sensors to publish; empty: all', kind='integer_array',
                      check=partial(core.check_sensor_indices, **_CHECK)),
     'publish_state': Param(True, f'publish the true state on {contract.TRUE_STATE_TOPIC}'),
@@ -201,10 +219,25 @@ class SimulatorNode(Node):
         return self._command_sub.get_publisher_count()
 
     def _ready(self) -> bool:
-        """Return whether a command publisher and ``start_subscribers`` currents readers exist."""
+        """Return whether the graph is ready for the start.
+
+        Ready: a command publisher, ``start_subscribers`` readers of the currents,
+        and the ``start_reader`` node (if any) reading the commands.
+        """
         return (
             self.count_publishers(contract.COMMAND_TOPIC) >= 1
             and self.currents_subscribers >= self.config.start_subscribers
+            and self._start_reader_subscribed()
+        )
+
+    def _start_reader_subscribed(self) -> bool:
+        """Return whether the ``start_reader`` node (if any) subscribes to the commands."""
+        reader = self.config.start_reader
+        if not reader:
+            return True
+        topic = self.resolve_topic_name(contract.COMMAND_TOPIC)
+        return any(
+            info.node_name == reader for info in self.get_subscriptions_info_by_topic(topic)
         )
 
     def _on_tick(self) -> None:

@@ -171,6 +171,10 @@ class SimulatorConfig:
         readings and currents, stamped at the last
         (:class:`~maglev_ros.physics.sample_average.SampleAverager`); 1: every
         step is published.
+    start_reader : str
+        Name of a node (a recorder, say) that must subscribe to
+        ``maglev/currents/command`` before the run starts, so that what it
+        records begins with the first command; '' for none.
     """
 
     params: str
@@ -198,6 +202,7 @@ class SimulatorConfig:
     diagnostics_period: float
     wait_for_controller: bool = False
     average: int = 1
+    start_reader: str = ''
 
     def summary(self, set_name: str, sensors: tuple[int, ...]) -> str:
         """One line saying what runs (the node logs it at start).
@@ -221,6 +226,7 @@ class SimulatorConfig:
             f'noise {self.sensor_noise:g} T, seed {self.seed}'
             f'{", paused" if self.start_paused else ""}'
             f'{", waiting for a first command" if self.wait_for_controller else ""}'
+            f'{f" and for {self.start_reader} to read the commands" if self.start_reader else ""}'
         )
 
 

@@ -407,6 +407,27 @@ def test_realtime_averaged_samples_are_means_of_five_steps_on_the_1_khz_grid(mak
     np.testing.assert_array_equal(clock[(clock >= stamps[0]) & (clock <= stamps[-1])], stamps)
 
 
+def test_the_run_starts_once_the_start_reader_reads_the_commands(ctx, make_peer):
+    """A recorder named as ``start_reader`` holds the start until it subscribes."""
+    peer = make_peer([[0.1, 0.0, 0.0, 0.0]] * 50, start_paused=False, magnet='fixed',
+                     marker_rate=0.0, start_reader='maglev_test_recorder')  # fmt: skip
+    assert 'and for maglev_test_recorder to read the commands' in peer.sim.config.summary(
+        'maggy_v2', peer.sim.sensors
+    )
+    # a command publisher and a currents reader are there (the peer): only the reader misses;
+    # the start is checked every 0.05 s, and ten checks pass without a sample
+    time.sleep(0.5)
+    assert peer.currents == []
+    recorder = rclpy.create_node('maglev_test_recorder', context=ctx)
+    try:
+        recorder.create_subscription(
+            JointState, contract.COMMAND_TOPIC, lambda m: None, contract.LOCKSTEP_COMMAND_QOS
+        )
+        wait_for(lambda: len(peer.currents) >= 20, what='samples after the reader subscribed')
+    finally:
+        recorder.destroy_node()
+
+
 def test_averaged_samples_in_lockstep_are_refused(ctx):
     with pytest.raises(SimulatorParameterError, match='average 5 .* needs mode realtime'):
         SimulatorNode(context=ctx, parameter_overrides=[
@@ -510,6 +531,7 @@ def _values(**changes):
         ({'field_model': 'slow'}, 'field_model must be one of fast, accurate, filament'),
         ({'substeps': 0}, 'substeps must be an integer >= 1, got 0'),
         ({'seed': -3}, 'seed must be an integer >= 0, got -3'),
+        ({'start_reader': '/ns/rec'}, "start_reader must be a node name .* got '/ns/rec'"),
     ],
 )
 def test_config_errors(changes, match):
