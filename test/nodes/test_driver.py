@@ -631,7 +631,12 @@ def test_unconfirmed_records_are_published_at_once(make_harness):
         wait_for(lambda: h.driver.counters['records'] > 500, what='records')
         garbage = bytes(range(256)) * 2
         board.inject(garbage)
-        wait_for(lambda: h.driver.decoder_stats.resyncs == 1, what='the resync')
+        # relocked behind the garbage: until records follow it, the decoder keeps its
+        # last bytes (they may yet begin a run that extends backwards into them)
+        wait_for(
+            lambda: h.driver.decoder_stats.resyncs == 1 and h.driver.decoder_stats.locked,
+            what='the resync and the lock behind the garbage',
+        )
         board.pause()
         with board.lock:
             written = board.firmware.records_since_open
