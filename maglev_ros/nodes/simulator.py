@@ -13,7 +13,7 @@ the timing contract; a crash stops it until a reset):
     A steady-clock timer (every ``pace_period``) publishes the samples due; a
     command holds from the next burst. With ``wait_for_controller`` the run
     starts once a command came, ``start_subscribers`` subscribe and the
-    ``start_reader`` node (a recorder) reads the commands.
+    ``start_reader`` node (a recorder) reads its ``start_reader_topics``.
 ``lockstep``
     Each command steps and publishes the next sample (early ones queue). A
     timer starts the run once a command publisher, ``start_subscribers``
@@ -67,6 +67,7 @@ class SimulatorParameterError(NodeParameterError):
 
 _CHECK = {'error': SimulatorParameterError}  # the config's checks raise the node's error
 _NODE_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
+_TOPIC_NAME = re.compile(r'/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
 
 
 def _node_name(name: str, value: str) -> str:
@@ -76,6 +77,14 @@ def _node_name(name: str, value: str) -> str:
             f'{name} must be a node name (letters, digits, _) or empty, got {value!r}'
         )
     return value
+
+
+def _topic_names(name: str, values: tuple[str, ...]) -> tuple[str, ...]:
+    """Check topic names (relative ones resolve in the node's namespace)."""
+    bad = [v for v in values if not _TOPIC_NAME.fullmatch(v)]
+    if bad or not values:
+        raise SimulatorParameterError(f'{name} must name topics, got {list(values)}')
+    return tuple(dict.fromkeys(values))
 
 
 # fmt: off
@@ -113,10 +122,14 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
     'wait_for_controller': Param(False, f'realtime: start only once a first '
                                  f'{contract.COMMAND_TOPIC} arrived and start_subscribers '
                                  'subscribers exist (a free magnet waits for its controller)'),
-    'start_reader': Param('', f'a node that must subscribe to {contract.COMMAND_TOPIC} before '
+    'start_reader': Param('', 'a node that must subscribe to the start_reader_topics before '
                           'the start (lockstep; real time with wait_for_controller), e.g. a '
-                          "recorder: its bag then begins at the first command; '': none",
+                          "recorder: its bag then begins at their first message; '': none",
                           check=_node_name),
+    'start_reader_topics': Param([contract.COMMAND_TOPIC], 'the topics the start_reader must '
+                                 'subscribe to (the ones other nodes publish: the simulator\'s '
+                                 'own are read from the first sample)', kind='string_array',
+                                 check=_topic_names),
     'sensors': Param([], 'indices of the sensors to publish; empty: all', kind='integer_array',
                      check=partial(core.check_sensor_indices, **_CHECK)),
     'publish_state': Param(True, f'publish the true state on {contract.TRUE_STATE_TOPIC}'),
@@ -222,7 +235,7 @@ class SimulatorNode(Node):
         """Return whether the graph is ready for the start.
 
         Ready: a command publisher, ``start_subscribers`` readers of the currents,
-        and the ``start_reader`` node (if any) reading the commands.
+        and the ``start_reader`` node (if any) reading its ``start_reader_topics``.
         """
         return (
             self.count_publishers(contract.COMMAND_TOPIC) >= 1
@@ -231,13 +244,14 @@ class SimulatorNode(Node):
         )
 
     def _start_reader_subscribed(self) -> bool:
-        """Return whether the ``start_reader`` node (if any) subscribes to the commands."""
+        """Return whether the ``start_reader`` (if any) subscribes to its topics."""
         reader = self.config.start_reader
-        if not reader:
-            return True
-        topic = self.resolve_topic_name(contract.COMMAND_TOPIC)
-        return any(
-            info.node_name == reader for info in self.get_subscriptions_info_by_topic(topic)
+        return not reader or all(
+            any(
+                info.node_name == reader
+                for info in self.get_subscriptions_info_by_topic(self.resolve_topic_name(topic))
+            )
+            for topic in self.config.start_reader_topics
         )
 
     def _on_tick(self) -> None:

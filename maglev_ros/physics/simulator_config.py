@@ -172,9 +172,11 @@ class SimulatorConfig:
         (:class:`~maglev_ros.physics.sample_average.SampleAverager`); 1: every
         step is published.
     start_reader : str
-        Name of a node (a recorder, say) that must subscribe to
-        ``maglev/currents/command`` before the run starts, so that what it
-        records begins with the first command; '' for none.
+        Name of a node (a recorder, say) that must subscribe to the
+        ``start_reader_topics`` before the run starts, so that what it records
+        begins with their first messages; '' for none.
+    start_reader_topics : tuple of str
+        Those topics (default the commands).
     """
 
     params: str
@@ -203,6 +205,13 @@ class SimulatorConfig:
     wait_for_controller: bool = False
     average: int = 1
     start_reader: str = ''
+    start_reader_topics: tuple[str, ...] = ('maglev/currents/command',)
+
+    @property
+    def _reader_wait(self) -> str:
+        if not self.start_reader:
+            return ''
+        return f' and for {self.start_reader} to read {", ".join(self.start_reader_topics)}'
 
     def summary(self, set_name: str, sensors: tuple[int, ...]) -> str:
         """One line saying what runs (the node logs it at start).
@@ -226,7 +235,7 @@ class SimulatorConfig:
             f'noise {self.sensor_noise:g} T, seed {self.seed}'
             f'{", paused" if self.start_paused else ""}'
             f'{", waiting for a first command" if self.wait_for_controller else ""}'
-            f'{f" and for {self.start_reader} to read the commands" if self.start_reader else ""}'
+            f'{self._reader_wait}'
         )
 
 

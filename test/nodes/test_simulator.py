@@ -411,8 +411,9 @@ def test_the_run_starts_once_the_start_reader_reads_the_commands(ctx, make_peer)
     """A recorder named as ``start_reader`` holds the start until it subscribes."""
     peer = make_peer([[0.1, 0.0, 0.0, 0.0]] * 50, start_paused=False, magnet='fixed',
                      marker_rate=0.0, start_reader='maglev_test_recorder')  # fmt: skip
-    assert 'and for maglev_test_recorder to read the commands' in peer.sim.config.summary(
-        'maggy_v2', peer.sim.sensors
+    assert (
+        'and for maglev_test_recorder to read maglev/currents/command'
+        in peer.sim.config.summary('maggy_v2', peer.sim.sensors)
     )
     # a command publisher and a currents reader are there (the peer): only the reader misses;
     # the start is checked every 0.05 s, and ten checks pass without a sample
@@ -532,6 +533,7 @@ def _values(**changes):
         ({'substeps': 0}, 'substeps must be an integer >= 1, got 0'),
         ({'seed': -3}, 'seed must be an integer >= 0, got -3'),
         ({'start_reader': '/ns/rec'}, "start_reader must be a node name .* got '/ns/rec'"),
+        ({'start_reader_topics': ['a b']}, r"start_reader_topics must name topics, got \['a b'\]"),
     ],
 )
 def test_config_errors(changes, match):
