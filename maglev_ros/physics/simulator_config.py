@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..topics import COMMAND_TOPIC
 from .model import make_model
 from .parameters import ParameterError
 from .simulation import CoilDynamics, SensorEffects, Simulator
@@ -205,7 +206,7 @@ class SimulatorConfig:
     wait_for_controller: bool = False
     average: int = 1
     start_reader: str = ''
-    start_reader_topics: tuple[str, ...] = ('maglev/currents/command',)
+    start_reader_topics: tuple[str, ...] = (COMMAND_TOPIC,)
 
     @property
     def _reader_wait(self) -> str:
