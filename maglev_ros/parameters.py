@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from typing import Any, NamedTuple
 
@@ -51,8 +52,10 @@ __all__ = [
     'coerce',
     'help_requested',
     'integer',
+    'node_name',
     'number',
     'setting',
+    'topic_names',
 ]
 
 
@@ -270,6 +273,45 @@ def integer(low: int, high: int | None = None) -> Check:
         return value
 
     check.rule = f'>= {low}' if high is None else f'{low} .. {high}'
+    return check
+
+
+_NAME = r'[A-Za-z_][A-Za-z0-9_]*'
+
+
+def node_name() -> Check:
+    """Check: a node name without namespace (what ``Node.get_name()`` gives), or ''.
+
+    Returns
+    -------
+    callable
+    """
+
+    def check(name: str, value: str) -> str:
+        if value and not re.fullmatch(_NAME, value):
+            raise NodeParameterError(
+                f'{name} must be a node name (letters, digits, _) or empty, got {value!r}'
+            )
+        return value
+
+    check.rule = "a node name or ''"
+    return check
+
+
+def topic_names() -> Check:
+    """Check: one or more topic names (``a/b``, or ``/a/b``), duplicates dropped.
+
+    Returns
+    -------
+    callable
+    """
+
+    def check(name: str, values: tuple[str, ...]) -> tuple[str, ...]:
+        if not values or not all(re.fullmatch(f'/?{_NAME}(/{_NAME})*', v) for v in values):
+            raise NodeParameterError(f'{name} must name topics, got {list(values)}')
+        return tuple(dict.fromkeys(values))
+
+    check.rule = 'topic names'
     return check
 
 

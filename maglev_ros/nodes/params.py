@@ -19,7 +19,9 @@ from maglev_ros.parameters import (
     config_params,
     help_requested,
     integer,
+    node_name,
     number,
+    topic_names,
 )
 
 __all__ = [
@@ -31,7 +33,9 @@ __all__ = [
     'config_params',
     'help_requested',
     'integer',
+    'node_name',
     'number',
+    'topic_names',
 ]
 
 

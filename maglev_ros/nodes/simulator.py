@@ -12,18 +12,15 @@ the timing contract; a crash stops it until a reset):
 ``realtime``
     A steady-clock timer (every ``pace_period``) publishes the samples due; a
     command holds from the next burst. With ``wait_for_controller`` the run
-    starts once a command came, ``start_subscribers`` subscribe and the
-    ``start_reader`` node (a recorder) reads its ``start_reader_topics``.
+    starts once a command came and the graph is ready (:mod:`.start_gate`).
 ``lockstep``
     Each command steps and publishes the next sample (early ones queue). A
-    timer starts the run once a command publisher, ``start_subscribers``
-    subscribers and the ``start_reader`` exist, and holds the last command
+    timer starts the run once the graph is ready, and holds the last command
     after ``command_timeout``.
 """
 
 from __future__ import annotations
 
-import re
 import time
 from functools import partial
 
@@ -37,12 +34,13 @@ from sensor_msgs.msg import JointState, MagneticField
 from std_srvs.srv import SetBool, Trigger
 from visualization_msgs.msg import MarkerArray
 
-from maglev_ros.nodes import contract
+from maglev_ros.nodes import contract, params
 from maglev_ros.nodes.markers import base_markers, magnet_marker, marker_array
 from maglev_ros.nodes.messages import command_currents, stamp_ns
 from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, integer, number
 from maglev_ros.nodes.params import choice as one_of
 from maglev_ros.nodes.runtime import run_nodes
+from maglev_ros.nodes.start_gate import StartGate
 from maglev_ros.physics import FIELD_MODELS, KINEMATICS, TORQUE_MODES, Simulator
 from maglev_ros.physics import simulator_config as core
 from maglev_ros.physics.sample_encoder import SampleEncoder
@@ -66,26 +64,6 @@ class SimulatorParameterError(NodeParameterError):
 
 
 _CHECK = {'error': SimulatorParameterError}  # the config's checks raise the node's error
-_NODE_NAME = re.compile(r'[A-Za-z_][A-Za-z0-9_]*')
-_TOPIC_NAME = re.compile(r'/?[A-Za-z_][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*')
-
-
-def _node_name(name: str, value: str) -> str:
-    """Check a node name without namespace (what a node's ``get_name()`` gives), or ''."""
-    if value and not _NODE_NAME.fullmatch(value):
-        raise SimulatorParameterError(
-            f'{name} must be a node name (letters, digits, _) or empty, got {value!r}'
-        )
-    return value
-
-
-def _topic_names(name: str, values: tuple[str, ...]) -> tuple[str, ...]:
-    """Check topic names (relative ones resolve in the node's namespace)."""
-    bad = [v for v in values if not _TOPIC_NAME.fullmatch(v)]
-    if bad or not values:
-        raise SimulatorParameterError(f'{name} must name topics, got {list(values)}')
-    return tuple(dict.fromkeys(values))
-
 
 # fmt: off
 PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
@@ -122,14 +100,10 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
     'wait_for_controller': Param(False, f'realtime: start only once a first '
                                  f'{contract.COMMAND_TOPIC} arrived and start_subscribers '
                                  'subscribers exist (a free magnet waits for its controller)'),
-    'start_reader': Param('', 'a node that must subscribe to the start_reader_topics before '
-                          'the start (lockstep; real time with wait_for_controller), e.g. a '
-                          "recorder: its bag then begins at their first message; '': none",
-                          check=_node_name),
-    'start_reader_topics': Param([contract.COMMAND_TOPIC], 'the topics the start_reader must '
-                                 'subscribe to (the ones other nodes publish: the simulator\'s '
-                                 'own are read from the first sample)', kind='string_array',
-                                 check=_topic_names),
+    'start_reader': Param('', 'a node (a recorder) that must read the start_reader_topics before '
+                          "the start, as start_subscribers; '': none", check=params.node_name()),
+    'start_reader_topics': Param([contract.COMMAND_TOPIC], "topics other nodes publish that the "
+                                 'start_reader must read', check=params.topic_names()),
     'sensors': Param([], 'indices of the sensors to publish; empty: all', kind='integer_array',
                      check=partial(core.check_sensor_indices, **_CHECK)),
     'publish_state': Param(True, f'publish the true state on {contract.TRUE_STATE_TOPIC}'),
@@ -217,6 +191,7 @@ class SimulatorNode(Node):
         # /clock this node publishes, which does not run before the first samples
         period = min(0.05, cfg.command_timeout / 4) if lockstep else session.burst * session.dt
         self.create_timer(period, self._on_tick, clock=SteadyClock(clock_type=STEADY_TIME))
+        self._ready = StartGate(self, self._current_pub, cfg)
         if not lockstep and not cfg.wait_for_controller:
             self._send(session.start(time.monotonic()))
         self.get_logger().info(cfg.summary(self.sim.model.params.name, self.sensors))
@@ -230,29 +205,6 @@ class SimulatorNode(Node):
     def command_publishers(self) -> int:
         """Publishers matched to the command subscription (discovery is per side: wait on both)."""
         return self._command_sub.get_publisher_count()
-
-    def _ready(self) -> bool:
-        """Return whether the graph is ready for the start.
-
-        Ready: a command publisher, ``start_subscribers`` readers of the currents,
-        and the ``start_reader`` node (if any) reading its ``start_reader_topics``.
-        """
-        return (
-            self.count_publishers(contract.COMMAND_TOPIC) >= 1
-            and self.currents_subscribers >= self.config.start_subscribers
-            and self._start_reader_subscribed()
-        )
-
-    def _start_reader_subscribed(self) -> bool:
-        """Return whether the ``start_reader`` (if any) subscribes to its topics."""
-        reader = self.config.start_reader
-        return not reader or all(
-            any(
-                info.node_name == reader
-                for info in self.get_subscriptions_info_by_topic(self.resolve_topic_name(topic))
-            )
-            for topic in self.config.start_reader_topics
-        )
 
     def _on_tick(self) -> None:
         self._send(*self.session.tick(time.monotonic(), self._ready))

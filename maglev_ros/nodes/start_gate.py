@@ -1,0 +1,54 @@
+"""When a plant node's run may start: the graph it needs is there.
+
+A simulated magnet falls from its first sample on, so the simulator starts only
+once the nodes that act on it and record it are up: a command publisher,
+enough readers of the currents, and, when named, a recorder that reads the
+topics other nodes publish (it finds topics by polling the graph, so without
+the wait its bag could miss the first commands and estimates).
+"""
+
+from __future__ import annotations
+
+from rclpy.node import Node
+
+from maglev_ros.topics import COMMAND_TOPIC
+
+__all__ = ['StartGate']
+
+
+class StartGate:
+    """The start condition, a callable (true once the graph is ready).
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        The plant node.
+    currents_pub : rclpy.publisher.Publisher
+        Its ``maglev/currents`` publisher.
+    config : SimulatorConfig
+        Its ``start_subscribers`` (matched readers of the currents to wait for),
+        ``start_reader`` (a node that must subscribe to the
+        ``start_reader_topics``; '' : none) and ``start_reader_topics``.
+    """
+
+    def __init__(self, node: Node, currents_pub, config) -> None:
+        self.node = node
+        self.currents_pub = currents_pub
+        self.subscribers = config.start_subscribers
+        self.reader = config.start_reader
+        self.reader_topics = tuple(node.resolve_topic_name(t) for t in config.start_reader_topics)
+
+    def reader_subscribed(self) -> bool:
+        """Return whether the reader (if any) subscribes to each of its topics."""
+        info = self.node.get_subscriptions_info_by_topic
+        return not self.reader or all(
+            any(i.node_name == self.reader for i in info(topic)) for topic in self.reader_topics
+        )
+
+    def __call__(self) -> bool:
+        """Return whether a command publisher, the currents' readers and the reader are there."""
+        return (
+            self.node.count_publishers(COMMAND_TOPIC) >= 1
+            and self.currents_pub.get_subscription_count() >= self.subscribers
+            and self.reader_subscribed()
+        )
