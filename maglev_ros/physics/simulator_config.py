@@ -210,7 +210,8 @@ class SimulatorConfig:
 
     @property
     def _reader_wait(self) -> str:
-        if not self.start_reader:
+        """The start_reader's wait, when there is one (real time waits only for a controller)."""
+        if not self.start_reader or (self.mode == 'realtime' and not self.wait_for_controller):
             return ''
         return f' and for {self.start_reader} to read {", ".join(self.start_reader_topics)}'
 

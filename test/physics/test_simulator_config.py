@@ -68,6 +68,13 @@ def test_summary_says_what_runs():
         BASE, mode='realtime', start_paused=True, wait_for_controller=True
     )
     assert waiting.summary('maggy_v2', (0,)).endswith(', paused, waiting for a first command')
+    recorded = dataclasses.replace(waiting, start_reader='maglev_recorder')
+    assert recorded.summary('maggy_v2', (0,)).endswith(
+        'waiting for a first command and for maglev_recorder to read maglev/currents/command'
+    )
+    # real time without wait_for_controller starts at once: no wait to announce
+    at_once = dataclasses.replace(recorded, wait_for_controller=False)
+    assert 'maglev_recorder' not in at_once.summary('maggy_v2', (0,))
 
 
 @pytest.mark.parametrize(
