@@ -78,6 +78,8 @@ PARAMETERS = ParameterTable(NODE_NAME, SimulatorParameterError, {
     'substeps': Param(1, 'RK4 steps per sample', check=integer(1)),
     'magnet': Param('free', 'levitating magnet: free, fixed (held at the initial state) or absent',
                     check=one_of(*MAGNET_MODES)),
+    'hold': Param(0.0, 'free magnet: s held at the initial state after each start, then released '
+                  '(a hand holding it while the loop comes up)', check=number(0)),
     'initial_state': Param([], '12 numbers x y z alpha beta gamma vx vy vz wx wy wz (m, rad, '
                            'm/s, rad/s); empty: resting at the first equilibrium',
                            kind='double_array', check=partial(core.check_initial_state, **_CHECK)),

@@ -250,6 +250,10 @@ class Simulator:
         place). ``absent``: no levitating magnet at all (base and coils only).
     freeze : SensorFreeze or None
         Sensor freezes, scheduled or random (seeded with ``seed``).
+    hold : float
+        A free magnet is held at ``x0`` for this long after each (re)start, s,
+        then released, as a hand holds the magnet while the loop comes up (the
+        coils and sensors run meanwhile). 0: free from the start.
     """
 
     def __init__(
@@ -264,10 +268,13 @@ class Simulator:
         x0=None,
         magnet: str = 'free',
         freeze: SensorFreeze | None = None,
+        hold: float = 0.0,
     ):
         if magnet not in MAGNET_MODES:
             raise ValueError(f'magnet must be one of {", ".join(MAGNET_MODES)}, got {magnet!r}')
         self.magnet = magnet
+        if not (math.isfinite(hold) and hold >= 0):
+            raise ValueError(f'hold must be a finite number of seconds >= 0, got {hold!r}')
         if not (np.isfinite(sample_rate) and sample_rate > 0):
             raise ValueError(f'sample_rate must be positive, got {sample_rate!r}')
         if not isinstance(substeps, (int, np.integer)) or substeps < 1:
@@ -276,6 +283,8 @@ class Simulator:
         self.sample_rate = float(sample_rate)
         self.dt = 1.0 / self.sample_rate
         self.substeps = int(substeps)
+        #: samples a free magnet is held after each (re)start (0: none)
+        self.hold_samples = int(round(hold * self.sample_rate)) if magnet == 'free' else 0
         self.coil = coil
         self.sensor = sensor or SensorEffects()
         self.seed = seed
@@ -320,16 +329,23 @@ class Simulator:
             if magnet == 'absent':
                 mag = np.array([mag[0], 0.0])  # no levitating magnet: its field is zero
             self._sens_args = (sens, mag)
-            cfg = kernels.simulator_config(
-                self.dt,
-                self.substeps,
-                self._coil_mode,
-                self.check_crash,
-                magnet != 'free',
-                self._electrical,
-                self._crash,
+            self._free_args, self._held_args = (
+                (
+                    kernels.simulator_config(
+                        self.dt,
+                        self.substeps,
+                        self._coil_mode,
+                        self.check_crash,
+                        frozen,
+                        self._electrical,
+                        self._crash,
+                    ),
+                    *self._fast_args,
+                    *self._sens_args,
+                )
+                for frozen in (magnet != 'free', True)
             )
-            self._step_args = (cfg, *self._fast_args, *self._sens_args)
+            self._step_args = self._free_args
         self.reset()
         if self._fast:
             self._sample_step = _compiled(
@@ -364,11 +380,18 @@ class Simulator:
         self.reason = ''
         self.crash_time: float | None = None
         self.crash_state: np.ndarray | None = None
+        if self._fast:
+            self._step_args = self._held_args if self.hold_samples else self._free_args
         self._seed_noise()
         self._reset_freeze()
         self._pending = []
         self._last_input = np.zeros(n_s)
         return self._observe(self._true_output())
+
+    @property
+    def held(self) -> bool:
+        """True while a free magnet is still held (the first :attr:`hold_samples` samples)."""
+        return self.samples < self.hold_samples
 
     @property
     def state(self) -> np.ndarray:
@@ -425,14 +448,16 @@ class Simulator:
                 self.time = self.samples * self.dt
                 self._xe = new
                 self._last_input = drive
+                if self.samples == self.hold_samples:  # released
+                    self._step_args = self._free_args
                 return y if self._ideal_sensor else self._observe(y)
             if status == kernels.STATUS_BAD_INPUT:
                 raise ValueError(f'input must be finite, got {drive.tolist()}')
         else:
             if not math.isfinite(drive.sum()):
                 raise ValueError(f'input must be finite, got {drive.tolist()}')
-            new = self._python_rk4(self._xe, drive)
-            status = self._status(new)
+            new = self._python_rk4(self._xe, drive, self.held)
+            status = self._status(new, self.held)
             y = None
         self.samples += 1
         self.time = self.samples * self.dt
@@ -472,7 +497,7 @@ class Simulator:
         self.reset(x0)
         total = 2 * len(drives) + 1
         if self._fast:
-            states, truth, done, status, last = kernels.rk4_run(self._xe, drives, *self._step_args)
+            states, truth, done, status, last = self._compiled_run(drives)
         else:
             states, done, status, last = self._python_run(drives, progress, total)
             truth = None
@@ -525,8 +550,27 @@ class Simulator:
             [self.model.dynamics(xe[:12], i_coil), (volts - r * i_coil) / inductance]
         )
 
-    def _python_rk4(self, xe: np.ndarray, drive: np.ndarray) -> np.ndarray:
-        if self.magnet != 'free':
+    def _compiled_run(self, drives: np.ndarray):
+        """:func:`kernels.rk4_run` over ``drives`` from the reset state, the hold first."""
+        h = min(self.hold_samples, len(drives))
+        if not h:
+            return kernels.rk4_run(self._xe, drives, *self._free_args)
+        held = kernels.rk4_run(self._xe, drives[:h], *self._held_args)
+        if held[3] != kernels.STATUS_OK or h == len(drives):
+            return held
+        states, truth, done, status, last = kernels.rk4_run(
+            held[0][-1].copy(), drives[h:], *self._free_args
+        )
+        return (
+            np.concatenate([held[0], states[1:]]),
+            np.concatenate([held[1], truth[1:]]),
+            h + done,
+            status,
+            last,
+        )
+
+    def _python_rk4(self, xe: np.ndarray, drive: np.ndarray, held: bool = False) -> np.ndarray:
+        if self.magnet != 'free' or held:
             return kernels.coil_step(xe, drive, self.dt, self._coil_mode, self._electrical)
         volts = kernels.coil_voltages(
             drive, self._coil_mode, self._electrical[0], self._electrical[2]
@@ -546,15 +590,15 @@ class Simulator:
         for k, drive in enumerate(drives):
             if progress is not None and k % 16 == 0:
                 progress(k, total)
-            new = self._python_rk4(states[-1], drive)
-            status = self._status(new)
+            new = self._python_rk4(states[-1], drive, k < self.hold_samples)
+            status = self._status(new, k < self.hold_samples)
             if status != kernels.STATUS_OK:
                 return np.array(states), k, status, new
             states.append(new)
         return np.array(states), len(drives), kernels.STATUS_OK, states[-1]
 
-    def _status(self, xe: np.ndarray) -> int:
-        if self.check_crash and self.magnet == 'free':
+    def _status(self, xe: np.ndarray, held: bool = False) -> int:
+        if self.check_crash and self.magnet == 'free' and not held:
             c = self._crash
             return kernels.crash_status(xe[:12], c[0], c[1], c[2], c[3:6], c[6:9])
         return kernels.STATUS_OK if np.all(np.isfinite(xe)) else kernels.STATUS_NOT_FINITE

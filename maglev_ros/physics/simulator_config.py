@@ -178,6 +178,10 @@ class SimulatorConfig:
         begins with their first messages; '' for none.
     start_reader_topics : tuple of str
         Those topics (default the commands).
+    hold : float
+        A free magnet is held at its initial state for this long after each
+        start, s, then released (:class:`~maglev_ros.physics.Simulator`'s
+        ``hold``); 0: free from the start.
     """
 
     params: str
@@ -207,6 +211,7 @@ class SimulatorConfig:
     average: int = 1
     start_reader: str = ''
     start_reader_topics: tuple[str, ...] = (COMMAND_TOPIC,)
+    hold: float = 0.0
 
     @property
     def _reader_wait(self) -> str:
@@ -237,8 +242,15 @@ class SimulatorConfig:
             f'noise {self.sensor_noise:g} T, seed {self.seed}'
             f'{", paused" if self.start_paused else ""}'
             f'{", waiting for a first command" if self.wait_for_controller else ""}'
-            f'{self._reader_wait}'
+            f'{self._reader_wait}{self._hold_note}'
         )
+
+    @property
+    def _hold_note(self) -> str:
+        """The free magnet's hold after the start, when there is one."""
+        if self.hold > 0 and self.magnet == 'free':
+            return f', the magnet held {self.hold:g} s after the start'
+        return ''
 
 
 def make_simulator(cfg: SimulatorConfig) -> Simulator:
@@ -294,6 +306,7 @@ def make_simulator(cfg: SimulatorConfig) -> Simulator:
             seed=cfg.seed,
             x0=cfg.initial_state,
             magnet=cfg.magnet,
+            hold=cfg.hold,
         )
     except ValueError as err:
         raise SimulatorConfigError(f'initial_state / model: {err}') from err

@@ -205,3 +205,33 @@ def test_fixed_and_absent_magnet_only_the_coils_move(field):
     )
     with pytest.raises(ValueError, match='magnet must be one of free, fixed, absent'):
         Simulator(model, magnet='glued')
+
+
+@pytest.mark.parametrize('field', ['fast', 'accurate'])
+def test_a_held_magnet_stays_put_until_its_release_then_moves_as_a_free_one(field):
+    model = make_model('maggy_v2', field=field)
+    x0 = model.hover_state(0.0365)
+    x0[0] = 0.003  # off-centre: a free magnet flies away
+    inputs = np.tile([0.5, -0.5, 0.2, -0.2], (30, 1))
+    held = Simulator(model, sample_rate=RATE, x0=x0, hold=20 / RATE)
+    assert held.hold_samples == 20 and held.held
+    stepped = np.array([held.step(u) for u in inputs])
+    assert not held.held
+    ran = held.run(inputs)
+    np.testing.assert_array_equal(ran.x[:21], np.tile(x0, (21, 1)))  # held through sample 20
+    np.testing.assert_array_equal(stepped, ran.y[1:])  # stepping and a run release alike
+    # released: from the held state at sample 20 on, the motion of a free magnet
+    free = Simulator(model, sample_rate=RATE).run(inputs[20:], x0=x0)
+    assert np.abs(free.x[-1] - x0).max() > 1e-6  # it moves
+    np.testing.assert_array_equal(ran.x[20:], free.x)
+    # a crash while held is no crash; after the release it is
+    low = x0.copy()
+    low[2] = 0.0  # into the base
+    assert Simulator(model, x0=low, hold=1.0).run(inputs).status == 'ok'
+    assert Simulator(model, x0=low, hold=1 / RATE).run(inputs).crashed
+    # each reset holds it again; a fixed magnet is not released
+    held.reset()
+    assert held.held
+    assert Simulator(model, x0=x0, magnet='fixed', hold=1.0).hold_samples == 0
+    with pytest.raises(ValueError, match=r'hold must be a finite number of seconds >= 0'):
+        Simulator(model, hold=-1.0)

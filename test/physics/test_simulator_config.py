@@ -75,6 +75,15 @@ def test_summary_says_what_runs():
     # real time without wait_for_controller starts at once: no wait to announce
     at_once = dataclasses.replace(recorded, wait_for_controller=False)
     assert 'maglev_recorder' not in at_once.summary('maggy_v2', (0,))
+    # a free magnet held after the start says so; a fixed one has nothing to release
+    held = dataclasses.replace(BASE, hold=2.0)
+    assert held.summary('maggy_v2', (0,)).endswith(', the magnet held 2 s after the start')
+    assert 'held' not in dataclasses.replace(held, magnet='fixed').summary('maggy_v2', (0,))
+
+
+def test_the_hold_reaches_the_simulator():
+    assert make_simulator(dataclasses.replace(BASE, hold=0.01)).hold_samples == 50
+    assert make_simulator(BASE).hold_samples == 0
 
 
 @pytest.mark.parametrize(

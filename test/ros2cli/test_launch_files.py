@@ -242,9 +242,10 @@ def test_separate_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2,
     sample the mean of 5 readings; the estimator models that mean, the LQR runs at
     1 kHz and designs for 3 periods of latency. Asserted: estimates and commands
     flow, Ctrl-C ends every process with 0 and the recorder's bag reads back
-    complete. Not asserted: the hold. Through the middleware the commands land
-    later than the 3 periods designed for, and the magnet is lost within about a
-    second even on an idle 2-core machine (docs/closed_loop.md); a crash of the
+    complete. Not asserted: the hold. The simulator holds the magnet for the first
+    2 s (``hold``); through the middleware the commands then land later than the
+    3 periods designed for, and the magnet is lost within a second of the release in
+    most runs even on an idle 2-core machine (docs/closed_loop.md); a crash of the
     simulated magnet is the one ERROR line tolerated.
     """
     bag = tmp_path / 'closed_loop_bag'
