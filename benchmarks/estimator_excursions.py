@@ -70,6 +70,11 @@ class TrueState:
         """Return zeros: no uncertainty."""
         return np.zeros(10)
 
+    @property
+    def state_covariance(self) -> np.ndarray:
+        """Zeros (10, 10): no uncertainty."""
+        return np.zeros((10, 10))
+
 
 def converges(model, lin, kind, what, offset, duration, seed) -> tuple[bool, str]:
     """Run one loop, the magnet's or the estimate's x offset (m): (converged, what happened)."""
