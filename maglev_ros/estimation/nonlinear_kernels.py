@@ -16,8 +16,15 @@ full prediction takes 24.
 
 UKF ``fast``: each sigma point takes one exponential-Euler step; A is the
 statistical linearisation the sigma points give for free (the differences of
-f across each pair of points against the Cholesky factor). Per sample: one
-evaluation of f per sigma point where RK4 takes four.
+f across each pair of points against the Cholesky factor). The magnetic
+wrench, the cost of f, is evaluated at the centre only: a point spread along
+the pose takes the centre's wrench plus the wrench's Jacobian in the pose
+times its offset (the rigid-body rates, rotation included, evaluated at the
+point itself). That Jacobian is refreshed one pose column per sample (forward
+differences, one more wrench), so it is at most 5 samples (1 ms at 5 kHz)
+old, and all of it after a reset. Per sample: two wrenches where the
+exponential-Euler step of every point took 11 (the points of distinct pose)
+and RK4 takes 84.
 
 Both: h and the magnetic wrench (the cost of f) depend on the pose (x, y,
 z, alpha, beta) only. So the measurement Jacobian's velocity columns are
@@ -490,8 +497,20 @@ def _unscented(sig, Wm, Wc):  # pragma: no cover - jitted
 
 
 @njit(cache=True)
+def _pose_wrench(x12, w0, J, pose, reduced):  # pragma: no cover - jitted
+    """Return the wrench at ``x12`` from the one at ``pose`` (12,) and its Jacobian (6, n_pose)."""
+    w = w0.copy()
+    for j in range(J.shape[1]):
+        d = x12[reduced[j]] - pose[reduced[j]]
+        if d != 0.0:
+            for a in range(6):
+                w[a] += J[a, j] * d
+    return w
+
+
+@njit(cache=True)
 def ukf_predict(
-    x, P, u, Q, Wm, Wc, lam, fast, x_eq, reduced, dt, src, coil, rim, par, work
+    x, P, u, Q, Wm, Wc, lam, fast, J, cursor, step, x_eq, reduced, dt, src, coil, rim, par, work
 ):  # pragma: no cover - jitted
     """UKF prediction: sigma points of (x, P) through f, their unscented transform plus Q.
 
@@ -510,6 +529,13 @@ def ukf_predict(
         Sigma-point scaling ``alpha^2 (n + kappa) - n``.
     fast : bool
         Exponential Euler with the statistical linearisation (else RK4).
+    J : ndarray, shape (6, n_pose)
+        Fast: the wrench's Jacobian in the pose states (the reduced states
+        before the first velocity), N/m, N, N m/m, N m (updated).
+    cursor : ndarray of int64, shape (1,)
+        Fast: the pose column of J refreshed now (negative: all of them; updated).
+    step : float
+        Finite-difference step of J, m or rad.
     x_eq, reduced, dt
     src, coil, rim, par, work
         The fast model's packed arguments.
@@ -521,16 +547,28 @@ def ukf_predict(
     out = sig.copy()
     if fast:
         rates = np.empty((p, n_r))
-        w0, r0 = _wrench(embed(sig[0], x_eq, reduced), u, src, coil, rim, par, work)
+        x0 = embed(sig[0], x_eq, reduced)
+        w0, r0 = _wrench(x0, u, src, coil, rim, par, work)
+        n_pose = J.shape[1]
+        first, last = cursor[0], cursor[0] + 1
+        if cursor[0] < 0:
+            first, last = 0, n_pose
+        for j in range(first, last):  # the wrench's Jacobian, one pose column a sample
+            xp = x0.copy()
+            xp[reduced[j]] += step
+            wp, _ = _wrench(xp, u, src, coil, rim, par, work)
+            for a in range(6):
+                J[a, j] = (wp[a] - w0[a]) / step
+        cursor[0] = last % n_pose
         for i in range(p):
             if i > 0 and _same_reduced(sig[i], sig[0], n_r):
                 rates[i] = rates[0]
             elif _same_pose(sig[i], sig[0], reduced):  # the centre's wrench
                 rates[i] = _rates_with(embed(sig[i], x_eq, reduced), w0, r0, par, reduced)
-            else:
-                rates[i] = _rates(
-                    embed(sig[i], x_eq, reduced), u, src, coil, rim, par, work, reduced
-                )
+            else:  # the centre's wrench moved along its Jacobian; this point's rotation
+                xi = embed(sig[i], x_eq, reduced)
+                ri = phys.rotation_matrix(xi[3], xi[4], xi[5])
+                rates[i] = _rates_with(xi, _pose_wrench(xi, w0, J, x0, reduced), ri, par, reduced)
         # statistical linearisation: f(x + L_j) - f(x - L_j) = 2 A L_j (reduced block)
         D = np.empty((n_r, n_r))
         for j in range(n_r):
@@ -667,6 +705,9 @@ def ukf_step(
     prev,
     delayed,
     fast,
+    J,
+    cursor,
+    step,
     x,
     P,
     sigmas_f,
@@ -713,6 +754,8 @@ def ukf_step(
         As :func:`~maglev_ros.estimation.kernels.kf_step`.
     fast : bool
         The fast prediction (see :func:`ukf_predict`).
+    J, cursor, step
+        The fast prediction's wrench Jacobian (see :func:`ukf_predict`).
     x, P, sigmas_f, Q, Wm, Wc, lam
         Filter state, its predicted sigma points, process noise, weights, scaling.
     r_diag, gate, last, runs, run, frozen, events, missing, rejected, x_eq, reduced
@@ -749,8 +792,9 @@ def ukf_step(
         work,
     )
     xn, Pn, sn = ukf_predict(
-        xu, Pu, across, Q, Wm, Wc, lam, fast, x_eq, reduced, dt, src, coil, rim, par, work
-    )
+        xu, Pu, across, Q, Wm, Wc, lam, fast, J, cursor, step, x_eq, reduced, dt, src, coil,
+        rim, par, work,
+    )  # fmt: skip
     _count(available, accepted, dof, missing, rejected)
     _publish(xn if delayed else xu, x_eq, reduced, out_x)
     _keep(

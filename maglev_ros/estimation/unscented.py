@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 from filterpy.kalman import MerweScaledSigmaPoints
 
+from ..physics.linearization import FD_STEP
 from .base import Estimator
 from .nonlinear import FilterModel, require_fast_field
 from .nonlinear_kernels import sigma_points, ukf_predict, ukf_step, ukf_update
@@ -20,7 +21,9 @@ class UnscentedEstimator(Estimator):
     filterpy's ``MerweScaledSigmaPoints`` gives the weights). f: the
     prediction :attr:`EstimatorConfig.prediction` names, per sigma point
     (``fast``: one exponential-Euler step, the Jacobian from the sigma points'
-    statistical linearisation; ``full``: one RK4 step); h: the sensor model
+    statistical linearisation, the magnetic wrench from the centre's and its
+    Jacobian in the pose, one column refreshed a sample; ``full``: one RK4
+    step); h: the sensor model
     (coils' direct field included) plus the bias states if any. The
     chi-square gate per sensor uses the unscented transform of the predicted
     sigma points through h; the accepted sensors' rows then update as
@@ -53,9 +56,13 @@ class UnscentedEstimator(Estimator):
             fm = self.filter_model
             self._f_args = fm.fast_f_args if self._fast else fm.f_args
             self._no_currents = np.full(self.n_inputs, np.nan)
+            n_pose = int(np.sum(self.reduced < 6))  # x y z alpha beta
+            self._J = np.zeros((6, n_pose))  # the wrench's Jacobian in the pose
+            self._cursor = np.zeros(1, dtype=np.int64)
         self._x = np.ascontiguousarray(dx, dtype=float)
         self._P = np.ascontiguousarray(P, dtype=float)
         self._sigmas, _ = sigma_points(self._x, self._P, self._lambda)
+        self._cursor[0] = -1  # the whole wrench Jacobian at the next prediction
 
     @property
     def deviation(self) -> np.ndarray:
@@ -96,6 +103,9 @@ class UnscentedEstimator(Estimator):
             self.Wc,
             self._lambda,
             self._fast,
+            self._J,
+            self._cursor,
+            FD_STEP,
             self._x_eq,
             self.reduced,
             self.dt,
@@ -133,6 +143,9 @@ class UnscentedEstimator(Estimator):
             prev,
             self.config.sensor_delay == 1,
             self._fast,
+            self._J,
+            self._cursor,
+            FD_STEP,
             self._x,
             self._P,
             self._sigmas,

@@ -6,8 +6,10 @@ import pytest
 from maglev_ros.estimation import EstimatorConfig, EstimatorConfigError, make_estimator
 from maglev_ros.estimation.base import Estimator
 from maglev_ros.estimation.filter_model import magnet_reading
+from maglev_ros.estimation.nonlinear_kernels import _wrench
 from maglev_ros.estimation.reference import FilterpyReference
 from maglev_ros.physics import kernels as phys
+from maglev_ros.physics.linearization import FD_STEP
 
 
 def _run(est, ref, ys, cs):
@@ -101,3 +103,29 @@ def test_the_compiled_step_gives_the_numbers_of_the_python_step(
 def test_an_unknown_prediction_is_named():
     with pytest.raises(EstimatorConfigError, match='prediction must be one of fast, full'):
         EstimatorConfig(filter='ekf', prediction='euler')
+
+
+def test_the_fast_ukf_takes_the_wrench_of_a_pose_from_its_jacobian_one_column_a_sample(
+    v2, v2_linear, v2_data
+):
+    ys, cs, _ = v2_data
+    est = make_estimator(v2, EstimatorConfig(filter='ukf', sensor_delay=0), linear=v2_linear)
+    src, coil, rim, par, work = est._f_args
+    # the first prediction: every column, at the posterior (published: no sensor delay)
+    x0 = est.step(ys[0], cs[0])
+    assert est._J.shape == (6, 5) and est._cursor[0] == 0
+    first = est._J.copy()
+    assert np.all(np.abs(first[:3, :3]).max(axis=0) > 0)  # the force moves with x, y, z
+    for k in range(1, 6):  # one column a sample, in turn
+        est.step(ys[k], cs[k])
+        changed = np.flatnonzero(np.any(est._J != first, axis=0))
+        assert set(changed) <= set(range(k)), (k, changed)
+        assert est._cursor[0] == k % 5
+    # each column is the forward difference of the wrench at a centre the filter held
+    w0, _ = _wrench(x0, cs[0], src, coil, rim, par, work)
+    xp = x0.copy()
+    xp[0] += FD_STEP
+    wp, _ = _wrench(xp, cs[0], src, coil, rim, par, work)
+    np.testing.assert_allclose(first[:, 0], (wp - w0) / FD_STEP, rtol=1e-12, atol=0)
+    est.reset()
+    assert est._cursor[0] == -1  # all of it again after a reset
