@@ -240,10 +240,13 @@ def main() -> int:
                     if hasattr(check, 'max_db')
                     else str(check or '')
                 )
-                fit = float(np.mean(row.fit_validation))
+                # an unstable model (the plant is) has no simulation fit: its k-step one
+                sim = float(np.mean(row.fit_validation))
+                kstep = float(np.mean(row.kstep_validation))
+                fits = f'{sim:6.1f}' if np.isfinite(sim) else '   n/a'
                 print(
-                    f'  {item.group.name:<5} {row.label:<28} fit val. {fit:6.1f} % '
-                    f'{row.status:<10} physics {text}'
+                    f'  {item.group.name:<5} {row.label:<28} fit val. {fits} % '
+                    f'({row.kstep}-step {kstep:6.1f} %) {row.status:<10} physics {text}'
                 )
     print('held' if ok else 'NOT held')
     return 0 if ok else 1
