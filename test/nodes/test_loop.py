@@ -1,5 +1,6 @@
 """The loop node: the closed loop composed in one process, its topics for observers."""
 
+import gc
 import time
 
 import numpy as np
@@ -19,6 +20,8 @@ WAIT_S = 120.0  # s: the first construction compiles the kernels
 
 def test_the_loop_node_publishes_samples_estimates_and_commands_in_stamp_order(ctx):
     loop = LoopNode(context=ctx, parameter_overrides=[Parameter('diagnostics_period', value=0.2)])
+    # the node's objects were frozen out of the garbage collector's way before its loop ran
+    assert gc.get_freeze_count() > 10_000
     listener = Node('listener', context=ctx)
     got = {'field': [], 'currents': [], 'estimate': [], 'command': [], 'true': [], 'diag': []}
 
