@@ -121,6 +121,20 @@ def _transition(A, dt, n):  # pragma: no cover - jitted
 
 
 @njit(cache=True)
+def _columns_due(cursor, n):  # pragma: no cover - jitted
+    """Columns ``first:last`` of a Jacobian to refresh now; advance ``cursor`` (1,) in place.
+
+    One column a sample, in turn; every column when ``cursor[0]`` is negative
+    (after a reset).
+    """
+    first, last = cursor[0], cursor[0] + 1
+    if cursor[0] < 0:
+        first, last = 0, n
+    cursor[0] = last % n
+    return first, last
+
+
+@njit(cache=True)
 def ekf_predict_full(
     dx, P, u, Q, x_eq, reduced, dt, step, src, coil, rim, par, work
 ):  # pragma: no cover - jitted
@@ -185,9 +199,7 @@ def ekf_predict_fast(
     x12 = embed(dx, x_eq, reduced)
     w0, r0 = _wrench(x12, u, src, coil, rim, par, work)
     f0 = _rates_with(x12, w0, r0, par, reduced)
-    first, last = cursor[0], cursor[0] + 1
-    if cursor[0] < 0:
-        first, last = 0, n_r
+    first, last = _columns_due(cursor, n_r)
     for j in range(first, last):
         xp = x12.copy()
         xp[reduced[j]] += step
@@ -197,7 +209,6 @@ def ekf_predict_fast(
             fp = _rates(xp, u, src, coil, rim, par, work, reduced)
         for i in range(n_r):
             A[i, j] = (fp[i] - f0[i]) / step
-    cursor[0] = last % n_r
     F, M = _transition(A, dt, n)
     xn = dx.copy()
     for i in range(n_r):
@@ -549,17 +560,13 @@ def ukf_predict(
         rates = np.empty((p, n_r))
         x0 = embed(sig[0], x_eq, reduced)
         w0, r0 = _wrench(x0, u, src, coil, rim, par, work)
-        n_pose = J.shape[1]
-        first, last = cursor[0], cursor[0] + 1
-        if cursor[0] < 0:
-            first, last = 0, n_pose
+        first, last = _columns_due(cursor, J.shape[1])
         for j in range(first, last):  # the wrench's Jacobian, one pose column a sample
             xp = x0.copy()
             xp[reduced[j]] += step
             wp, _ = _wrench(xp, u, src, coil, rim, par, work)
             for a in range(6):
                 J[a, j] = (wp[a] - w0[a]) / step
-        cursor[0] = last % n_pose
         for i in range(p):
             if i > 0 and _same_reduced(sig[i], sig[0], n_r):
                 rates[i] = rates[0]
