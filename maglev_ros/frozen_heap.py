@@ -23,21 +23,7 @@ import gc
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-__all__ = ['freeze_heap', 'frozen_heap']
-
-
-def freeze_heap() -> int:
-    """Collect once, then freeze every object alive now, for good; return how many.
-
-    For a thread that starts now and runs on outside any one block (a real-time
-    loop started by a node's constructor, until the node is destroyed): the
-    collection happens before it runs, not during it. A later
-    :func:`frozen_heap` then collects only what was allocated since;
-    :func:`gc.unfreeze` ends it.
-    """
-    gc.collect()
-    gc.freeze()
-    return gc.get_freeze_count()
+__all__ = ['frozen_heap']
 
 
 @contextmanager
@@ -55,7 +41,8 @@ def frozen_heap() -> Iterator[int]:
     and leaves the heap frozen on exit; the outermost block unfreezes it.
     """
     outermost = gc.get_freeze_count() == 0
-    freeze_heap()
+    gc.collect()
+    gc.freeze()
     try:
         yield gc.get_freeze_count()
     finally:

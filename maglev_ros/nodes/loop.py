@@ -20,15 +20,15 @@ the controller's level; ERROR once the magnet is lost (the loop then stops).
 
 from __future__ import annotations
 
-import gc
 import sys
 import threading
+from contextlib import ExitStack
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.node import Node
 
 from maglev_ros.estimation.config import FILTERS
-from maglev_ros.frozen_heap import freeze_heap
+from maglev_ros.frozen_heap import frozen_heap
 from maglev_ros.hardware.serial_link import LinkError
 from maglev_ros.loop import SimulatedLoopSettings
 from maglev_ros.loop.simulated_setup import build_loop, plant_health
@@ -129,8 +129,8 @@ class LoopNode(Node):
         sys.setswitchinterval(SWITCH_INTERVAL_S)
         self._thread = threading.Thread(target=self._run, name='maglev-loop', daemon=True)
         # the full collection before the loop runs, not during it (until destroy_node)
-        self._thawed = gc.get_freeze_count() == 0
-        freeze_heap()
+        self._heap = ExitStack()
+        self._heap.enter_context(frozen_heap())
         self._thread.start()
         where = f'the board on {board["port"]}' if plant == 'board' else 'the simulator'
         self.get_logger().info(
@@ -176,8 +176,7 @@ class LoopNode(Node):
         """Stop the loop, then the broadcaster (what it holds is published first)."""
         self._stop.set()
         self._thread.join(timeout=5.0)
-        if self._thawed:
-            gc.unfreeze()
+        self._heap.close()
         self.plant.close()  # a board's coils at zero current
         self.broadcaster.close()
         sys.setswitchinterval(self._switch)
