@@ -590,8 +590,9 @@ class Simulator:
         for k, drive in enumerate(drives):
             if progress is not None and k % 16 == 0:
                 progress(k, total)
-            new = self._python_rk4(states[-1], drive, k < self.hold_samples)
-            status = self._status(new, k < self.hold_samples)
+            held = k < self.hold_samples
+            new = self._python_rk4(states[-1], drive, held)
+            status = self._status(new, held)
             if status != kernels.STATUS_OK:
                 return np.array(states), k, status, new
             states.append(new)
