@@ -14,6 +14,12 @@ than the believed one (``plant_polarization``, ``plant_mass``); or a V2x board
 (``plant: board``, ``port``), whose 5 kHz stream paces the loop and whose
 coils are left at zero current when the node stops or the link fails.
 
+Start: at once, or, with ``start_reader`` (a recorder's node name), once that
+node reads ``start_reader_topics``. The bag then holds the first sample, and
+the loop does not start while the recorder's process is still coming up and
+taking the CPU (a simulated magnet is lost when its loop is starved in its
+first tenths of a second).
+
 Diagnostics: real-time factor, overruns, samples dropped by the broadcaster,
 the controller's level; ERROR once the magnet is lost (the loop then stops).
 """
@@ -34,17 +40,27 @@ from maglev_ros.loop import SimulatedLoopSettings
 from maglev_ros.loop.simulated_setup import build_loop, plant_health
 from maglev_ros.nodes.broadcast import LoopBroadcaster
 from maglev_ros.nodes.messages import diagnostic_array
-from maglev_ros.nodes.params import NodeParameterError, Param, ParameterTable, choice, integer
+from maglev_ros.nodes.params import (
+    NodeParameterError,
+    Param,
+    ParameterTable,
+    choice,
+    integer,
+    node_name,
+    topic_names,
+)
 from maglev_ros.nodes.params import number as num
 from maglev_ros.nodes.qos import DIAGNOSTICS_QOS
 from maglev_ros.nodes.runtime import run_nodes
-from maglev_ros.topics import DIAGNOSTICS_TOPIC
+from maglev_ros.nodes.start_gate import reads_topics
+from maglev_ros.topics import COMMAND_TOPIC, DIAGNOSTICS_TOPIC, ESTIMATE_TOPIC
 
 __all__ = ['PARAMETERS', 'LoopNode', 'LoopParameterError', 'main']
 
 NODE_NAME = 'maglev_loop'
 PLANTS = ('simulator', 'board')
 SWITCH_INTERVAL_S = 0.0005  # s: the loop's thread gets the GIL back within this
+START_POLL_S = 0.02  # s between looks at the graph while the loop waits for its reader
 
 
 class LoopParameterError(NodeParameterError):
@@ -86,6 +102,17 @@ PARAMETERS = ParameterTable(
             False, 'publish every sample (else the newest of each control period)'
         ),
         'diagnostics_period': Param(1.0, 's between diagnostics', check=num(0, above=True)),
+        'start_reader': Param(
+            '',
+            'a node (a recorder) that must read the start_reader_topics before the loop '
+            "starts; '': start at once",
+            check=node_name(),
+        ),
+        'start_reader_topics': Param(
+            [COMMAND_TOPIC, ESTIMATE_TOPIC],
+            'topics the start_reader must read',
+            check=topic_names(),
+        ),
     },
 )
 
@@ -109,6 +136,8 @@ class LoopNode(Node):
         values = PARAMETERS.validate(PARAMETERS.declare(self))
         self.publish_every_sample = values.pop('publish_every_sample')
         period = values.pop('diagnostics_period')
+        reader = values.pop('start_reader')
+        topics = tuple(self.resolve_topic_name(t) for t in values.pop('start_reader_topics'))
         plant = values.pop('plant')
         board = {k: values.pop(k) for k in ('port', 'n_sensors', 'command_timeout')}
         self.settings = s = SimulatedLoopSettings(**values)
@@ -131,15 +160,31 @@ class LoopNode(Node):
         # the full collection before the loop runs, not during it (until destroy_node)
         self._heap = ExitStack()
         self._heap.enter_context(frozen_heap())
-        self._thread.start()
         where = f'the board on {board["port"]}' if plant == 'board' else 'the simulator'
+        wait = f'; starts once {reader} reads {", ".join(topics)}' if reader else ''
         self.get_logger().info(
             f'{s.params}: {s.filter if s.mode == "lqr" else "no estimator"} + {s.mode} at '
             f'{s.control_rate:g} Hz on {where} at {s.sample_rate:g} Hz (real time), '
             f'noise {s.sensor_noise:g} T, plant polarisation x{s.plant_polarization:g}, '
             f'mass x{s.plant_mass:g}; publishing '
-            f'{"every sample" if every_sample else f"at {s.control_rate:g} Hz"}'
+            f'{"every sample" if every_sample else f"at {s.control_rate:g} Hz"}{wait}'
         )
+        self._gate = None
+        if reader:
+            self._gate = self.create_timer(START_POLL_S, lambda: self._start_when(reader, topics))
+        else:
+            self._thread.start()
+
+    def _start_when(self, reader: str, topics: tuple[str, ...]) -> None:
+        if not self.started and reads_topics(self, reader, topics):
+            self.destroy_timer(self._gate)
+            self._thread.start()
+            self.get_logger().info(f'{reader} reads; the loop starts')
+
+    @property
+    def started(self) -> bool:
+        """Whether the loop's thread started (see ``start_reader``)."""
+        return self._thread.ident is not None
 
     def _run(self) -> None:
         self.loop.run(sys.maxsize, stop=self._stop.is_set)
@@ -150,6 +195,8 @@ class LoopNode(Node):
     def status(self) -> tuple[int, str, dict]:
         """Diagnostic level (0 OK, 1 WARN, 2 ERROR), message and values."""
         level, message = (2, f'magnet lost: {self.loop.reason}') if self.loop.stopped else (0, '')
+        if not self.started:
+            message = 'waiting for the start_reader to read its topics'
         if not level and self.broadcaster.error is not None:
             level, message = 2, f'publishing failed: {self.broadcaster.error!r}'
         plant = self.plant
@@ -175,7 +222,8 @@ class LoopNode(Node):
     def destroy_node(self) -> None:
         """Stop the loop, then the broadcaster (what it holds is published first)."""
         self._stop.set()
-        self._thread.join(timeout=5.0)
+        if self.started:
+            self._thread.join(timeout=5.0)
         self._heap.close()
         self.plant.close()  # a board's coils at zero current
         self.broadcaster.close()

@@ -13,7 +13,23 @@ from rclpy.node import Node
 
 from maglev_ros.topics import COMMAND_TOPIC
 
-__all__ = ['StartGate']
+__all__ = ['StartGate', 'reads_topics']
+
+
+def reads_topics(node: Node, reader: str, topics) -> bool:
+    """Return whether the node named ``reader`` subscribes to each of ``topics``.
+
+    Parameters
+    ----------
+    node : rclpy.node.Node
+        A node of this process (its view of the graph).
+    reader : str
+        The reading node's name ('': none, always true).
+    topics : iterable of str
+        Fully resolved topic names.
+    """
+    info = node.get_subscriptions_info_by_topic
+    return not reader or all(any(i.node_name == reader for i in info(t)) for t in topics)
 
 
 class StartGate:
@@ -40,10 +56,7 @@ class StartGate:
 
     def reader_subscribed(self) -> bool:
         """Return whether the reader (if any) subscribes to each of its topics."""
-        info = self.node.get_subscriptions_info_by_topic
-        return not self.reader or all(
-            any(i.node_name == self.reader for i in info(topic)) for topic in self.reader_topics
-        )
+        return reads_topics(self.node, self.reader, self.reader_topics)
 
     def __call__(self) -> bool:
         """Return whether a command publisher, the currents' readers and the reader are there."""

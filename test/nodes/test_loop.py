@@ -64,6 +64,41 @@ def test_the_loop_node_publishes_samples_estimates_and_commands_in_stamp_order(c
     assert int(values['broadcast_published']) > 0 and values['controller'] in ('OK', 'ERROR')
 
 
+def test_the_loop_starts_once_its_start_reader_reads_the_command_and_the_estimate(ctx):
+    """With ``start_reader`` the loop waits (nothing published) until that node subscribes."""
+    loop = LoopNode(context=ctx, parameter_overrides=[
+        Parameter('start_reader', value='maglev_test_recorder')])  # fmt: skip
+    listener = Node('listener', context=ctx)
+    currents = []
+    listener.create_subscription(JointState, 'maglev/currents', currents.append, SENSOR_QOS)
+    executor = SingleThreadedExecutor(context=ctx)
+    for node in (listener, loop):
+        executor.add_node(node)
+    recorder = None
+    try:
+        deadline = time.monotonic() + 1.0  # fifty looks at the graph, no reader
+        while time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        assert not loop.started and currents == []
+        assert loop.status[1] == 'waiting for the start_reader to read its topics'
+        recorder = Node('maglev_test_recorder', context=ctx)
+        recorder.create_subscription(JointState, 'maglev/currents/command', len, SENSOR_QOS)
+        deadline = time.monotonic() + 1.0
+        while time.monotonic() < deadline and not loop.started:
+            executor.spin_once(timeout_sec=0.05)
+        assert not loop.started, 'started before its reader read maglev/state/estimate'
+        recorder.create_subscription(Odometry, 'maglev/state/estimate', len, SENSOR_QOS)
+        deadline = time.monotonic() + WAIT_S
+        while time.monotonic() < deadline and len(currents) < 100:
+            executor.spin_once(timeout_sec=0.05)
+        assert loop.started and len(currents) >= 100
+    finally:
+        loop.destroy_node()
+        listener.destroy_node()
+        if recorder is not None:
+            recorder.destroy_node()
+
+
 def test_bad_loop_parameters_name_the_problem(ctx):
     with pytest.raises(LoopParameterError, match=r'control_rate must divide sample_rate'):
         LoopNode(context=ctx, parameter_overrides=[Parameter('control_rate', value=3000.0)])

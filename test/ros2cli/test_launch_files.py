@@ -208,7 +208,8 @@ def run_composed(ros2, tmp_path, seconds: float, *args: str) -> Path:
     launch = ros2.start('launch', 'maglev_ros', 'closed_loop.launch.xml', 'record:=true',
                         f'bag:={bag}', *args)  # fmt: skip
     launch.wait_for(r'\[maglev_loop\]: maggy_v2: kf \+ lqr at 1000 Hz', START_TIMEOUT)
-    launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
+    # the loop starts once the recorder reads its topics (the bag holds the first sample)
+    launch.wait_for(r'\[maglev_loop\]: maglev_recorder reads; the loop starts', START_TIMEOUT)
     time.sleep(seconds + SETTLE_S + 1.0)
     stop_like_terminal(launch)
     assert_bag_complete(
