@@ -368,6 +368,14 @@ def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
             Ts=data.Ts,
             sensors=tuple(sensors),
         )
+        idle = exp.coils_idle()
+        if idle is not None:
+            raise UsageError(
+                f'{bag}: no coil current changes from {idle[0]:.3f} s on for {idle[1]:.3f} s: '
+                'the loop was not acting (the magnet lost, or not yet levitating), so this is '
+                'not a record of a levitating magnet; record one where the loop held the '
+                'magnet throughout'
+            )
         _say(
             f'  {exp.samples} samples at {1 / data.Ts:.6g} Hz, magnet levitating, '
             f'sensors {", ".join(map(str, sensors))}'

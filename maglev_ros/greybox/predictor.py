@@ -48,6 +48,10 @@ __all__ = [
 MEASUREMENTS = ('raw', 'board')
 
 
+#: s of unchanging coil currents that mark a levitation record's loop as not acting
+COILS_IDLE_S = 0.1
+
+
 @dataclass(frozen=True)
 class LevitationExperiment:
     """One record of the levitating magnet under feedback.
@@ -98,6 +102,35 @@ class LevitationExperiment:
     def samples(self) -> int:
         """Number of samples N."""
         return self.u.shape[0]
+
+    def coils_idle(self, shortest: float = COILS_IDLE_S) -> tuple[float, float] | None:
+        """Return the longest span in which no coil current changes at all, if any.
+
+        A levitating magnet needs its loop every few milliseconds (the lateral
+        modes' time constants are 20-35 ms), and a loop's commands move with
+        the sensor noise every sample. Currents that all keep one value for
+        longer mean the loop was not acting: the magnet was lost (the
+        controller switched the coils off), or not yet lifted.
+
+        Parameters
+        ----------
+        shortest : float, optional
+            Shortest span reported, s (default :data:`COILS_IDLE_S`).
+
+        Returns
+        -------
+        (start, duration) : tuple of float, or None
+            Start (s from the first sample) and length (s) of the longest
+            such span; None when none lasts ``shortest``.
+        """
+        same = np.all(self.u[1:] == self.u[:-1], axis=1)  # sample k+1 repeats sample k
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], same, [0]]).astype(np.int8)))
+        if not len(edges):
+            return None
+        starts, ends = edges[::2], edges[1::2] + 1  # a run of repeats spans one sample more
+        k = int(np.argmax(ends - starts))
+        duration = (ends[k] - starts[k]) * self.Ts
+        return (starts[k] * self.Ts, duration) if duration >= shortest else None
 
     def channels(self, sensor_count: int) -> np.ndarray:
         """Return the indices of y's columns in the model's output vector.

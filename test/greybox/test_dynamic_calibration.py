@@ -143,3 +143,18 @@ def test_nonlinear_closed_loop_simulation_recovers_mass_and_polarization():
         calibrate_closed_loop(
             nominal_vector().with_free(FREE), exp, LoopSetup(setup.believed, setup.excitation[:5])
         )
+
+
+def test_coils_idle_finds_the_longest_span_of_unchanging_currents():
+    rng = np.random.default_rng(0)
+    u = rng.normal(0.0, 0.3, (5000, 4))  # a loop at work: every sample moves
+    y = np.zeros((5000, 9))
+    assert LevitationExperiment(u, y, Ts=1e-3).coils_idle() is None
+    u[1000:1098] = u[999]  # 99 samples (0.099 s) of one value: shorter than the 0.1 s
+    u[3000:] = 0.003  # the coils off from sample 3000 (a current sensor's offset)
+    idle = LevitationExperiment(u, y, Ts=1e-3).coils_idle()
+    assert idle == pytest.approx((3.0, 2.0))
+    assert LevitationExperiment(u, y, Ts=1e-3).coils_idle(0.05) == pytest.approx((3.0, 2.0))
+    u[3000:] = rng.normal(0.0, 0.3, (2000, 4))
+    assert LevitationExperiment(u, y, Ts=1e-3).coils_idle() is None
+    assert LevitationExperiment(u, y, Ts=1e-3).coils_idle(0.09) == pytest.approx((0.999, 0.099))
