@@ -1,10 +1,9 @@
 """maglev-calibrate on a bag of the closed loop on a V4x PC-control board.
 
 The board is the emulated firmware (physics plant, magnet free) whose magnet is
-not the believed one: polarisation and mass +10 %, and -10 % (either floats at
-the believed height). The -10 % magnet runs on noise seed 1: the one-sensor
-loop loses it in seeds 0 and 2 (docs/boards.md), and a record of a lost magnet
-is refused. The loop (the KF with the board's measurement model, the LQR, a PRBS on
+not the believed one: polarisation and mass +10 % (it floats at the believed
+height). A record of a magnet the loop lost (-20 %) is refused. The loop (the KF
+with the board's measurement model, the LQR, a PRBS on
 the pairs) believes the nominal set and records the bag. ``--measurement board``
 recovers the board's magnet within the stated uncertainty; the raw-field model
 on the same bag refuses.
@@ -38,20 +37,17 @@ from test_v4x_pc_plant import SETTINGS, emulated_board  # noqa: E402
 
 POLARIZATION, MASS = 1.1, 1.1  # the board's magnet: 10 % stronger and heavier
 SAMPLES = 10000  # 10 s at 1 kHz
-# (polarisation, mass) of the board's magnet / the believed one's, noise seed
-PERTURBED = [(POLARIZATION, MASS, 0), (0.9, 0.9, 1)]
 
 
-@pytest.fixture(scope='module', params=PERTURBED, ids=['plus10', 'minus10'])
-def board_bag(request, tmp_path_factory):
-    scale_polarization, scale_mass, seed = request.param
+@pytest.fixture(scope='module')
+def board_bag(tmp_path_factory):
     nominal = load_parameters(SETTINGS.params)
     magnet = dataclasses.replace(
         nominal.magnet,
-        polarization=nominal.magnet.polarization * scale_polarization,
-        mass=nominal.magnet.mass * scale_mass,
+        polarization=nominal.magnet.polarization * POLARIZATION,
+        mass=nominal.magnet.mass * MASS,
     )
-    plant, _, port, link = emulated_board(seed, params=nominal.replace(magnet=magnet))
+    plant, _, port, link = emulated_board(params=nominal.replace(magnet=magnet))
     excitation = CommandExcitation('prbs', 0.05, (0.0, 0.05), 'pairs', length=SAMPLES)
     run = run_v4x_pc_loop(SETTINGS, link, SAMPLES, excitation, clock=port.clock, sleep=port.sleep)
     assert run.samples == SAMPLES and not plant.crashed, run.reason
@@ -173,13 +169,13 @@ def test_on_the_lab_commands_bag_the_raw_model_refuses(lab_bag, tmp_path, capsys
 
 
 def test_a_record_whose_magnet_was_lost_is_refused(tmp_path, capsys):
-    """-10 % on noise seed 0: the loop's estimate runs away, its controller switches the
-    coils off (their currents freeze from 0.7 s) and the magnet falls; refused, not fitted."""
+    """-20 %: the loop's estimate runs away, its controller switches the coils off (their
+    currents freeze) and the magnet falls; refused, not fitted."""
     nominal = load_parameters(SETTINGS.params)
     magnet = dataclasses.replace(
         nominal.magnet,
-        polarization=nominal.magnet.polarization * 0.9,
-        mass=nominal.magnet.mass * 0.9,
+        polarization=nominal.magnet.polarization * 0.8,
+        mass=nominal.magnet.mass * 0.8,
     )
     plant, _, port, link = emulated_board(0, params=nominal.replace(magnet=magnet))
     run = run_v4x_pc_loop(SETTINGS, link, 3000, None, clock=port.clock, sleep=port.sleep)
