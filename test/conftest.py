@@ -14,6 +14,12 @@ checks (``test_colcon_build.py``) and the real command-line tests
 source tree has compiled so far (``__pycache__/*.nbi``, ``*.nbc``), as a
 user's checkout does: the build's last step (``maglev_ros.cli.kernels``)
 copies them into the install tree and compiles the rest.
+
+Tests send SIGINT to the commands they start, as a terminal's Ctrl-C does. A
+test run started as a background job of a non-interactive shell (``.ci/run &``)
+inherits SIGINT ignored, and so would every command it starts (an ignored
+signal stays ignored across ``exec``): the session restores Python's handler
+first, so its commands get the default disposition.
 """
 
 from __future__ import annotations
@@ -21,6 +27,7 @@ from __future__ import annotations
 import itertools
 import os
 import shutil
+import signal
 import subprocess
 import sys
 from dataclasses import dataclass
@@ -33,6 +40,13 @@ PKG_DIR = Path(__file__).resolve().parents[1]
 COLCON = Path(sys.executable).parent / 'colcon'
 
 BUILD_TIMEOUT = 600  # s; the build compiles the kernels the checkout has not (~45 s of CPU)
+
+
+def pytest_configure(config):
+    """Take SIGINT back from an ignoring parent (see the module docstring)."""
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+
 
 SAFE_DOMAIN_IDS = tuple(range(1, 102)) + tuple(range(215, 233))
 _NEXT = itertools.count(os.getpid() % len(SAFE_DOMAIN_IDS))
