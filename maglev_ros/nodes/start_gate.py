@@ -54,14 +54,10 @@ class StartGate:
         self.reader = config.start_reader
         self.reader_topics = tuple(node.resolve_topic_name(t) for t in config.start_reader_topics)
 
-    def reader_subscribed(self) -> bool:
-        """Return whether the reader (if any) subscribes to each of its topics."""
-        return reads_topics(self.node, self.reader, self.reader_topics)
-
     def __call__(self) -> bool:
         """Return whether a command publisher, the currents' readers and the reader are there."""
         return (
             self.node.count_publishers(COMMAND_TOPIC) >= 1
             and self.currents_pub.get_subscription_count() >= self.subscribers
-            and self.reader_subscribed()
+            and reads_topics(self.node, self.reader, self.reader_topics)
         )

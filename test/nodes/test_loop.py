@@ -81,13 +81,17 @@ def test_the_loop_starts_once_its_start_reader_reads_the_command_and_the_estimat
             executor.spin_once(timeout_sec=0.05)
         assert not loop.started and currents == []
         assert loop.status[1] == 'waiting for the start_reader to read its topics'
-        recorder = Node('maglev_test_recorder', context=ctx)
-        recorder.create_subscription(JointState, 'maglev/currents/command', len, SENSOR_QOS)
+        recorder = Node('maglev_test_recorder', context=ctx)  # not spun: its subscriptions only
+
+        def ignore(msg):
+            pass
+
+        recorder.create_subscription(JointState, 'maglev/currents/command', ignore, SENSOR_QOS)
         deadline = time.monotonic() + 1.0
         while time.monotonic() < deadline and not loop.started:
             executor.spin_once(timeout_sec=0.05)
         assert not loop.started, 'started before its reader read maglev/state/estimate'
-        recorder.create_subscription(Odometry, 'maglev/state/estimate', len, SENSOR_QOS)
+        recorder.create_subscription(Odometry, 'maglev/state/estimate', ignore, SENSOR_QOS)
         deadline = time.monotonic() + WAIT_S
         while time.monotonic() < deadline and len(currents) < 100:
             executor.spin_once(timeout_sec=0.05)
