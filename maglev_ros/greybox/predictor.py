@@ -48,6 +48,10 @@ __all__ = [
 MEASUREMENTS = ('raw', 'board')
 
 
+#: Noise of a board-filtered reading beyond its filter state, in its noise levels
+#: (the float32 rounding: none to speak of; small and positive for the Riccati equation)
+FILTERED_READING = 0.01
+
 #: s of unchanging coil currents that mark a levitation record's loop as not acting
 COILS_IDLE_S = 0.1
 
@@ -337,16 +341,26 @@ class LinearGreyBoxProblem:
         c = np.ascontiguousarray(lin.C[self.channels])
         d = np.ascontiguousarray(lin.D[self.channels])
         y_eq = lin.y_eq[self.channels]
+        reading = self.sigma**2
+        filter_noise = np.zeros(0)
         if self.measurement == 'board':
             full = BoardProcessing.from_model(model)
             y_eq = y_eq - full.baseline[self.channels]
             d = d - full.feedthrough[self.channels]
+            filtered = full.filtered[self.channels]
             # the board filters at each of its 200 us steps inside the host sample
-            ad, bd, c, d = augment_exact(
-                lin.A, lin.B, c, d, full, full.filtered[self.channels], self.Ts
-            )
+            ad, bd, c, d = augment_exact(lin.A, lin.B, c, d, full, filtered, self.Ts)
+            # the sensor noise enters before the filter: noise of the filter
+            # states, not of the readings (white-noise readings bias the fit
+            # in closed loop, where the noise reaches the currents)
+            sensor = full.sensor_noise(self.sigma[filtered], self.Ts)
+            filter_noise = full.noise_injection(self.Ts) * sensor**2
+            reading = np.where(filtered, (FILTERED_READING * self.sigma) ** 2, reading)
         q = (self.process_noise**2) * (bd @ bd.T) + 1e-30 * np.eye(ad.shape[0])
-        r = np.diag(self.sigma**2)
+        q[ad.shape[0] - filter_noise.size :, ad.shape[0] - filter_noise.size :] += np.diag(
+            filter_noise
+        )
+        r = np.diag(reading)
         p = solve_discrete_are(ad.T, c.T, q, r)
         gain = ad @ p @ c.T @ np.linalg.inv(c @ p @ c.T + r)
         return GreyBoxSystem(

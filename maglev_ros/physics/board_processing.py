@@ -112,6 +112,55 @@ class BoardProcessing:
         """
         return max(1, int(round(Ts / self.board_period)))
 
+    def noise_injection(self, Ts: float) -> float:
+        """Return the noise variance a filter state takes in over one host sample, per unit.
+
+        The board filters a fresh sensor reading at each of its ``M`` steps, so
+        white sensor noise of variance ``s^2`` per board step enters the filter
+        state once per host sample with variance ``s^2 w^2 sum_j (1 - w)^(2 j)``
+        (``j < M``, ``w``: :attr:`weight`): the readings of a filtered channel
+        carry coloured noise (a first-order lag of white noise at the host
+        rate), not white noise.
+
+        Parameters
+        ----------
+        Ts : float
+            Host sample time, s.
+
+        Returns
+        -------
+        float
+            That variance per unit sensor variance (dimensionless).
+        """
+        keep = (1.0 - self.weight) ** 2
+        return float(self.weight**2 * sum(keep**j for j in range(self.board_steps(Ts))))
+
+    def sensor_noise(self, level: np.ndarray, Ts: float) -> np.ndarray:
+        """Return the sensor noise behind a filtered channel's readings, T rms per board step.
+
+        ``level`` is what :func:`maglev_ros.greybox.noise_level` measures on
+        the readings the host receives (second differences, taken as white).
+        For the filtered noise ``f_k = a f_(k-1) + n_k`` (``a``:
+        :meth:`host_pole`, ``var n = s^2`` :meth:`noise_injection`) the second
+        difference has the variance ``var n * sum_i h_i^2`` (``h``: the impulse
+        response of ``(1 - z^-1)^2 / (1 - a z^-1)``), which gives ``s``.
+
+        Parameters
+        ----------
+        level : array_like
+            Noise level of the received readings, T rms (white-noise reading).
+        Ts : float
+            Host sample time, s.
+
+        Returns
+        -------
+        ndarray
+            Sensor noise, T rms, same shape as ``level``.
+        """
+        a = self.host_pole(Ts)
+        h2 = 1.0 + (a - 2.0) ** 2 + (1.0 - a) ** 4 / (1.0 - a * a)
+        return np.asarray(level, dtype=float) * np.sqrt(6.0 / (h2 * self.noise_injection(Ts)))
+
     def host_filter(
         self, A: np.ndarray, G: np.ndarray, C: np.ndarray, D: np.ndarray, Ts: float
     ) -> tuple[np.ndarray, np.ndarray, float]:

@@ -107,3 +107,27 @@ def test_host_filter_is_the_board_loop_on_the_continuous_model(model):
     # the filter state decays with the pole of the host-rate shortcut
     a = bp.host_pole(Ts)
     assert ad[n, n] == pytest.approx(a)
+
+
+@pytest.mark.parametrize('Ts', [2e-4, 1e-3, 1.25e-3])
+def test_sensor_noise_is_read_back_from_the_filtered_readings(Ts):
+    """White sensor noise filtered at every board step, read at the host rate: the noise
+    level that second differences give (as for white readings) leads back to it."""
+    from scipy.signal import lfilter
+
+    from maglev_ros.greybox import noise_level
+
+    board = BoardProcessing(np.zeros(3), np.zeros((3, 4)), np.array([True, True, False]))
+    steps = board.board_steps(Ts)
+    rng = np.random.default_rng(3)
+    noise = rng.normal(0.0, 1e-4, (200_000 * steps, 2))  # T, per board step
+    filtered = lfilter([board.weight], [1.0, board.weight - 1.0], noise, axis=0)
+    readings = filtered[steps - 1 :: steps]  # the host reads after each M-th board step
+    level = noise_level(readings)
+    assert level.max() < 0.6e-4  # the filter hides most of it from a white-noise reading
+    assert board.sensor_noise(level, Ts) == pytest.approx([1e-4, 1e-4], rel=0.02)
+    # what a filter state takes in per host sample
+    injected = readings[1:] - board.host_pole(Ts) * readings[:-1]
+    assert injected.var(axis=0) == pytest.approx(
+        board.noise_injection(Ts) * 1e-8 * np.ones(2), rel=0.02
+    )
