@@ -123,6 +123,7 @@ def run_emulated(args, settings, samples, excitation, out):
     """Run the loop on the emulated firmware in this process, on the board's simulated time."""
     from maglev_ros.hardware.emulated_port import EmulatedPort
     from maglev_ros.hardware.physics_plant import make_simulator_plant
+    from maglev_ros.hardware.v4x_pc_feedthrough import measurement_time
     from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
     from maglev_ros.physics import SensorEffects
 
@@ -131,7 +132,10 @@ def run_emulated(args, settings, samples, excitation, out):
     scaling = settings.scaling
     plant = make_simulator_plant('free', params, scaling, sensor, args.seed)
     setup = make_simulator_plant('absent', params, scaling, sensor, args.seed + 1)
-    port = EmulatedPort(V4xPcFirmware(plant, scaling=scaling, setup_plant=setup))
+    place = measurement_time(1.0 / settings.sample_rate) + 0.5  # after the feedthrough's
+    port = EmulatedPort(
+        V4xPcFirmware(plant, scaling=scaling, setup_plant=setup, place_after=place)
+    )
     link = V4xPcLink('emulated', serial_link=port, timeout=REPLY_TIMEOUT_S, clock=port.clock)
     rows = []
 

@@ -209,6 +209,16 @@ def build_parser() -> argparse.ArgumentParser:
         'model gives them; default) or board (a V4x PC-control firmware: power-up baseline '
         'and coil feedthrough removed, x/y low-pass). Chosen here, never guessed from the data',
     )
+    p.add_argument(
+        '--board-feedthrough',
+        nargs=6,
+        type=float,
+        metavar='T_PER_A',
+        help='with --measurement board: the processed Bx, By, Bz per ampere of the x pair and '
+        'of the y pair, row by row (T/A), measured without the magnet (default: the '
+        "records' metadata, which maglev-lab --firmware v4x_pc writes; else the firmware's "
+        'compensation taken as exact)',
+    )
     p.add_argument('--list', action='store_true', help='list the parameters and exit')
     p.add_argument(
         '--ts',
@@ -350,6 +360,8 @@ def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
         )
         data, metadata = ds.data, ds.metadata
     magnet = mode or _recorded_magnet(metadata)
+    if magnet == 'free' and 'board_feedthrough' in metadata:
+        args.recorded_feedthrough.append((bag, metadata['board_feedthrough']))
     if magnet is None:
         raise UsageError(
             f'{bag}: the data do not say whether the magnet was absent, fixed or free '
@@ -394,6 +406,44 @@ def _experiment(bag: str, mode: str | None, args, sensors, outputs, inputs):
         f'sensors {", ".join(map(str, sensors))}'
     )
     return exp
+
+
+def _board_pairs(args, sensors: int):
+    """Return the pairs' measured feedthrough for ``--measurement board``, T/A (None: exact)."""
+    from maglev_ros.hardware.v4x_pc_feedthrough import PairFeedthrough
+
+    if args.measurement != 'board':
+        if args.board_feedthrough is not None:
+            raise UsageError('--board-feedthrough goes with --measurement board')
+        return None
+    if args.board_feedthrough is not None:
+        values, source = args.board_feedthrough, '--board-feedthrough'
+    elif args.recorded_feedthrough:
+        if len({str(v) for _, v in args.recorded_feedthrough}) > 1:
+            raise UsageError(
+                'the records carry different board feedthroughs (each session measures its '
+                'own): calibrate them one at a time, or give --board-feedthrough'
+            )
+        values, source = args.recorded_feedthrough[0][1], 'the record'
+    else:
+        _say(
+            "board feedthrough: the firmware's compensation taken as exact (the records do "
+            'not carry a measurement; maglev-lab --firmware v4x_pc measures it before the '
+            'magnet is placed)'
+        )
+        return None
+    if sensors != 1:
+        raise UsageError(f'--measurement board reads one sensor, got {sensors}')
+    try:
+        pairs = PairFeedthrough.response_from(values)
+    except ValueError as err:
+        raise UsageError(f'{source}: {err}') from None
+    r = 1e3 * pairs
+    _say(
+        f'board feedthrough from {source}: x pair into Bx {r[0, 0]:+.4f} mT/A, y pair into '
+        f'By {r[1, 1]:+.4f} mT/A (Bz {r[2, 0]:+.4f}, {r[2, 1]:+.4f} mT/A)'
+    )
+    return pairs
 
 
 def _header(args, cal, bags) -> list[str]:
@@ -485,6 +535,7 @@ def _run(args: argparse.Namespace) -> int:
     outputs = args.output or defaults[0]
     inputs = args.input or defaults[1]
     experiments, bags = [], []
+    args.recorded_feedthrough = []
     for bag, mode in parsed:
         experiments.append(_experiment(bag, mode, args, sensors, outputs, inputs))
         bags.append(bag)
@@ -508,6 +559,7 @@ def _run(args: argparse.Namespace) -> int:
             progress=_say,
             form=args.form,
             measurement=args.measurement,
+            board_pairs=_board_pairs(args, len(sensors)),
         )
     else:
         if args.measurement != 'raw':

@@ -47,6 +47,7 @@ V4X_PC_RATE = 1000.0  # Hz, samples (and commands) per second by default
 V4X_PC_SECONDS = 25.0  # s of samples by default (--duration, --samples)
 V4X_PC_AMPLITUDE = 0.3  # A per pair: the loop rejects most of it; the hold is noise-bound
 V4X_PC_BAND = (0.0, 0.05)  # of Nyquist: 0-25 Hz at 1 kHz, where the field sees the motion
+PLACE_MARGIN = 1.5  # s the virtual board's magnet comes after the feedthrough measurement
 
 
 def check_v4x_pc(args: argparse.Namespace) -> None:
@@ -128,7 +129,10 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     t0 = time.monotonic()
     try:
         settle = round((args.settle or 0.0) * rate)
-        run = run_v4x_pc_loop(settings, link, samples, excitation, ready=start, settle=settle)
+        run = run_v4x_pc_loop(
+            settings, link, samples, excitation, ready=start, settle=settle,
+            notice=lambda text: print(f'{PROG}: {text}', flush=True),
+        )  # fmt: skip
     except (OSError, ValueError) as err:
         raise UsageError(str(err)) from None
     finally:
@@ -142,6 +146,10 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     )
     if run.priority_note:
         print(f'{PROG}: {run.priority_note}')
+    extra = {}
+    if run.feedthrough is not None:
+        print(f'the magnet came {run.magnet_wait:.2f} s after the feedthrough measurement')
+        extra['board_feedthrough'] = run.feedthrough.metadata()
     write_sample_bag(
         bag,
         run.log,
@@ -154,6 +162,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
             'measurement': 'board',
             'sample_rate': rate,
             'seed': args.seed,
+            **extra,
         },
     )
     print(f'wrote {bag}')
@@ -186,6 +195,9 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         'true_max_abs_xy_settling_m': settling if truth is not None else None,
         'crashed': crashed,
         'board_params': board_params,
+        'board_feedthrough_T_per_A': None
+        if run.feedthrough is None
+        else np.asarray(run.feedthrough.response).tolist(),
         'models': [],
     }
     if run.samples == samples:
@@ -248,10 +260,14 @@ def _start_board(args: argparse.Namespace, link: str, params: str, truth: Path):
     import subprocess
     import sys
 
+    from maglev_ros.hardware.v4x_pc_feedthrough import measurement_time
+
+    # the magnet goes in place once the host has measured the board without it (+ margin)
+    place = measurement_time(1.0 / (args.control_rate or V4X_PC_RATE)) + PLACE_MARGIN
     cmd = [
         sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
         '--magnet', 'free', '--params', params, '--link', link, '--seed', str(args.seed),
-        '--truth', str(truth), '--exit-with-parent',
+        '--truth', str(truth), '--exit-with-parent', '--place-after', f'{place:g}',
         '--realtime-priority', str(args.realtime_priority),
     ]  # fmt: skip
     # its own session: under Linux's autogroup scheduling the board's emulator then gets its

@@ -22,7 +22,11 @@ what a host cannot read from the board, the check of a closed loop against it.
 docs/boards.md) on the physics plant by default, with the TLV493D's noise
 (0.1 mT) and resolution (0.098 mT) unless given: without noise a static field
 reads identically 20 times in a row and the firmware resets its sensor.
-The board calibrates with the magnet absent unless ``--magnet-at-power-up present``.
+The board calibrates with the magnet absent unless ``--magnet-at-power-up present``;
+``--place-after S`` puts the free magnet in place (at rest at its equilibrium) S
+seconds after the board's set-up, as a hand would once the host has measured
+the board without it (``maglev-lab --firmware v4x_pc`` does); default 0: at the
+end of set-up.
 
 Exit status: 0 after a signal, 2 for bad arguments (one line on stderr).
 """
@@ -154,6 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
         help='v4x_pc: where the magnet is while the board calibrates (default absent)',
     )
     parser.add_argument(
+        '--place-after',
+        type=non_negative_float,
+        default=0.0,
+        help='v4x_pc: s after set-up at which the magnet is put in place (default 0)',
+    )
+    parser.add_argument(
         '--sensor-delay', type=_integer_from(0), default=0, help='samples (physics; default 0)'
     )
     parser.add_argument('--seed', type=int, default=0, help='seed of the sensor noise (physics)')
@@ -245,6 +255,11 @@ def load_plant(spec: str, n_sensors: int) -> Plant:
 
 
 def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], object]:
+    if args.place_after > 0 and getattr(args, 'setup_plant', None) is None:
+        raise UsageError(
+            '--place-after needs --firmware v4x_pc, --plant physics and the magnet absent '
+            'at power-up (the board without the magnet until then)'
+        )
     if args.firmware == 'v4x_pc':
         setup = getattr(args, 'setup_plant', None)
         if args.board_sensor >= args.sensors:
@@ -258,6 +273,7 @@ def _firmware_factory(args: argparse.Namespace, plant: Plant) -> Callable[[], ob
             scaling=getattr(plant, 'scaling', None),
             setup_plant=setup,
             sensor=args.board_sensor,
+            place_after=args.place_after,
         )
         if isinstance(plant, (SimulatorPlant, TruthRecorder)):
 

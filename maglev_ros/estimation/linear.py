@@ -63,7 +63,6 @@ class KalmanEstimator(Estimator):
 
     def _build(self) -> None:
         """Build the model matrices and the packed arrays (:func:`linear_kernels.packed_sizes`)."""
-        lin = self.linear
         n, nr, m, mi = self.n_states, self.n_reduced, self.n_outputs, self.n_inputs
         k, w = self.n_sensors, self.config.nis_window
         layout = packed_sizes(n, m, mi, k, w, nr)
@@ -81,30 +80,7 @@ class KalmanEstimator(Estimator):
         self.H = section(self._floats, fl, 'H', (m, n))
         self.D = section(self._floats, fl, 'D', (m, mi))
         self.Q = section(self._floats, fl, 'Q', (n, n))
-        g = self.disturbance_matrix()
-        ad, gd = zoh(lin.A, g, self.dt)  # g's first columns are B: gd's are Bd
-        F = np.eye(n)
-        F[:nr, :nr] = ad
-        B = np.zeros((n, mi))
-        B[:nr] = gd[:, :mi]
-        H = np.zeros((m, n))
-        H[:, :nr] = lin.C
-        if self.filter_start > self.bias_start:
-            H[:, self.bias_start : self.filter_start] = np.eye(m)
-        self.C = np.ascontiguousarray(lin.C, dtype=float)
-        self.magnet_field = self.y_eq - self.model.measurement(
-            self.x_eq, self.u_eq, with_magnet=False
-        )
-        if self.strength_index is not None:
-            H[:, self.strength_index] = self.magnet_field
-        D = np.array(lin.D, dtype=float)
-        if self.config.average > 1:  # a mean of readings over the sample: of its start
-            H[:, :nr], D = group_mean_model(lin.A, lin.B, lin.C, D, self.dt, self.config.average)
-        Q = self.process_noise(gd)
-        if self.board is not None:  # the board's processed field (BoardProcessing)
-            D = self._board_model(F, B, H, D, Q, gd)
-        self.F[:], self.B[:], self.H[:], self.D[:] = F, B, H, D
-        self.Q[:] = 0.5 * (Q + Q.T)
+        self._write_model()
         for name, value in (
             ('y_eq', self.y_eq),
             ('u_eq', self.u_eq),
@@ -115,6 +91,7 @@ class KalmanEstimator(Estimator):
         ):
             section(self._floats, fl, name)[:] = value
         self._p_init = section(self._floats, fl, 'p_init', (n, n))
+        self._packed_y_eq = section(self._floats, fl, 'y_eq')
         self._ints[: lk.INT_HEADER] = [
             n, m, mi, k, w, nr,
             self.delay_mode, self.freeze.run, self.config.lost_samples,
@@ -138,6 +115,65 @@ class KalmanEstimator(Estimator):
         f._last = section(self._floats, fl, 'last', (k, 3))
         f.runs = section(self._ints, it, 'runs')
         f.events = section(self._ints, it, 'events')
+
+    def _write_model(self) -> None:
+        """Compute F, B, H, D, Q (and ``y_eq`` for the board) into the packed arrays."""
+        n, nr, m, mi = self.n_states, self.n_reduced, self.n_outputs, self.n_inputs
+        lin = self.linear
+        g = self.disturbance_matrix()
+        ad, gd = zoh(lin.A, g, self.dt)  # g's first columns are B: gd's are Bd
+        F = np.eye(n)
+        F[:nr, :nr] = ad
+        B = np.zeros((n, mi))
+        B[:nr] = gd[:, :mi]
+        H = np.zeros((m, n))
+        H[:, :nr] = lin.C
+        if self.filter_start > self.bias_start:
+            H[:, self.bias_start : self.filter_start] = np.eye(m)
+        self.C = np.ascontiguousarray(lin.C, dtype=float)
+        self.y_eq = np.array(lin.y_eq, dtype=float)
+        self.magnet_field = self.y_eq - self.model.measurement(
+            self.x_eq, self.u_eq, with_magnet=False
+        )
+        if self.strength_index is not None:
+            H[:, self.strength_index] = self.magnet_field
+        D = np.array(lin.D, dtype=float)
+        if self.config.average > 1:  # a mean of readings over the sample: of its start
+            H[:, :nr], D = group_mean_model(lin.A, lin.B, lin.C, D, self.dt, self.config.average)
+        Q = self.process_noise(gd)
+        if self.board is not None:  # the board's processed field (BoardProcessing)
+            D = self._board_model(F, B, H, D, Q, gd)
+        self.F[:], self.B[:], self.H[:], self.D[:] = F, B, H, D
+        self.Q[:] = 0.5 * (Q + Q.T)
+
+    def use_board(self, board) -> None:
+        """Model this board's processing from now on, and restart (:meth:`reset`).
+
+        For a board whose processing was measured (its coil pairs' feedthrough:
+        ``BoardProcessing.from_model(model, pairs=...)``). The packed arrays
+        keep their place: the loop's compiled step sees the new model.
+
+        Parameters
+        ----------
+        board : BoardProcessing
+            Of the estimator's channels.
+
+        Raises
+        ------
+        ValueError
+            If the estimator's measurement is not ``board``, or the board's
+            channels differ from the estimator's.
+        """
+        if self.board is None:
+            raise ValueError("the estimator's measurement is 'raw': it models no board")
+        if board.baseline.shape != self.board.baseline.shape or not np.array_equal(
+            board.filtered, self.board.filtered
+        ):
+            raise ValueError('the board must have the channels of the estimator')
+        self.board = board
+        self._write_model()
+        self._packed_y_eq[:] = self.y_eq
+        self.reset()
 
     def reset(self, x0=None) -> None:
         """Restart: as :meth:`Estimator.reset`.

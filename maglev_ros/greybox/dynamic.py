@@ -116,6 +116,8 @@ def calibrate_dynamic(
     max_delay: int = 3,
     form: str = 'linear',
     measurement: str = 'raw',
+    board_pairs=None,
+    fit_board_pairs: bool = True,
 ) -> DynamicCalibration:
     """Estimate the free parameters of ``vector`` from levitation data (linear grey-box).
 
@@ -148,6 +150,18 @@ def calibrate_dynamic(
         What the field channels are: the raw field, or a V4x PC-control
         firmware's output (baseline and feedthrough removed, x/y low-pass;
         chosen by the user, never inferred). Linear form only.
+    board_pairs : array_like, shape (3 k, 2), optional
+        ``board``: the processed field per ampere of each coil pair, measured
+        without the magnet, T/A (:class:`LinearGreyBoxProblem`); default: the
+        firmware's compensation taken as exact.
+    fit_board_pairs : bool
+        ``board``, one sensor: estimate what each axis's own coil pair leaves
+        in its readings (``board.bx_xpair``, ``board.by_ypair``, from
+        ``board_pairs`` or the model's exact compensation) along with the
+        free parameters. A few 0.01 mT/A there move the magnet's polarisation
+        and mass by several of their standard deviations along the line
+        they share; estimated, that uncertainty is in their standard
+        deviations.
 
     Returns
     -------
@@ -206,6 +220,20 @@ def calibrate_dynamic(
     estimation = [p[0] for p in parts]
     validation = [p[1] for p in parts]
     sigma = np.median([noise_level(e.y) for e in estimation], axis=0)
+    board = {'measurement': measurement, 'board_pairs': board_pairs}
+    channels = estimation[0].channels(len(vector.base.sensors))
+    if measurement == 'board' and fit_board_pairs and channels.size == 3:
+        from ..physics.board_processing import BoardProcessing
+        from ..physics.model import MaggyModel
+
+        start = board_pairs
+        if start is None:
+            start = BoardProcessing.model_pairs(MaggyModel(vector.base), channels[::3] // 3)
+        vector = vector.with_board_pairs(start)
+        say(
+            "the board's pair feedthrough is estimated too (board.bx_xpair, board.by_ypair; "
+            + ('from the measured values)' if board_pairs is not None else 'from zero)')
+        )
     say(f'noise level per channel: {", ".join(f"{1e3 * s:.3f}" for s in sigma)} mT rms')
 
     start = time.perf_counter()
@@ -213,9 +241,7 @@ def calibrate_dynamic(
     if delay is None:
         for d in range(max_delay + 1):
             # the linear predictor finds the same delay at a tenth of the cost
-            trial = LinearGreyBoxProblem(
-                vector, estimation, d, sigma, process_noise, measurement=measurement
-            )
+            trial = LinearGreyBoxProblem(vector, estimation, d, sigma, process_noise, **board)
             r = trial.residual(np.zeros(len(trial.free)))
             costs.append(float(r @ r) / r.size)
         delay = int(np.argmin(costs))
@@ -229,7 +255,7 @@ def calibrate_dynamic(
             'the nonlinear form models the raw field only: use the linear form with '
             'the board measurement model'
         )
-    extra = {'measurement': measurement} if form == 'linear' else {}
+    extra = board if form == 'linear' else {}
     problem = problem_type(vector, estimation, delay, sigma, process_noise, **extra)
     if form == 'nonlinear':
         from .nonlinear import divergence_text

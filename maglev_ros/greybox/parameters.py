@@ -21,6 +21,9 @@ fixed-magnet experiment):
 ``sensor{k}.offset_x|y|z``  T      per-axis offset
 ``sensor{k}.tilt_x|y|z``    rad    mounting rotation (rotation vector, after the nominal one)
 ``pose{e}.x|y|z|alpha|beta`` m/rad where experiment ``e`` held the magnet (not in the file)
+``board.b{x|y|z}_{x|y}pair`` T/A   a V4x PC-control board's processed field per ampere of
+                                   its x or y coil pair (``--measurement board``; not in
+                                   the file)
 =========================== ====== =====================================================
 
 The sensor delay is not a continuous parameter here: static calibration
@@ -50,6 +53,7 @@ __all__ = [
     'ParameterSpec',
     'ParameterVector',
     'parameter_vector',
+    'BOARD_PAIRS',
     'POSE_NAMES',
 ]
 
@@ -57,6 +61,10 @@ __all__ = [
 #: looks the same at any yaw).
 POSE_NAMES = ('x', 'y', 'z', 'alpha', 'beta')
 _AXES = ('x', 'y', 'z')
+#: A board's processed field per ampere of each coil pair, row by row (Bx, By, Bz; x, y pair)
+BOARD_PAIRS = tuple(f'board.b{a}_{p}pair' for a in _AXES for p in ('x', 'y'))
+#: T/A either side of the measured value that a board's pair feedthrough may take
+BOARD_PAIR_SPAN = 2e-4
 
 
 @dataclass(frozen=True)
@@ -232,6 +240,23 @@ def _pose_specs(index: int, pose: Sequence[float]) -> list[ParameterSpec]:
     return specs
 
 
+def _board_pair_specs(pairs: np.ndarray) -> list[ParameterSpec]:
+    return [
+        _spec(
+            name,
+            'T/A',
+            value,
+            value - BOARD_PAIR_SPAN,
+            value + BOARD_PAIR_SPAN,
+            1e-5,
+            ('mT/A', 1e3),
+            "board's processed field per ampere of a coil pair",
+            in_file=False,
+        )
+        for name, value in zip(BOARD_PAIRS, np.ravel(pairs), strict=True)
+    ]
+
+
 class ParameterVector:
     """An ordered set of named parameters over a base parameter set.
 
@@ -389,6 +414,41 @@ class ParameterVector:
         new = [dataclasses.replace(s, free=free) for s in _pose_specs(index, pose)]
         kept = [s for s in self.specs if not s.name.startswith(f'pose{index}.')]
         return ParameterVector(self.base, [*kept, *new])
+
+    def with_board_pairs(
+        self, pairs, free: Iterable[str] = ('board.bx_xpair', 'board.by_ypair')
+    ) -> ParameterVector:
+        """Return a copy with a board's pair feedthrough as parameters (:data:`BOARD_PAIRS`).
+
+        Parameters
+        ----------
+        pairs : array_like, shape (3, 2)
+            Processed Bx, By, Bz per ampere of the x and the y pair, T/A (the
+            nominal values: measured, or the model's own).
+        free : iterable of str
+            Which are estimated (default each axis's own pair: what the
+            firmware's compensation leaves).
+        """
+        pairs = np.asarray(pairs, dtype=float)
+        if pairs.shape != (3, 2) or not np.all(np.isfinite(pairs)):
+            raise GreyBoxError(f'board pairs must be finite, shape (3, 2), got {pairs.shape}')
+        free = set(free)
+        new = [dataclasses.replace(s, free=s.name in free) for s in _board_pair_specs(pairs)]
+        kept = [s for s in self.specs if not s.name.startswith('board.')]
+        return ParameterVector(self.base, [*kept, *new])
+
+    def board_pairs(self, values: Mapping[str, float]) -> np.ndarray | None:
+        """Return the board's pair feedthrough (3, 2) in ``values``, T/A (None: not a parameter).
+
+        Parameters
+        ----------
+        values : mapping of str to float
+            Parameter values by name.
+        """
+        if BOARD_PAIRS[0] not in self._index:
+            return None
+        merged = {**self.nominal, **values}
+        return np.array([merged[n] for n in BOARD_PAIRS]).reshape(3, 2)
 
     # ------------------------------------------------------------------ values
     def values(self, free_values: Sequence[float] | None = None) -> dict[str, float]:

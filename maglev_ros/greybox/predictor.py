@@ -274,6 +274,10 @@ class LinearGreyBoxProblem:
         ``raw``: the sensors' field as the physics model gives it; ``board``:
         after a V4x PC-control firmware's processing (baseline and coil
         feedthrough removed, x/y low-pass; :mod:`maglev_ros.physics.board_processing`).
+    board_pairs : array_like, shape (3 k, 2), optional
+        ``board``: the processed field per ampere of each coil pair, measured
+        without the magnet (T/A; ``BoardProcessing.from_model``'s ``pairs``);
+        default: the firmware's compensation taken as exact.
     """
 
     def __init__(
@@ -285,12 +289,14 @@ class LinearGreyBoxProblem:
         process_noise: float = 1e-3,
         burn: int = 100,
         measurement: str = 'raw',
+        board_pairs=None,
     ):
         if measurement not in MEASUREMENTS:
             raise GreyBoxError(
                 f'measurement must be one of {", ".join(MEASUREMENTS)}, got {measurement!r}'
             )
         self.measurement = measurement
+        self.board_pairs = None if board_pairs is None else np.asarray(board_pairs, float)
         #: finite-difference step of the linearisation (the numerical check changes it)
         self.fd_step = FD_STEP
         self.vector = vector
@@ -344,17 +350,22 @@ class LinearGreyBoxProblem:
         reading = self.sigma**2
         filter_noise = np.zeros(0)
         if self.measurement == 'board':
-            full = BoardProcessing.from_model(model)
-            y_eq = y_eq - full.baseline[self.channels]
-            d = d - full.feedthrough[self.channels]
-            filtered = full.filtered[self.channels]
+            pairs = self.vector.board_pairs(values)  # estimated, else as measured
+            board = BoardProcessing.from_model(
+                model,
+                sensors=self.channels[::3] // 3,
+                pairs=self.board_pairs if pairs is None else pairs,
+            )
+            y_eq = y_eq - board.baseline
+            d = d - board.feedthrough
+            filtered = board.filtered
             # the board filters at each of its 200 us steps inside the host sample
-            ad, bd, c, d = augment_exact(lin.A, lin.B, c, d, full, filtered, self.Ts)
+            ad, bd, c, d = augment_exact(lin.A, lin.B, c, d, board, filtered, self.Ts)
             # the sensor noise enters before the filter: noise of the filter
             # states, not of the readings (white-noise readings bias the fit
             # in closed loop, where the noise reaches the currents)
-            sensor = full.sensor_noise(self.sigma[filtered], self.Ts)
-            filter_noise = full.noise_injection(self.Ts) * sensor**2
+            sensor = board.sensor_noise(self.sigma[filtered], self.Ts)
+            filter_noise = board.noise_injection(self.Ts) * sensor**2
             reading = np.where(filtered, (FILTERED_READING * self.sigma) ** 2, reading)
         q = (self.process_noise**2) * (bd @ bd.T) + 1e-30 * np.eye(ad.shape[0])
         q[ad.shape[0] - filter_noise.size :, ad.shape[0] - filter_noise.size :] += np.diag(

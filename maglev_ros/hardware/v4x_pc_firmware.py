@@ -16,7 +16,9 @@ work follows the published sketch:
   over the three levels. The readings come from ``setup_plant`` when given
   (the board powered up without the levitating magnet: the default of the
   virtual board), else from ``plant``; the plant itself is then started
-  when the loop starts (the magnet is put in place after set-up).
+  when the loop starts (the magnet is put in place after set-up), or
+  ``place_after`` s after set-up (the readings come from ``setup_plant``
+  until then: the host may measure the board without the magnet first).
 * **Sample** (every 200 us): the four currents through the 10-bit ADC
   (``I = (adc * 3.3 / 1023 - 1.65) / 0.5``), the field of one sensor minus
   the baseline plus the feedthrough compensation, x and y low-pass filtered
@@ -121,6 +123,10 @@ class V4xPcFirmware:
         Which of the plant's sensors the board reads (mux channel 7).
     init_delay : float, optional
         s of bus and sensor set-up before the baseline.
+    place_after : float, optional
+        s after set-up at which the levitating magnet is put in place (the
+        readings come from ``setup_plant`` until then; default 0: at the end
+        of set-up). Needs ``setup_plant``.
     freeze_limit : int, optional
         Identical readings in a row that reset the sensor.
     """
@@ -140,11 +146,16 @@ class V4xPcFirmware:
         sensor: int = 0,
         init_delay: float = 0.4,
         freeze_limit: int = FREEZE_LIMIT,
+        place_after: float = 0.0,
     ) -> None:
         if not callable(plant) or (setup_plant is not None and not callable(setup_plant)):
             raise TypeError('plant and setup_plant must be callable')
         if not init_delay >= 0:
             raise ValueError(f'init_delay must be >= 0 s, got {init_delay!r}')
+        if not place_after >= 0 or (place_after > 0 and setup_plant is None):
+            raise ValueError(
+                f'place_after must be >= 0 s (and > 0 needs a setup_plant), got {place_after!r}'
+            )
         if freeze_limit < 1:
             raise ValueError(f'freeze_limit must be >= 1, got {freeze_limit}')
         self.plant = plant
@@ -156,6 +167,8 @@ class V4xPcFirmware:
         self.freeze_limit = int(freeze_limit)
         self._init_us = round(init_delay * 1e6)
         self.setup_us = self._init_us + SETUP_US - 400_000
+        #: us since power-up at which the levitating magnet is in place
+        self.placed_us = self.setup_us + round(place_after * 1e6)
         self.now_us = 0
         self._next_tick = 0
         self._pwm = np.zeros(4, dtype=np.int64)  # x+, x-, y+, y-
@@ -257,7 +270,8 @@ class V4xPcFirmware:
         if tick < self.setup_us:
             self._setup_tick(tick)
             return
-        field = self._read_plant(self.plant, tick)
+        placed = tick >= self.placed_us
+        field = self._read_plant(self.plant if placed else self.setup_plant, tick)
         if self._blocked or tick < self._resume_us:
             return  # the loop is stuck in readBytesUntil or in the sensor reset
         self._sample(tick, field)

@@ -77,6 +77,14 @@ class V4xPcLoopSettings:
         ``SCHED_FIFO`` priority of the loop's thread while it runs, 1-99
         (:func:`~maglev_ros.realtime_priority.fifo_priority`); 0 (default): the
         normal policy.
+    measure_feedthrough : bool
+        Before the loop, with the magnet absent, measure what each coil pair
+        leaves in the board's readings (the firmware's own compensation is a
+        few percent off; :mod:`~maglev_ros.hardware.v4x_pc_feedthrough`), model
+        it, then wait for the magnet. False: the magnet is in place already,
+        and the firmware's compensation is taken as exact.
+    magnet_timeout : float
+        s to wait for the magnet after the measurement.
     """
 
     params: str = 'maggy_v2'
@@ -93,6 +101,8 @@ class V4xPcLoopSettings:
     position_scale: float = 1.0e-4
     current_scale: float = 1.0
     realtime_priority: int = 0
+    measure_feedthrough: bool = True
+    magnet_timeout: float = 60.0
 
     @property
     def scaling(self) -> CurrentScaling:
@@ -273,6 +283,11 @@ class V4xPcRun:
     settled_from : float
         The plant clock at the first sample of the settling (``started`` when
         there was none), s.
+    feedthrough : PairFeedthrough or None
+        What the coil pairs left in the readings, measured before the loop
+        (None: not measured).
+    magnet_wait : float
+        s waited for the magnet after that measurement.
     """
 
     samples: int
@@ -286,6 +301,8 @@ class V4xPcRun:
     ended: float
     priority_note: str = ''
     settled_from: float = float('nan')
+    feedthrough: object = None
+    magnet_wait: float = 0.0
 
 
 def run_v4x_pc_loop(
@@ -298,6 +315,7 @@ def run_v4x_pc_loop(
     progress=None,
     ready=None,
     settle: int = 0,
+    notice=None,
 ) -> V4xPcRun:
     """Open the board, run the closed loop for ``samples`` samples, zero the coils.
 
@@ -323,6 +341,9 @@ def run_v4x_pc_loop(
         Samples the loop holds the magnet first, without excitation and not
         logged (the estimator's start and the magnet's first correction are
         not in the record); the excitation and the record start after them.
+    notice : callable, optional
+        ``notice(text)`` with what the user does next: before the feedthrough
+        measurement (the magnet off the board) and after it (place the magnet).
 
     Returns
     -------
@@ -359,6 +380,7 @@ def run_v4x_pc_loop(
     with frozen_heap(), fifo_priority(s.realtime_priority) as priority_note:
         plant.open()
         try:
+            feedthrough, waited = _before_the_magnet(s, loop, link, clock, sleep, notice)
             started = settled_from = now()
             done, chunk, total = 0, max(1, int(s.sample_rate)), settle + samples
             while done < total and not loop.stopped:
@@ -383,4 +405,38 @@ def run_v4x_pc_loop(
         ended,
         priority_note,
         settled_from,
+        feedthrough,
+        waited,
     )
+
+
+def _before_the_magnet(s: V4xPcLoopSettings, loop: ControlLoop, link, clock, sleep, notice):
+    """Measure the coil pairs' feedthrough, model it, wait for the magnet (if asked to).
+
+    Returns
+    -------
+    (PairFeedthrough or None, float)
+        The measurement and the s waited for the magnet.
+    """
+    if not s.measure_feedthrough:
+        return None, 0.0
+    from ..hardware.v4x_pc_feedthrough import (
+        measure_feedthrough,
+        measurement_time,
+        wait_for_magnet,
+    )
+    from ..physics.board_processing import BoardProcessing
+
+    say = notice or (lambda text: None)
+    timing = {'clock': clock, 'sleep': sleep, 'period': 1.0 / s.sample_rate}
+    seconds = measurement_time(timing['period'])
+    say(f'measuring the coil feedthrough the board leaves ({seconds:.1f} s; the magnet off)')
+    feedthrough = measure_feedthrough(link, **timing)
+    est = loop.estimator
+    est.use_board(BoardProcessing.from_model(est.model, pairs=feedthrough.response))
+    say(
+        f'{feedthrough.summary()}; now hold the magnet over the centre of the board at its '
+        f'height: the loop takes it when its field is there (waiting up to {s.magnet_timeout:g} s)'
+    )
+    waited = wait_for_magnet(link, float(est.y_eq[2]), timeout=s.magnet_timeout, **timing)
+    return feedthrough, waited

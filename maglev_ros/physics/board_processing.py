@@ -29,10 +29,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'BoardProcessing', 'augment', 'augment_exact']
+__all__ = ['BOARD_PERIOD', 'FILTER_WEIGHT', 'PAIRS', 'BoardProcessing', 'augment', 'augment_exact']
 
 #: The firmware's loop period, s (5 kHz).
 BOARD_PERIOD = 2e-4
+#: The coil pairs (x+, x-) and (y+, y-): the board drives each antisymmetrically.
+PAIRS = ((0, 1), (2, 3))
 #: Weight of the new sample in the firmware's x/y low-pass (``f = 0.2 raw + 0.8 f``).
 FILTER_WEIGHT = 0.2
 
@@ -63,7 +65,7 @@ class BoardProcessing:
     board_period: float = BOARD_PERIOD
 
     @classmethod
-    def from_model(cls, model, sensors=None) -> BoardProcessing:
+    def from_model(cls, model, sensors=None, pairs=None) -> BoardProcessing:
         """Return the processing a board that the physics model describes would apply.
 
         Parameters
@@ -72,24 +74,86 @@ class BoardProcessing:
             The physics model (its parameter set).
         sensors : sequence of int, optional
             Sensors whose channels are kept (default all).
+        pairs : array_like, shape (p, 2), optional
+            The board's processed field per ampere of each coil pair, T/A, as
+            measured with the magnet absent
+            (:func:`maglev_ros.hardware.v4x_pc_feedthrough.measure_feedthrough`;
+            columns: the x pair, the y pair; rows: the kept channels). The
+            firmware measures its own compensation with a few percent of error;
+            given this, the feedthrough is corrected so that the processed field
+            of each pair is the measured one (only the pairs' differences reach
+            the coils: the correction is split evenly, antisymmetric, between a
+            pair's two coils). Default: the model's own compensation, exact.
 
         Returns
         -------
         BoardProcessing
             Baseline and feedthrough of the model's own field.
         """
-        n_s = model.params.solenoids.count
-        x = model.hover_state(0.03)  # any state: the magnet is left out
-        base = model.measurement(x, np.zeros(n_s), with_magnet=False)
-        feed = np.column_stack(
-            [model.measurement(x, np.eye(n_s)[j], with_magnet=False) - base for j in range(n_s)]
-        )
-        axes = np.arange(base.size) % 3
-        feed[axes == 2] = 0.0  # z is not compensated
-        rows = np.arange(base.size)
-        if sensors is not None:
-            rows = np.concatenate([np.arange(3 * k, 3 * k + 3) for k in sensors])
-        return cls(base[rows], feed[rows], axes[rows] < 2)
+        base, raw, rows = _coil_field(model, sensors)
+        feed = raw.copy()
+        feed[np.arange(rows.size) % 3 == 2] = 0.0  # z is not compensated
+        board = cls(base, feed, np.arange(rows.size) % 3 < 2)
+        return board if pairs is None else board.with_pairs(raw, pairs)
+
+    @classmethod
+    def model_pairs(cls, model, sensors=None) -> np.ndarray:
+        """Return the processed field per ampere of each coil pair of the model's board, T/A.
+
+        Zero on x and y (the model's compensation is exact); the coils' own
+        field on z.
+
+        Parameters
+        ----------
+        model : MaggyModel
+            The physics model.
+        sensors : sequence of int, optional
+            Sensors whose channels are kept (default all).
+
+        Returns
+        -------
+        ndarray, shape (p, 2)
+        """
+        _, raw, _ = _coil_field(model, sensors)
+        return cls.from_model(model, sensors).pair_response(raw)
+
+    def pair_response(self, raw: np.ndarray) -> np.ndarray:
+        """Return the processed field per ampere of each coil pair, T/A, shape (p, 2).
+
+        Parameters
+        ----------
+        raw : ndarray, shape (p, 4)
+            The coils' raw field per ampere (order x+, x-, y+, y-), T/A.
+        """
+        processed = np.asarray(raw, dtype=float) - self.feedthrough
+        return np.column_stack([processed[:, a] - processed[:, b] for a, b in PAIRS])
+
+    def with_pairs(self, raw: np.ndarray, pairs) -> BoardProcessing:
+        """Return this processing with its feedthrough corrected to a measured pair response.
+
+        Parameters
+        ----------
+        raw : ndarray, shape (p, 4)
+            The coils' raw field per ampere, T/A (the model's).
+        pairs : array_like, shape (p, 2)
+            Measured processed field per ampere of the x and the y pair, T/A.
+
+        Raises
+        ------
+        ValueError
+            If ``pairs`` is not finite or has the wrong shape.
+        """
+        pairs = np.asarray(pairs, dtype=float)
+        if pairs.shape != (self.baseline.size, 2) or not np.all(np.isfinite(pairs)):
+            raise ValueError(
+                f'pairs must be finite, shape ({self.baseline.size}, 2), got {pairs.shape}'
+            )
+        excess = self.pair_response(raw) - pairs  # what the board removes beyond the model
+        feed = self.feedthrough.copy()
+        for (a, b), col in zip(PAIRS, excess.T, strict=True):
+            feed[:, a] += col / 2
+            feed[:, b] -= col / 2
+        return BoardProcessing(self.baseline, feed, self.filtered, self.weight, self.board_period)
 
     def host_pole(self, Ts: float) -> float:
         """Return the pole ``a`` of the x/y low-pass at the host's sample time.
@@ -242,6 +306,20 @@ class BoardProcessing:
         for k in range(1, b.shape[0]):
             out[k, cols] = a * out[k - 1, cols] + (1 - a) * b[k, cols]
         return out
+
+
+def _coil_field(model, sensors=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the field without the magnet (p,), each coil's field per ampere (p, 4), the rows."""
+    n_s = model.params.solenoids.count
+    x = model.hover_state(0.03)  # any state: the magnet is left out
+    base = model.measurement(x, np.zeros(n_s), with_magnet=False)
+    raw = np.column_stack(
+        [model.measurement(x, np.eye(n_s)[j], with_magnet=False) - base for j in range(n_s)]
+    )
+    rows = np.arange(base.size)
+    if sensors is not None:
+        rows = np.concatenate([np.arange(3 * k, 3 * k + 3) for k in sensors])
+    return base[rows], raw[rows], rows
 
 
 def augment(

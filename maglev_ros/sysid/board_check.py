@@ -168,16 +168,20 @@ def check_board_bag(
         :func:`~maglev_ros.sysid.seed_models.identify_groups` (IV with the excitation).
     checks : dict
         :func:`~maglev_ros.sysid.seed_models.physics_deviations` against
-        :func:`board_local_plant` of each pair.
+        :func:`board_local_plant` of each pair (with the board's pair
+        feedthrough of the bag's metadata, ``board_feedthrough``, when the
+        loop measured it).
     """
     from ..bags import read_bag
+    from ..hardware.v4x_pc_feedthrough import PairFeedthrough
     from ..loop.v4x_pc_setup import board_model
     from ..physics import linearize
     from .seed_models import identify_groups, physics_deviations
 
     outputs, inputs = board_bag_channels(sensor)
     # periods the host missed are gaps: outputs interpolated, inputs held across them
-    data = read_bag(bag, outputs, inputs, allow_gaps=True).data
+    dataset = read_bag(bag, outputs, inputs, allow_gaps=True)
+    data = dataset.data
     # the reference: the loop's own sampling (decimation keeps that relation, filtered)
     loop_ts = data.Ts
     if rate is not None:
@@ -186,7 +190,10 @@ def check_board_bag(
         data = data.decimate(max(1, round(1.0 / (data.Ts * rate))))
     model = board_model(params, sensor)
     linear = linearize(model).reduced()
-    board = BoardProcessing.from_model(model)
+    # the board's pair feedthrough as the loop measured it before the magnet came, if it did
+    recorded = dataset.metadata.get('board_feedthrough')
+    pairs = None if recorded is None else PairFeedthrough.response_from(recorded)
+    board = BoardProcessing.from_model(model, pairs=pairs)
     results = identify_groups(data, split)
     plants = {p: board_local_plant(linear, loop_ts, f'B{p}_0', p, board) for p in ('x', 'y')}
     return data, results, physics_deviations(results, plants, band)

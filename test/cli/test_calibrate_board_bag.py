@@ -1,12 +1,13 @@
 """maglev-calibrate on a bag of the closed loop on a V4x PC-control board.
 
 The board is the emulated firmware (physics plant, magnet free) whose magnet is
-not the believed one: polarisation and mass +10 % (it floats at the believed
-height). A record of a magnet the loop lost (-20 %) is refused. The loop (the KF
+not the believed one: polarisation and mass +10 % or -10 % (it floats near the
+believed height). A record of a magnet the loop lost (-30 %) is refused. The loop (the KF
 with the board's measurement model, the LQR, a PRBS on
-the pairs) believes the nominal set and records the bag. ``--measurement board``
-recovers the board's magnet within the stated uncertainty; the raw-field model
-on the same bag refuses.
+the pairs) believes the nominal set and records the bag, with the coil pairs'
+feedthrough it measured before the magnet came. ``--measurement board``
+recovers the board's magnet within the stated uncertainty (the pairs'
+feedthrough estimated along); the raw-field model on the same bag refuses.
 
 The same on a bag of the real command, ``maglev-lab --firmware v4x_pc
 --virtual-board --magnet free --board-params`` (the virtual board in its own
@@ -35,24 +36,35 @@ from maglev_ros.physics import load_parameters
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / 'loop'))
 from test_v4x_pc_plant import SETTINGS, emulated_board  # noqa: E402
 
-POLARIZATION, MASS = 1.1, 1.1  # the board's magnet: 10 % stronger and heavier
+#: the board's magnet: polarisation and mass 10 % above and 10 % below the believed ones
+FACTORS = (1.1, 0.9)
 SAMPLES = 10000  # 10 s at 1 kHz
 
 
-@pytest.fixture(scope='module')
-def board_bag(tmp_path_factory):
+def _magnet(factor: float):
     nominal = load_parameters(SETTINGS.params)
     magnet = dataclasses.replace(
         nominal.magnet,
-        polarization=nominal.magnet.polarization * POLARIZATION,
-        mass=nominal.magnet.mass * MASS,
+        polarization=nominal.magnet.polarization * factor,
+        mass=nominal.magnet.mass * factor,
     )
+    return nominal, magnet
+
+
+@pytest.fixture(scope='module', params=FACTORS, ids=lambda f: f'magnet x{f}')
+def board_bag(request, tmp_path_factory):
+    nominal, magnet = _magnet(request.param)
     plant, _, port, link = emulated_board(params=nominal.replace(magnet=magnet))
     excitation = CommandExcitation('prbs', 0.05, (0.0, 0.05), 'pairs', length=SAMPLES)
     run = run_v4x_pc_loop(SETTINGS, link, SAMPLES, excitation, clock=port.clock, sleep=port.sleep)
     assert run.samples == SAMPLES and not plant.crashed, run.reason
     bag = tmp_path_factory.mktemp('board') / 'bag'
-    write_sample_bag(bag, run.log, (SETTINGS.sensor,), {'magnet': 'free', 'firmware': 'v4x_pc'})
+    meta = {
+        'magnet': 'free',
+        'firmware': 'v4x_pc',
+        'board_feedthrough': run.feedthrough.metadata(),
+    }
+    write_sample_bag(bag, run.log, (SETTINGS.sensor,), meta)
     return bag, magnet
 
 
@@ -105,18 +117,13 @@ def test_the_raw_model_on_board_data_refuses_and_writes_nothing(board_bag, tmp_p
     assert not (tmp_path / 'cal.yaml').exists()
 
 
-@pytest.fixture(scope='module')
-def lab_bag(tmp_path_factory):
-    """A bag of ``maglev-lab --firmware v4x_pc --virtual-board`` whose magnet is +10 %."""
+@pytest.fixture(scope='module', params=FACTORS, ids=lambda f: f'magnet x{f}')
+def lab_bag(request, tmp_path_factory):
+    """A bag of ``maglev-lab --firmware v4x_pc --virtual-board`` whose magnet is +-10 %."""
     from maglev_ros.greybox import write_parameters
 
     out = tmp_path_factory.mktemp('lab')
-    nominal = load_parameters(SETTINGS.params)
-    magnet = dataclasses.replace(
-        nominal.magnet,
-        polarization=nominal.magnet.polarization * POLARIZATION,
-        mass=nominal.magnet.mass * MASS,
-    )
+    nominal, magnet = _magnet(request.param)
     board = write_parameters(nominal.replace(magnet=magnet, name='perturbed'), out / 'b.yaml')
     code = lab.main(
         [
@@ -169,13 +176,13 @@ def test_on_the_lab_commands_bag_the_raw_model_refuses(lab_bag, tmp_path, capsys
 
 
 def test_a_record_whose_magnet_was_lost_is_refused(tmp_path, capsys):
-    """-20 %: the loop's estimate runs away, its controller switches the coils off (their
+    """-30 %: the loop's estimate runs away, its controller switches the coils off (their
     currents freeze) and the magnet falls; refused, not fitted."""
     nominal = load_parameters(SETTINGS.params)
     magnet = dataclasses.replace(
         nominal.magnet,
-        polarization=nominal.magnet.polarization * 0.8,
-        mass=nominal.magnet.mass * 0.8,
+        polarization=nominal.magnet.polarization * 0.7,
+        mass=nominal.magnet.mass * 0.7,
     )
     plant, _, port, link = emulated_board(0, params=nominal.replace(magnet=magnet))
     run = run_v4x_pc_loop(SETTINGS, link, 3000, None, clock=port.clock, sleep=port.sleep)

@@ -249,3 +249,27 @@ def test_step_takes_lists_and_strided_rows_without_compiling_again(v2, v2_linear
         others.step(ys[:2], cs[0])
     with pytest.raises(ValueError, match='currents must be 4 finite numbers'):
         others.step(ys[0], [np.nan, 0.0, 0.0, 0.0])
+
+
+def test_a_measured_board_feedthrough_goes_into_the_same_packed_model():
+    """use_board: the board's filter rows take the measured pair feedthrough; the packed
+    arrays the compiled step reads stay where they are; a raw-field KF refuses."""
+    from maglev_ros.loop.v4x_pc_setup import board_model
+    from maglev_ros.physics.board_processing import BoardProcessing
+
+    model = board_model('maggy_v2', 0)
+    est = make_estimator(model, EstimatorConfig(sample_rate=1000.0, measurement='board'))
+    F, B, y_eq = est.F, est.B.copy(), est.y_eq.copy()
+    pairs = BoardProcessing.model_pairs(model) + np.array([[2e-5, 0], [0, -3e-5], [0, 0]])
+    est.use_board(BoardProcessing.from_model(model, pairs=pairs))
+    assert est.F is F and np.array_equal(est.y_eq, y_eq)
+    rows = slice(est.filter_start, est.n_states)
+    changed = est.B[rows] - B[rows]  # filter states: the pair's direct field, per coil
+    # x: more field per ampere of the x pair (x+ up, x- down), y: less per ampere of the y pair
+    assert changed[0, 0] > 0 and changed[0, 1] == pytest.approx(-changed[0, 0])
+    assert changed[1, 2] < 0 and changed[1, 3] == pytest.approx(-changed[1, 2])
+    assert np.allclose(changed[0, 2:], 0.0) and np.allclose(changed[1, :2], 0.0)
+    assert np.array_equal(est.B[: est.filter_start], B[: est.filter_start])  # the magnet's
+    raw = make_estimator(model, EstimatorConfig(sample_rate=1000.0))
+    with pytest.raises(ValueError, match="measurement is 'raw'"):
+        raw.use_board(BoardProcessing.from_model(model))

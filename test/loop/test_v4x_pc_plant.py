@@ -15,6 +15,7 @@ import pytest
 from maglev_ros.hardware import v4x_pc_protocol as proto
 from maglev_ros.hardware.emulated_port import EmulatedPort
 from maglev_ros.hardware.physics_plant import make_simulator_plant
+from maglev_ros.hardware.v4x_pc_feedthrough import measurement_time
 from maglev_ros.hardware.v4x_pc_firmware import V4xPcFirmware
 from maglev_ros.hardware.v4x_pc_link import V4xPcLink
 from maglev_ros.loop.v4x_pc_plant import V4xPcPlant
@@ -22,19 +23,23 @@ from maglev_ros.loop.v4x_pc_setup import V4xPcLoopSettings, build_v4x_pc_loop, r
 from maglev_ros.physics import SensorEffects
 
 SETTINGS = V4xPcLoopSettings()
+#: s after set-up at which the emulated magnet is placed: after the feedthrough measurement
+PLACE_AFTER = measurement_time(1.0 / SETTINGS.sample_rate) + 0.5
 
 
-def emulated_board(seed: int = 0, params=None):
+def emulated_board(seed: int = 0, params=None, place_after: float = PLACE_AFTER):
     """The free magnet on the emulated V4x PC-control board: (plant, firmware, port, link).
 
     ``params``: the board's parameter set (default the one the loop believes).
+    ``place_after``: s after set-up at which the magnet is put in place (default:
+    after the loop's feedthrough measurement; 0: at the end of set-up).
     """
     scaling = SETTINGS.scaling
     params = params or SETTINGS.params
     sensor = SensorEffects(noise_rms=1e-4, quantization=0.098e-3)
     plant = make_simulator_plant('free', params, scaling, sensor, seed)
     setup = make_simulator_plant('absent', params, scaling, sensor, seed + 1)
-    firmware = V4xPcFirmware(plant, scaling=scaling, setup_plant=setup)
+    firmware = V4xPcFirmware(plant, scaling=scaling, setup_plant=setup, place_after=place_after)
     port = EmulatedPort(firmware)
     # the link's timeouts run on the board's time too: the run is the same on any machine
     link = V4xPcLink('emulated', serial_link=port, timeout=0.25, clock=port.clock)
@@ -120,7 +125,7 @@ def test_a_board_too_slow_for_the_rate_is_refused_with_its_coils_reset():
 
 def _running(seconds: float = 0.5):
     """A loop on the emulated board that ran ``seconds`` with the magnet levitating."""
-    sim, firmware, port, link = emulated_board()
+    sim, firmware, port, link = emulated_board(place_after=0.0)  # no measurement: in place
     loop, plant = build_v4x_pc_loop(SETTINGS, link, clock=port.clock, sleep=port.sleep)
     plant.open()
     loop.run(int(seconds * SETTINGS.sample_rate))
@@ -231,3 +236,44 @@ def test_an_unplug_on_the_virtual_board_ends_at_zero_current_once_plugged_back()
         with board.lock:
             assert factory.firmware.pwm.tolist() == [0, 0, 0, 0]
             assert factory.firmware.applied[-1][1:] == (0, 0)
+
+
+def _hold(seed: int, factor: float, settings: V4xPcLoopSettings, place_after: float):
+    """Run 3 s (0.05 A PRBS) on board ``seed`` with a magnet ``factor`` x polarisation, mass."""
+    import dataclasses
+
+    from maglev_ros.control.excitation import CommandExcitation
+    from maglev_ros.physics import load_parameters
+
+    nominal = load_parameters(SETTINGS.params)
+    magnet = dataclasses.replace(
+        nominal.magnet,
+        polarization=nominal.magnet.polarization * factor,
+        mass=nominal.magnet.mass * factor,
+    )
+    plant, firmware, port, link = emulated_board(
+        seed, nominal.replace(magnet=magnet), place_after=place_after
+    )
+    excitation = CommandExcitation('prbs', 0.05, (0.0, 0.05), 'pairs', length=3000)
+    run = run_v4x_pc_loop(settings, link, 3000, excitation, clock=port.clock, sleep=port.sleep)
+    return plant, firmware, run
+
+
+@pytest.mark.parametrize('seed, factor', [(0, 0.9), (3, 1.0), (4, 0.9), (4, 1.1)])
+def test_with_the_boards_feedthrough_measured_the_magnet_is_held(seed, factor):
+    """Boards whose own slopes are furthest off (sensor-noise seeds 0, 3, 4), and magnets
+    10 % weaker or stronger than believed: held."""
+    plant, firmware, run = _hold(seed, factor, SETTINGS, PLACE_AFTER)
+    assert run.samples == 3000 and not plant.crashed, run.reason
+    assert run.feedthrough is not None and 0.0 < run.magnet_wait < 1.0
+    assert firmware.pwm.tolist() == [0, 0, 0, 0]
+
+
+def test_without_it_a_board_whose_slopes_are_off_loses_the_believed_magnet():
+    """Board 3's y pair leaves -0.04 mT/A; taken as exact, the loop reads its own
+    commands as motion."""
+    import dataclasses
+
+    settings = dataclasses.replace(SETTINGS, measure_feedthrough=False)
+    plant, firmware, run = _hold(3, 1.0, settings, 0.0)
+    assert plant.crashed and run.feedthrough is None

@@ -31,6 +31,25 @@ def test_baseline_and_feedthrough_are_the_models_own_field(model):
     np.testing.assert_array_equal(selected.baseline, bp.baseline[3:6])
 
 
+def test_a_measured_pair_feedthrough_is_what_the_processing_then_leaves(model):
+    """A board whose own compensation is off: each pair's processed field per ampere is the
+    measured one (the pairs are driven antisymmetrically: x+ at +i, x- at -i)."""
+    exact = BoardProcessing.model_pairs(model, sensors=[0])
+    assert np.allclose(exact[:2], 0.0, atol=1e-12)  # the model's own: nothing left on x, y
+    measured = exact + np.array([[2.5e-5, -1e-6], [1e-6, -4.2e-5], [3e-6, 0.0]])
+    bp = BoardProcessing.from_model(model, sensors=[0], pairs=measured)
+    x = model.hover_state(0.03)
+    base = model.measurement(x, np.zeros(4), with_magnet=False)[:3]
+    for col, pair in enumerate(([1.0, -1.0, 0.0, 0.0], [0.0, 0.0, 1.0, -1.0])):
+        i = 0.7 * np.array(pair)
+        raw = model.measurement(x, i, with_magnet=False)[:3]
+        processed = raw - bp.baseline - bp.feedthrough @ i
+        np.testing.assert_allclose(processed, 0.7 * measured[:, col], atol=1e-12)
+    np.testing.assert_allclose(bp.baseline, base)
+    with pytest.raises(ValueError, match=r'pairs must be finite, shape \(3, 2\)'):
+        BoardProcessing.from_model(model, sensors=[0], pairs=np.zeros((2, 2)))
+
+
 def test_host_rate_filter_matches_the_board_loop_for_held_signals(model):
     bp = BoardProcessing.from_model(model, sensors=[0])
     Ts = 1e-3  # 5 board steps per host sample
