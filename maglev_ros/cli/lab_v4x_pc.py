@@ -47,7 +47,7 @@ V4X_PC_RATE = 1000.0  # Hz, samples (and commands) per second by default
 V4X_PC_SECONDS = 25.0  # s of samples by default (--duration, --samples)
 V4X_PC_AMPLITUDE = 0.3  # A per pair: the loop rejects most of it; the hold is noise-bound
 V4X_PC_BAND = (0.0, 0.05)  # of Nyquist: 0-25 Hz at 1 kHz, where the field sees the motion
-PLACE_MARGIN = 1.5  # s the virtual board's magnet comes after the feedthrough measurement
+PLACE_MARGIN = 1.0  # s the virtual board's magnet comes after the feedthrough measurement
 
 
 def check_v4x_pc(args: argparse.Namespace) -> None:
@@ -236,8 +236,16 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
                         'fit_validation': fit if np.isfinite(fit) else None,
                         'physics_max_db': getattr(check, 'max_db', None),
                         'physics_max_deg': getattr(check, 'max_deg', None),
+                        'physics_notches_hz': list(getattr(check, 'notches', ())),
                     }
                 )
+        notches = sorted({f for c in checks.values() for f in getattr(c, 'notches', ())})
+        if notches:
+            print(
+                'physics check without +-1 Hz around the notch at '
+                f'{", ".join(f"{f:.2f}" for f in notches)} Hz (where the feedthrough a pair '
+                "leaves cancels the magnet's response)"
+            )
     (out / 'models.json').write_text(json.dumps(summary, indent=1))
     print(f'wrote {out / "models.json"}')
     return 0 if run.samples == samples and 'identification' not in summary and not crashed else 1

@@ -4,7 +4,7 @@ The firmware removes each coil's direct field from the sensor's x and y axes
 with slopes it measures at power-up (``shared/docs/teensy-protocol.md``): ten
 readings at each of three PWM levels, with the sensor's noise, so each slope
 is a few percent off (emulated: 0.4 mT/A measured as 0.36-0.44 mT/A). What is
-left, some 0.01-0.02 mT per ampere of a pair, is a direct path from the
+left, up to 0.05 mT per ampere of a pair (emulated), is a direct path from the
 commands to the readings that the loop's model does not have; with the
 board's one sensor, whose x and y see the magnet's lateral motion weakly, it
 loses the magnet in some boards (docs/boards.md).

@@ -131,6 +131,42 @@ class LocalPlant:
         keep = np.r_[True, np.diff(found) > 1e-6 * np.maximum(found[1:], 1e-300)]
         return found[keep] if found.size else found
 
+    def antiresonances(self, max_damping: float = RESONANCE_DAMPING) -> np.ndarray:
+        """Frequencies (Hz) of the oscillatory zeros with damping ratio below ``max_damping``.
+
+        Where a direct term and the motion's response cancel (a board's pair
+        feedthrough against the magnet's field), the response dips to nearly
+        nothing: a notch, the mirror of a resonance.
+
+        Parameters
+        ----------
+        max_damping : float
+            Damping ratio (dimensionless) below which a zero pair counts.
+
+        Returns
+        -------
+        ndarray, shape (k,)
+            Sorted, each pair counted once.
+        """
+        from scipy.linalg import eigvals
+
+        n = self.A.shape[0]
+        rosenbrock = np.zeros((n + 1, n + 1))
+        rosenbrock[:n, :n] = self.A
+        rosenbrock[:n, n] = np.ravel(self.B)
+        rosenbrock[n, :n] = np.ravel(self.C)
+        rosenbrock[n, n] = float(np.ravel(self.D)[0]) if np.size(self.D) else 0.0
+        pencil = np.zeros((n + 1, n + 1))
+        pencil[:n, :n] = np.eye(n)
+        with np.errstate(divide='ignore', invalid='ignore'):
+            zeros = eigvals(rosenbrock, pencil)
+        zeros = zeros[np.isfinite(zeros) & (np.abs(zeros) > 0) & (zeros.imag > 0)]
+        s = np.log(zeros) / self.Ts
+        damping = -s.real / np.abs(s)
+        found = np.sort(np.abs(s[np.abs(damping) < max_damping]) / (2 * np.pi))
+        keep = np.r_[True, np.diff(found) > 1e-6 * np.maximum(found[1:], 1e-300)]
+        return found[keep] if found.size else found
+
     def impulse(self, n: int) -> np.ndarray:
         """First ``n`` samples of the response to a unit pulse ``u[0] = 1``.
 
@@ -273,6 +309,8 @@ class FrequencyDeviation:
         The band asked for, Hz.
     excluded : tuple of float
         Resonances (Hz) of the reference whose neighbourhood was left out.
+    notches : tuple of float
+        Anti-resonances (Hz) of the reference whose neighbourhood was left out.
     """
 
     frequencies: np.ndarray
@@ -284,6 +322,7 @@ class FrequencyDeviation:
     rms_deg: float
     band: tuple[float, float] = (0.0, 0.0)
     excluded: tuple[float, ...] = ()
+    notches: tuple[float, ...] = ()
 
     def within(self, db: float, deg: float) -> bool:
         """Return whether the gain stays within ``db`` dB and the phase within ``deg`` degrees.
@@ -312,6 +351,10 @@ class FrequencyDeviation:
             text += ' (without +-{:g} Hz around the undamped resonance(s) at {} Hz)'.format(
                 RESONANCE_WIDTH, ', '.join(f'{f:.2f}' for f in self.excluded)
             )
+        if self.notches:
+            text += ' (without +-{:g} Hz around the notch(es) at {} Hz)'.format(
+                RESONANCE_WIDTH, ', '.join(f'{f:.2f}' for f in self.notches)
+            )
         return text
 
 
@@ -332,7 +375,11 @@ def compare_response(
     :class:`LocalPlant` reference (damping ratio below
     :data:`RESONANCE_DAMPING`; the linearised magnet has undamped tilt modes)
     are left out and listed in the result (modes that cancel in this path,
-    e.g. the z or y tilt modes seen from the x input, are kept).
+    e.g. the z or y tilt modes seen from the x input, are kept). Likewise
+    around each notch (a zero pair of the same damping that shows in the
+    response, where a direct term cancels the motion's response): there the
+    reference falls to nearly nothing and any estimate's ratio to it is
+    unbounded (listed as ``notches``).
 
     Parameters
     ----------
@@ -379,6 +426,18 @@ def compare_response(
             if fr >= low - resonance_width and fr <= high + resonance_width:
                 excluded.append(float(fr))
             f = f[~near]
+    notches: list[float] = []
+    if resonance_width > 0 and hasattr(reference, 'antiresonances'):
+        for fz in reference.antiresonances():
+            # only a notch that shows in the response (not a zero a pole cancels)
+            close = np.abs(reference.freqresp(fz * np.array([1 - 1e-5, 1 + 1e-5])))
+            apart = np.abs(reference.freqresp(np.array([fz - 0.5, fz + 0.5])))
+            if close.min() > 0.5 * apart.min():
+                continue
+            near = np.abs(f - fz) <= resonance_width
+            if fz >= low - resonance_width and fz <= high + resonance_width:
+                notches.append(float(fz))
+            f = f[~near]
     if f.size < 2:
         raise PhysicsCheckError(
             f'band {band!r} lies within {resonance_width} Hz of resonances {excluded}: '
@@ -406,4 +465,5 @@ def compare_response(
         rms_deg=float(np.sqrt(np.mean(phase**2))),
         band=(low, high),
         excluded=tuple(excluded),
+        notches=tuple(notches),
     )

@@ -121,3 +121,26 @@ def test_undamped_resonances_are_left_out():
     assert kept.excluded == () and kept.frequencies.size == 400
     with pytest.raises(PhysicsCheckError, match='nothing left to compare'):
         compare_response(plant, plant, (14.0, 14.5))
+
+
+def test_a_notch_where_a_direct_term_cancels_the_motion_is_left_out():
+    """A board whose y pair leaves 0.025 mT/A against the magnet's field: the two cancel
+    near 10 Hz (a zero pair of damping 0.005); the pole-cancelled zeros (6.6, 13.0,
+    14.3 Hz) do not show and are not notches."""
+    from maglev_ros.loop.v4x_pc_setup import board_model
+    from maglev_ros.physics.board_processing import BoardProcessing
+    from maglev_ros.sysid.board_check import board_local_plant
+
+    model = board_model('maggy_v2', 0)
+    lin = linearize(model).reduced()
+    pairs = np.array([[0.0, 0.0], [0.0, 2.54e-5], [0.0, 0.0]])
+    notched = board_local_plant(
+        lin, 1e-3, 'By_0', 'y', BoardProcessing.from_model(model, pairs=pairs)
+    )
+    [notch] = [f for f in notched.antiresonances() if 5.0 < f < 12.0 and abs(f - 6.59) > 0.1]
+    assert 9.5 < notch < 10.5
+    near = compare_response(notched, notched, (1.0, 12.0), n=300)
+    assert near.notches == (notch,) and np.all(np.abs(near.frequencies - notch) > 1.0)
+    assert f'without +-1 Hz around the notch(es) at {notch:.2f} Hz' in near.summary()
+    exact = board_local_plant(lin, 1e-3, 'By_0', 'y', BoardProcessing.from_model(model))
+    assert compare_response(exact, exact, (1.0, 12.0), n=300).notches == ()
