@@ -60,10 +60,15 @@ def start_board(args, out: Path) -> tuple[subprocess.Popen, str, Path, str]:
     params = plant_parameters(args, out)
     truth = out / 'truth.csv'
     link = out / 'ttyMAGGY'
+    from maglev_ros.cli.lab_v4x_pc import PLACE_MARGIN
+    from maglev_ros.hardware.v4x_pc_feedthrough import measurement_time
+
+    # the magnet comes once the loop has measured the board without it
+    place = measurement_time(1.0 / args.rate) + PLACE_MARGIN
     cmd = [
         sys.executable, '-m', 'maglev_ros.cli.virtual_board', '--firmware', 'v4x_pc',
         '--magnet', 'free', '--params', params, '--link', str(link), '--truth', str(truth),
-        '--seed', str(args.seed), '--exit-with-parent',
+        '--seed', str(args.seed), '--exit-with-parent', '--place-after', f'{place:g}',
     ]  # fmt: skip
     # its own session (its own CPU share under autogroup scheduling, docs/boards.md)
     child = subprocess.Popen(cmd, stdout=subprocess.PIPE, text=True, start_new_session=True)
@@ -227,8 +232,15 @@ def main() -> int:
             'measurement': 'board',
             'sample_rate': args.rate,
             'seed': args.seed,
+            **(
+                {'board_feedthrough': run.feedthrough.metadata()}
+                if run.feedthrough is not None
+                else {}
+            ),
         },
     )
+    if run.feedthrough is not None:
+        print(f'board feedthrough measured before the magnet: {run.feedthrough.summary()}')
     print(f'wrote {bag}')
     ok = not crashed and run.samples == samples and bool(np.all(peak < LIMIT_M))
     if excitation is not None and run.samples == samples:
