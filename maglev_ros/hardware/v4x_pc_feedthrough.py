@@ -38,8 +38,11 @@ __all__ = [
 
 #: PWM differences each pair is driven at (0.7 and 1.4 A at 12 V, 4 ohm), zero first and last
 FEEDTHROUGH_LEVELS = (0, 60, -60, 120, -120, 0)
-#: T of processed |Bz| above which the magnet counts as present (its own field: tens of mT)
+#: T of processed |Bz| with the coils off above which the magnet counts as present (its
+#: own field in place: several mT)
 MAGNET_PRESENT = 1e-3
+#: T a level's mean Bz may lie off the line through the coils' field (noise: about 0.01 mT)
+MAGNET_MOVED = 5e-5
 
 
 class MagnetPresentError(ValueError):
@@ -176,7 +179,8 @@ def measure_feedthrough(
     Raises
     ------
     MagnetPresentError
-        The processed Bz shows the magnet (the coils are set to zero first).
+        The processed Bz shows the magnet with the coils off, or moves off the
+        coils' line during the measurement (the coils are set to zero first).
     LinkError
         The board does not answer.
     """
@@ -197,11 +201,12 @@ def measure_feedthrough(
                         c = cycle.currents_A
                         currents.append((c[2 * pair] - c[2 * pair + 1]) / 2)
                 fields = np.asarray(fields)
-                if np.max(np.abs(fields[:, 2])) > MAGNET_PRESENT:
+                bz = float(fields[:, 2].mean())
+                if level == 0 and abs(bz) > MAGNET_PRESENT:  # the coils off: only a magnet
                     raise MagnetPresentError(
-                        f'the board reads Bz {1e3 * fields[:, 2].mean():.1f} mT: the magnet is '
-                        'in place, but the coil feedthrough is measured without it; take the '
-                        'magnet off the board and start again'
+                        f'the board reads Bz {1e3 * bz:.1f} mT with the coils off: the magnet '
+                        'is in place, but the coil feedthrough is measured without it; take '
+                        'the magnet off the board and start again'
                     )
                 means_i.append(np.mean(currents))
                 means_b.append(fields.mean(axis=0))
@@ -211,6 +216,12 @@ def measure_feedthrough(
             dof = max(len(means_i) - 2, 1)
             scatter = np.asarray(means_b) - x @ coef
             cov = np.linalg.inv(x.T @ x)[1, 1]
+            moved = float(np.max(np.abs(scatter[:, 2])))
+            if moved > MAGNET_MOVED:
+                raise MagnetPresentError(
+                    f'the field moved during the measurement (Bz {1e3 * moved:.2f} mT off the '
+                    "coils' line): the magnet came near; keep it away until the loop asks for it"
+                )
             response[:, pair] = coef[1]
             std[:, pair] = np.sqrt(np.sum(scatter**2, axis=0) / dof * cov)
             offsets.append(coef[0])

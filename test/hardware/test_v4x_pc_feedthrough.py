@@ -62,9 +62,51 @@ def test_what_each_pair_leaves_is_measured_within_its_std(seed):
 def test_the_magnet_on_the_board_is_refused_with_the_coils_at_zero():
     _, firmware, port, link = emulated_board(place_after=0.0)  # in place from set-up's end
     link.open()
-    with pytest.raises(MagnetPresentError, match=r'the board reads Bz .* take the magnet off'):
+    with pytest.raises(
+        MagnetPresentError,
+        match=r'the board reads Bz .* with the coils off: the magnet is in place',
+    ):
         measure_feedthrough(link, clock=port.clock, sleep=port.sleep)
     assert firmware.pwm.tolist() == [0, 0, 0, 0]
+
+
+def test_a_magnet_that_comes_during_the_measurement_is_refused():
+    """Placed 0.45 s into it: the x pair's last zero level reads the magnet."""
+    _, firmware, port, link = emulated_board(place_after=0.5)
+    link.open()
+    with pytest.raises(MagnetPresentError, match=r'with the coils off: the magnet is in place'):
+        measure_feedthrough(link, clock=port.clock, sleep=port.sleep)
+    assert firmware.pwm.tolist() == [0, 0, 0, 0]
+
+
+class _PassingMagnet:
+    """A link whose Bz rises 0.5 mT while the x pair is at its third level (a magnet
+    brought near and taken away again: the coils-off levels read nothing)."""
+
+    def __init__(self):
+        self.calls = 0
+        self.commands = []
+
+    def command_and_sample(self, p_x, p_y):
+        from types import SimpleNamespace
+
+        self.calls += 1
+        level = (self.calls - 1) // 120  # 20 settle + 100 kept per level
+        bz = 0.5 if level == 2 else 0.0
+        i = 0.0118 * p_x  # A per count, as the board's ADC reads the pair
+        return SimpleNamespace(
+            field_mT=np.array([0.0, 0.0, bz]), currents_A=np.array([i, -i, 0.0, 0.0])
+        )
+
+    def command(self, p_x, p_y):
+        self.commands.append((p_x, p_y))
+
+
+def test_a_magnet_that_passes_near_during_the_measurement_is_refused():
+    link = _PassingMagnet()
+    with pytest.raises(MagnetPresentError, match=r'the field moved during the measurement'):
+        measure_feedthrough(link, clock=lambda: 0.0, sleep=lambda s: None)
+    assert link.commands[-1] == (0, 0)  # the coils end at zero
 
 
 def test_the_wait_ends_when_the_magnet_is_in_place_and_times_out_without_it():
