@@ -413,8 +413,6 @@ def _board_pairs(args, sensors: int):
     from maglev_ros.hardware.v4x_pc_feedthrough import PairFeedthrough
 
     if args.measurement != 'board':
-        if args.board_feedthrough is not None:
-            raise UsageError('--board-feedthrough goes with --measurement board')
         return None
     if args.board_feedthrough is not None:
         values, source = args.board_feedthrough, '--board-feedthrough'
@@ -504,6 +502,8 @@ def _run(args: argparse.Namespace) -> int:
         raise UsageError(f'--frozen-run must be >= 0, got {args.frozen_run}')
     if args.delay is not None and args.delay < 0:
         raise UsageError(f'--delay must be >= 0 samples, got {args.delay}')
+    if args.board_feedthrough is not None and args.measurement != 'board':
+        raise UsageError('--board-feedthrough goes with --measurement board')
     if args.out and Path(args.out).suffix not in ('.yaml', '.yml'):
         raise UsageError(f'--out must name a .yaml file, got {args.out!r}')
     if args.out:

@@ -94,6 +94,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     from maglev_ros.loop.sample_log import write_sample_bag
     from maglev_ros.loop.v4x_pc_setup import V4xPcLoopSettings, run_v4x_pc_loop
     from maglev_ros.sysid.board_check import check_board_bag
+    from maglev_ros.sysid.physics_check import RESONANCE_WIDTH
 
     rate = args.control_rate or V4X_PC_RATE
     seconds = V4X_PC_SECONDS if args.duration is None else args.duration
@@ -242,7 +243,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         notches = sorted({f for c in checks.values() for f in getattr(c, 'notches', ())})
         if notches:
             print(
-                'physics check without +-1 Hz around the notch at '
+                f'physics check without +-{RESONANCE_WIDTH:g} Hz around the notch at '
                 f'{", ".join(f"{f:.2f}" for f in notches)} Hz (where the feedthrough a pair '
                 "leaves cancels the magnet's response)"
             )

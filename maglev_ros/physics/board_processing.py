@@ -90,11 +90,17 @@ class BoardProcessing:
         BoardProcessing
             Baseline and feedthrough of the model's own field.
         """
-        base, raw, rows = _coil_field(model, sensors)
-        feed = raw.copy()
-        feed[np.arange(rows.size) % 3 == 2] = 0.0  # z is not compensated
-        board = cls(base, feed, np.arange(rows.size) % 3 < 2)
+        base, raw = _coil_field(model, sensors)
+        board = cls._compensating(base, raw)
         return board if pairs is None else board.with_pairs(raw, pairs)
+
+    @classmethod
+    def _compensating(cls, base: np.ndarray, raw: np.ndarray) -> BoardProcessing:
+        """Return the board compensating x and y by the coils' own field ``raw`` (p, 4), T/A."""
+        axes = np.arange(base.size) % 3
+        feed = raw.copy()
+        feed[axes == 2] = 0.0  # z is not compensated
+        return cls(base, feed, axes < 2)
 
     @classmethod
     def model_pairs(cls, model, sensors=None) -> np.ndarray:
@@ -114,8 +120,8 @@ class BoardProcessing:
         -------
         ndarray, shape (p, 2)
         """
-        _, raw, _ = _coil_field(model, sensors)
-        return cls.from_model(model, sensors).pair_response(raw)
+        base, raw = _coil_field(model, sensors)
+        return cls._compensating(base, raw).pair_response(raw)
 
     def pair_response(self, raw: np.ndarray) -> np.ndarray:
         """Return the processed field per ampere of each coil pair, T/A, shape (p, 2).
@@ -308,8 +314,8 @@ class BoardProcessing:
         return out
 
 
-def _coil_field(model, sensors=None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the field without the magnet (p,), each coil's field per ampere (p, 4), the rows."""
+def _coil_field(model, sensors=None) -> tuple[np.ndarray, np.ndarray]:
+    """Return the field without the magnet (p,) and each coil's field per ampere (p, 4)."""
     n_s = model.params.solenoids.count
     x = model.hover_state(0.03)  # any state: the magnet is left out
     base = model.measurement(x, np.zeros(n_s), with_magnet=False)
@@ -319,7 +325,7 @@ def _coil_field(model, sensors=None) -> tuple[np.ndarray, np.ndarray, np.ndarray
     rows = np.arange(base.size)
     if sensors is not None:
         rows = np.concatenate([np.arange(3 * k, 3 * k + 3) for k in sensors])
-    return base[rows], raw[rows], rows
+    return base[rows], raw[rows]
 
 
 def augment(

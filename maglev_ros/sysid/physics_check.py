@@ -122,14 +122,9 @@ class LocalPlant:
         ndarray, shape (k,)
             Sorted, each pair counted once.
         """
-        poles = np.linalg.eigvals(self.A)
-        poles = poles[(np.abs(poles) > 0) & (poles.imag > 0)]
-        s = np.log(poles) / self.Ts  # continuous-time equivalents, 1/s
-        damping = -s.real / np.abs(s)
-        found = np.sort(np.abs(s[damping < max_damping]) / (2 * np.pi))
+        hz, damping = _oscillations(np.linalg.eigvals(self.A), self.Ts)
         # repeated poles (the symmetric x and y tilt modes) counted once
-        keep = np.r_[True, np.diff(found) > 1e-6 * np.maximum(found[1:], 1e-300)]
-        return found[keep] if found.size else found
+        return _once(hz[damping < max_damping])
 
     def antiresonances(self, max_damping: float = RESONANCE_DAMPING) -> np.ndarray:
         """Frequencies (Hz) of the oscillatory zeros with damping ratio below ``max_damping``.
@@ -160,12 +155,8 @@ class LocalPlant:
         pencil[:n, :n] = np.eye(n)
         with np.errstate(divide='ignore', invalid='ignore'):
             zeros = eigvals(rosenbrock, pencil)
-        zeros = zeros[np.isfinite(zeros) & (np.abs(zeros) > 0) & (zeros.imag > 0)]
-        s = np.log(zeros) / self.Ts
-        damping = -s.real / np.abs(s)
-        found = np.sort(np.abs(s[np.abs(damping) < max_damping]) / (2 * np.pi))
-        keep = np.r_[True, np.diff(found) > 1e-6 * np.maximum(found[1:], 1e-300)]
-        return found[keep] if found.size else found
+        hz, damping = _oscillations(zeros[np.isfinite(zeros)], self.Ts)
+        return _once(hz[np.abs(damping) < max_damping])
 
     def impulse(self, n: int) -> np.ndarray:
         """First ``n`` samples of the response to a unit pulse ``u[0] = 1``.
@@ -415,33 +406,26 @@ def compare_response(
         raise PhysicsCheckError(f'n must be at least 2 frequencies, got {n!r}')
     f = np.geomspace(low, high, int(n))
     excluded: list[float] = []
-    if resonance_width > 0 and hasattr(reference, 'resonances'):
-        for fr in reference.resonances():
-            # only a resonance that shows in this input-output path (not a cancelled mode)
-            close = np.abs(reference.freqresp(fr * np.array([1 - 1e-5, 1 + 1e-5])))
-            apart = np.abs(reference.freqresp(np.array([fr - 0.5, fr + 0.5])))
-            if close.max() < 2.0 * apart.max():
-                continue
-            near = np.abs(f - fr) <= resonance_width
-            if fr >= low - resonance_width and fr <= high + resonance_width:
-                excluded.append(float(fr))
-            f = f[~near]
     notches: list[float] = []
-    if resonance_width > 0 and hasattr(reference, 'antiresonances'):
-        for fz in reference.antiresonances():
-            # only a notch that shows in the response (not a zero a pole cancels)
-            close = np.abs(reference.freqresp(fz * np.array([1 - 1e-5, 1 + 1e-5])))
-            apart = np.abs(reference.freqresp(np.array([fz - 0.5, fz + 0.5])))
-            if close.min() > 0.5 * apart.min():
-                continue
-            near = np.abs(f - fz) <= resonance_width
-            if fz >= low - resonance_width and fz <= high + resonance_width:
-                notches.append(float(fz))
-            f = f[~near]
+    if resonance_width > 0:
+        # only those that show in this input-output path (not a mode or a zero cancelled)
+        for method, shows, listed in (
+            ('resonances', lambda close, apart: close.max() >= 2.0 * apart.max(), excluded),
+            ('antiresonances', lambda close, apart: close.min() <= 0.5 * apart.min(), notches),
+        ):
+            for fr in getattr(reference, method, lambda: ())():
+                close = np.abs(reference.freqresp(fr * np.array([1 - 1e-5, 1 + 1e-5])))
+                apart = np.abs(reference.freqresp(np.array([fr - 0.5, fr + 0.5])))
+                if not shows(close, apart):
+                    continue
+                if fr >= low - resonance_width and fr <= high + resonance_width:
+                    listed.append(float(fr))
+                f = f[np.abs(f - fr) > resonance_width]
     if f.size < 2:
         raise PhysicsCheckError(
-            f'band {band!r} lies within {resonance_width} Hz of resonances {excluded}: '
-            'nothing left to compare'
+            f'band {band!r} lies within {resonance_width} Hz of resonances {excluded}'
+            + (f' and notches {notches}' if notches else '')
+            + ': nothing left to compare'
         )
 
     def response(system: object) -> np.ndarray:
@@ -467,3 +451,17 @@ def compare_response(
         excluded=tuple(excluded),
         notches=tuple(notches),
     )
+
+
+def _oscillations(roots: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:
+    """Frequency (Hz) and damping ratio of each oscillatory root of the z-plane (one per pair)."""
+    roots = roots[(np.abs(roots) > 0) & (roots.imag > 0)]
+    s = np.log(roots) / Ts  # continuous-time equivalents, 1/s
+    return np.abs(s) / (2 * np.pi), -s.real / np.abs(s)
+
+
+def _once(hz: np.ndarray) -> np.ndarray:
+    """Sorted frequencies, repeated ones (within 1e-6 of each other) counted once."""
+    found = np.sort(hz)
+    keep = np.r_[True, np.diff(found) > 1e-6 * np.maximum(found[1:], 1e-300)]
+    return found[keep] if found.size else found

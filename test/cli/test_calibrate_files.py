@@ -76,3 +76,13 @@ def test_file_errors_are_one_line(files, capsys):
     assert main([f'{files["raw"]}@free', '--free', 'magnet.mass', '--split', '0.1']) == 2
     err = capsys.readouterr().err
     assert 'needs at least 1000 estimation samples' in err and '--split' in err
+
+
+def test_a_board_feedthrough_without_the_board_model_is_one_line(files, capsys):
+    board = f'{files["board"]}@free'
+    assert main([board, *FREE, '--board-feedthrough', *['0'] * 6]) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert line.endswith('--board-feedthrough goes with --measurement board')
+    assert main([board, *FREE, '--measurement', 'board', '--board-feedthrough', '1', '2']) == 2
+    [line] = capsys.readouterr().err.strip().splitlines()
+    assert '--board-feedthrough' in line and 'expected 6 arguments' in line
