@@ -51,7 +51,7 @@ from maglev_ros.nodes.params import (
     config_params,
     number,
 )
-from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
+from maglev_ros.nodes.qos import DIAGNOSTICS_QOS, LATEST_QOS, LOCKSTEP_COMMAND_QOS, SENSOR_QOS
 from maglev_ros.nodes.runtime import run_nodes
 from maglev_ros.nodes.state_messages import odometry_state
 from maglev_ros.topics import (
@@ -196,7 +196,7 @@ class ControllerNode(Node):
         self._diag_pub = self.create_publisher(DiagnosticArray, DIAGNOSTICS_TOPIC, DIAGNOSTICS_QOS)
         if cfg.trigger == 'estimate':
             self._estimates = self.create_subscription(
-                Odometry, ESTIMATE_TOPIC, self._on_estimate_only, SENSOR_QOS
+                Odometry, ESTIMATE_TOPIC, self._on_estimate_only, LATEST_QOS
             )
             self.create_timer(cfg.controller.input_timeout, self._check_stale)
         else:

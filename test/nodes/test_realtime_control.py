@@ -4,7 +4,8 @@
   is a multiple of the publishing period go out (the filter steps every sample);
 * the controller's ``trigger: estimate``: zero commands while no estimate came
   (it is up and hears an estimator), one command per estimate, and when the estimates stop for
-  ``input_timeout`` one zero command and an ERROR;
+  ``input_timeout`` one zero command and an ERROR; after a stall it answers only the
+  newest estimate that came meanwhile (keep-last 1);
 * the simulator's ``wait_for_controller``: real time starts only at the first
   command.
 
@@ -130,6 +131,38 @@ def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
         assert len(commands) == answers + 1  # once per silence, no more ready commands
     finally:
         spinner.close()
+        ctrl.destroy_node()
+
+
+def test_a_stalled_controller_answers_only_the_newest_estimate(ctx):
+    """Estimates queued while the controller did not spin: one answer, to the newest."""
+    import rclpy
+
+    model = make_model('maggy_v2')
+    x_eq = model.hover_state(find_equilibria(model)[0].z)
+    ctrl = ControllerNode(
+        context=ctx,
+        parameter_overrides=_params(
+            trigger='estimate', sample_rate=1000.0, input_timeout=30.0, diagnostics_period=30.0
+        ),
+    )
+    source = rclpy.create_node('estimates', context=ctx)
+    pub = source.create_publisher(Odometry, topics.ESTIMATE_TOPIC, SENSOR_QOS)
+    try:
+        wait_for(lambda: pub.get_subscription_count() >= 1, what='discovery')
+        for k in range(20):  # the controller does not spin: a stall
+            pub.publish(odometry_message((k + 1) * 1_000_000, x_eq))
+        time.sleep(0.5)  # delivered to its subscription meanwhile
+        spinner = Spinner(ctx, [ctrl])
+        try:
+            wait_for(lambda: ctrl.commands >= 1, what='an answer')
+            time.sleep(0.5)
+        finally:
+            spinner.close()
+        assert ctrl.commands == 1
+        assert ctrl.controller.watchdog.last_input == 20e-3  # the newest estimate's stamp
+    finally:
+        source.destroy_node()
         ctrl.destroy_node()
 
 
