@@ -24,7 +24,7 @@ The package is built once per session with colcon (``colcon_build`` of
   is killed (group-wide) at the end of the test if it is still running.
 
 Without the daemon: ``ros2 node/param/topic/service`` verbs take
-``--no-daemon --spin-time 3`` where they have it, so that no ``ros2 daemon``
+``--no-daemon --spin-time 1`` (retried until the node is found), so that no ``ros2 daemon``
 outlives a test.
 """
 

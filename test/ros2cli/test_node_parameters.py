@@ -95,7 +95,7 @@ def test_integers_for_doubles_run_and_param_dump_is_complete(
                 pytest.fail(f'{executable} exited with {proc.returncode}: {proc.stdout.read()}')
             try:  # a loaded machine answers slowly
                 out = ros2_env.run(
-                    ['param', 'dump', '--no-daemon', '--spin-time', '3', f'/{node}'],
+                    ['param', 'dump', '--no-daemon', '--spin-time', '1', f'/{node}'],
                     domain,
                     timeout=120,
                 )
