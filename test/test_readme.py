@@ -13,8 +13,7 @@ from doc_blocks import README, ROOT, blocks, environment, mark_problem, run_bloc
 
 INSTALL = 'python3 -m venv .venv && .venv/bin/pip install -e ".[ros]" && '
 TEST_COMMAND = (
-    'python3 -m venv .venv && .venv/bin/pip install --no-compile -e ".[ros,test]" && '
-    '.venv/bin/python -m pytest'
+    'python3 -m venv .venv && .venv/bin/pip install -e ".[ros,test]" && .venv/bin/python -m pytest'
 )
 TASKS = (
     'simulate',
@@ -54,7 +53,7 @@ def test_the_two_commands_are_the_ones_ci_and_users_run():
     assert two[0] == INSTALL + '.venv/bin/maglev-lab --out lab --overwrite'
     assert two[1] == TEST_COMMAND
     ci = (ROOT / '.ci' / 'run').read_text()
-    assert 'pip install --no-compile -e ".[ros,test]"' in ci
+    assert 'pip install -e ".[ros,test]"' in ci
     assert '.venv/bin/python -m pytest' in ci
 
 
