@@ -12,7 +12,8 @@ effort in A clipped at ``current_limit``, stamped with the sample it answers).
 (currents and estimate, or every field and the currents) paired by stamp in
 any order; ``delay_commands`` publishes for sample k the command computed at
 k - 1 (the board's timing). ``trigger: estimate`` (real time): one command per
-estimate; when they stop, zero currents and an ERROR. With
+estimate taken, the newest (keep-last 1: after a stall, the ones queued meanwhile
+are skipped); when they stop, zero currents and an ERROR. With
 ``excitation_signal`` set, the excitation part of each command is published
 just before it on ``maglev/currents/excitation`` (the IV's instruments).
 
