@@ -85,15 +85,24 @@ def test_estimator_publishes_the_estimates_of_its_publish_rate(ctx):
         est.destroy_node()
 
 
-def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
+def _realtime_controller(ctx, input_timeout: float, diagnostics_period: float):
+    """A controller on estimates at 1 kHz, and the equilibrium state it holds."""
     model = make_model('maggy_v2')
     x_eq = model.hover_state(find_equilibria(model)[0].z)
     ctrl = ControllerNode(
         context=ctx,
         parameter_overrides=_params(
-            trigger='estimate', sample_rate=1000.0, input_timeout=0.05, diagnostics_period=10.0
+            trigger='estimate',
+            sample_rate=1000.0,
+            input_timeout=input_timeout,
+            diagnostics_period=diagnostics_period,
         ),
     )
+    return ctrl, x_eq
+
+
+def test_controller_answers_each_estimate_and_zeroes_when_they_stop(ctx):
+    ctrl, x_eq = _realtime_controller(ctx, input_timeout=0.05, diagnostics_period=10.0)
     listener, commands = _listener(ctx, JointState, topics.COMMAND_TOPIC, LOCKSTEP_COMMAND_QOS)
     diags = []
     listener.create_subscription(
@@ -138,14 +147,7 @@ def test_a_stalled_controller_answers_only_the_newest_estimate(ctx):
     """Estimates queued while the controller did not spin: one answer, to the newest."""
     import rclpy
 
-    model = make_model('maggy_v2')
-    x_eq = model.hover_state(find_equilibria(model)[0].z)
-    ctrl = ControllerNode(
-        context=ctx,
-        parameter_overrides=_params(
-            trigger='estimate', sample_rate=1000.0, input_timeout=30.0, diagnostics_period=30.0
-        ),
-    )
+    ctrl, x_eq = _realtime_controller(ctx, input_timeout=30.0, diagnostics_period=30.0)
     source = rclpy.create_node('estimates', context=ctx)
     pub = source.create_publisher(Odometry, topics.ESTIMATE_TOPIC, SENSOR_QOS)
     try:
