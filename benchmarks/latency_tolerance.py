@@ -83,9 +83,10 @@ def run(
     tail = max(1, round(after * RATE / 1000))  # samples after the controller
 
     def late() -> int:  # samples from the estimate to the command's first sample
-        ms = {'fixed': a, 'random': a * np.exp(sigma * rng.standard_normal())}.get(
-            kind, STALL_BASE_MS
-        )
+        if kind == 'random':
+            ms = a * np.exp(sigma * rng.standard_normal())
+        else:
+            ms = a if kind == 'fixed' else STALL_BASE_MS
         return max(1, round(ms * RATE / 1000))
 
     n = round(seconds * RATE)
