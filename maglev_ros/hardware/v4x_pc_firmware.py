@@ -208,6 +208,23 @@ class V4xPcFirmware:
 
     # -- host side -------------------------------------------------------------------------
 
+    def power_up(self) -> V4xPcFirmware:
+        """Run the set-up now, on emulated time: a board powered before its port opens.
+
+        Baseline and feedthrough calibration take :attr:`setup_us` of the
+        board's time (3.4 s and ``init_delay``); here they take the time the
+        machine needs to compute them (about 50 ms). A
+        :class:`~maglev_ros.hardware.virtual_board.VirtualBoard` given this
+        firmware goes on from its clock.
+
+        Returns
+        -------
+        V4xPcFirmware
+            This firmware, set up (:attr:`running`).
+        """
+        self.advance_to(self.setup_us)
+        return self
+
     @property
     def running(self) -> bool:
         """Whether set-up is over."""

@@ -86,7 +86,10 @@ class VirtualBoard:
     ----------
     firmware_factory : callable
         Called with no arguments at every power-up (``open`` and ``plug``);
-        returns a fresh ``V2xFirmware`` or ``V4xFirmware``.
+        returns a fresh ``V2xFirmware``, ``V4xFirmware`` or ``V4xPcFirmware``.
+        The board's clock goes on from the firmware's own (``now_us``): a
+        firmware that has already run (``V4xPcFirmware.power_up``, or the same
+        one again at a plug: a board on its own supply) is not restarted.
     link : str or Path, optional
         Stable device path (a symlink to the current pty). Default: a new
         temporary directory holding ``ttyMAGGY0``, removed on ``close``.
@@ -292,7 +295,9 @@ class VirtualBoard:
             self._on_arrival = bool(getattr(self._firmware, 'answers_on_arrival', False))
             self._master = master
             self._device = device
-            self._t0 = time.monotonic()
+            # the board's clock goes on from the firmware's own: a factory may return a
+            # board that has run (powered before the port opens, or through an unplug)
+            self._t0 = time.monotonic() - getattr(self._firmware, 'now_us', 0) * 1e-6
             self._plugs += 1
 
     def pause(self) -> None:

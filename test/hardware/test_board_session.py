@@ -222,7 +222,7 @@ def test_v4x_pc_board_is_polled_and_reset_on_close():
         return (np.array([0.5, -0.3, 40.0]) + rng.normal(0.0, 0.01, 3))[None, :]
 
     def firmware():
-        return V4xPcFirmware(noisy, scaling=SCALING, init_delay=0.0)
+        return V4xPcFirmware(noisy, scaling=SCALING, init_delay=0.0).power_up()
 
     with VirtualBoard(firmware) as board:
         assert board.wait_until(lambda b: b.firmware.running, TIMEOUT)

@@ -32,7 +32,7 @@ class NoisyPlant:
 
 @pytest.fixture(scope='module')
 def board():
-    factory = partial(V4xPcFirmware, NoisyPlant(), scaling=SCALING, init_delay=0.0)
+    factory = lambda: V4xPcFirmware(NoisyPlant(), scaling=SCALING, init_delay=0.0).power_up()  # noqa: E731
     with VirtualBoard(factory) as vb:
         assert vb.wait_until(lambda b: b.firmware.running, TIMEOUT)
         yield vb
@@ -206,7 +206,7 @@ def test_a_megabyte_of_garbage_and_half_frames_towards_the_board(board):
 
 
 def test_unplug_gives_a_link_error_and_close_still_works():
-    factory = partial(V4xPcFirmware, NoisyPlant(), scaling=SCALING, init_delay=0.0)
+    factory = lambda: V4xPcFirmware(NoisyPlant(), scaling=SCALING, init_delay=0.0).power_up()  # noqa: E731
     with VirtualBoard(factory) as vb:
         assert vb.wait_until(lambda b: b.firmware.running, TIMEOUT)
         link = V4xPcLink(vb.path, timeout=0.2).open()

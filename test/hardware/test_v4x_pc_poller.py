@@ -41,7 +41,7 @@ def noisy(pwm, t):
 
 @pytest.fixture(scope='module')
 def board():
-    factory = lambda: V4xPcFirmware(noisy, scaling=SCALING, init_delay=0.0)  # noqa: E731
+    factory = lambda: V4xPcFirmware(noisy, scaling=SCALING, init_delay=0.0).power_up()  # noqa: E731
     with VirtualBoard(factory) as vb:
         assert vb.wait_until(lambda b: b.firmware.running, TIMEOUT)
         yield vb
@@ -156,7 +156,7 @@ def test_the_boards_sensor_reset_is_no_link_error():
     without replies. The driver's reply timeout outlasts it: no error, no coil reset."""
     factory = lambda: V4xPcFirmware(  # noqa: E731
         lambda pwm, t: np.array([[0.5, -0.3, 40.0]]), scaling=SCALING, init_delay=0.0
-    )
+    ).power_up()
     with VirtualBoard(factory) as vb:
         assert vb.wait_until(lambda b: b.firmware.running, TIMEOUT)
         run = Running(vb.path, timeout=REPLY_TIMEOUT_S)

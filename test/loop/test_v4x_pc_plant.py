@@ -196,18 +196,10 @@ class _OwnSupply:
             lambda pwm, t: (np.array([0.5, -0.3, 40.0]) + rng.normal(0, 0.01, 3))[None, :],
             scaling=SETTINGS.scaling,
             init_delay=0.0,
-        )
-        self.offset_us = 0
+        ).power_up()
 
     def __call__(self):
-        self.offset_us = self.firmware.now_us
-        return self
-
-    def advance_to(self, t_us):
-        return self.firmware.advance_to(self.offset_us + t_us)
-
-    def __getattr__(self, name):
-        return getattr(self.firmware, name)
+        return self.firmware  # the virtual board's clock goes on from the firmware's
 
 
 def test_an_unplug_on_the_virtual_board_ends_at_zero_current_once_plugged_back():

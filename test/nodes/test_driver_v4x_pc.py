@@ -52,31 +52,24 @@ class StepPlant:
 
 
 def make_firmware():
+    """A board set up before its port opens (the set-up on emulated time)."""
     firmware = V4xPcFirmware(StepPlant(0.0), scaling=SCALING, init_delay=0.0)
     firmware.plant.t_step = firmware.setup_us * 1e-6 + 0.1
-    return firmware
+    return firmware.power_up()
 
 
 class PoweredThroughUnplug:
     """One firmware across unplug and plug: a board on its own supply keeps running (and
     keeps its PWM: no watchdog) while the USB cable is out. The virtual board calls this
-    factory at each plug; the firmware's clock goes on from where it was."""
+    factory at each plug, and its clock goes on from the firmware's."""
 
     def __init__(self):
         self.firmware = make_firmware()
-        self.offset_us = 0
         self.plugs = 0
 
     def __call__(self):
-        self.offset_us = self.firmware.now_us
         self.plugs += 1
-        return self
-
-    def advance_to(self, t_us):
-        return self.firmware.advance_to(self.offset_us + t_us)
-
-    def __getattr__(self, name):
-        return getattr(self.firmware, name)
+        return self.firmware
 
 
 def fw(board, attr):
