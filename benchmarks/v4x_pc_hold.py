@@ -232,11 +232,7 @@ def main() -> int:
             'measurement': 'board',
             'sample_rate': args.rate,
             'seed': args.seed,
-            **(
-                {'board_feedthrough': run.feedthrough.metadata()}
-                if run.feedthrough is not None
-                else {}
-            ),
+            **(run.feedthrough.metadata() if run.feedthrough is not None else {}),
         },
     )
     if run.feedthrough is not None:
@@ -251,11 +247,7 @@ def main() -> int:
         for item in results:
             for row in item.result.rows:
                 check = checks.get((item.group.name, row.label))
-                text = (
-                    f'{check.max_db:5.2f} dB {check.max_deg:5.1f} deg'
-                    if hasattr(check, 'max_db')
-                    else str(check or '')
-                )
+                text = check.brief() if hasattr(check, 'max_db') else str(check or '')
                 # an unstable model (the plant is) has no simulation fit: its k-step one
                 sim = float(np.mean(row.fit_validation))
                 kstep = float(np.mean(row.kstep_validation))

@@ -94,7 +94,6 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     from maglev_ros.loop.sample_log import write_sample_bag
     from maglev_ros.loop.v4x_pc_setup import V4xPcLoopSettings, run_v4x_pc_loop
     from maglev_ros.sysid.board_check import check_board_bag
-    from maglev_ros.sysid.physics_check import RESONANCE_WIDTH
 
     rate = args.control_rate or V4X_PC_RATE
     seconds = V4X_PC_SECONDS if args.duration is None else args.duration
@@ -150,7 +149,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     extra = {}
     if run.feedthrough is not None:
         print(f'the magnet came {run.magnet_wait:.2f} s after the feedthrough measurement')
-        extra['board_feedthrough'] = run.feedthrough.metadata()
+        extra.update(run.feedthrough.metadata())
     write_sample_bag(
         bag,
         run.log,
@@ -220,11 +219,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         for item in results:
             for row in item.result.rows:
                 check = checks.get((item.group.name, row.label))
-                text = (
-                    f'{check.max_db:5.2f} dB {check.max_deg:5.1f} deg'
-                    if hasattr(check, 'max_db')
-                    else ''
-                )
+                text = check.brief() if hasattr(check, 'max_db') else ''
                 fit = float(np.mean(row.fit_validation))
                 print(
                     f'{item.group.name + " " + row.label:<28} {fit:10.1f}  {text:<24} {row.status}'
@@ -238,18 +233,44 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
                         'physics_max_db': getattr(check, 'max_db', None),
                         'physics_max_deg': getattr(check, 'max_deg', None),
                         'physics_notches_hz': list(getattr(check, 'notches', ())),
+                        'physics_left_out_hz': [list(b) for b in getattr(check, 'uncertain', ())],
+                        'unstable_physics_per_s': getattr(check, 'unstable_reference', None),
+                        'unstable_model_per_s': getattr(check, 'unstable_model', None),
                     }
                 )
-        notches = sorted({f for c in checks.values() for f in getattr(c, 'notches', ())})
-        if notches:
-            print(
-                f'physics check without +-{RESONANCE_WIDTH:g} Hz around the notch at '
-                f'{", ".join(f"{f:.2f}" for f in notches)} Hz (where the feedthrough a pair '
-                "leaves cancels the magnet's response)"
-            )
+        _explain_checks(checks)
     (out / 'models.json').write_text(json.dumps(summary, indent=1))
     print(f'wrote {out / "models.json"}')
     return 0 if run.samples == samples and 'identification' not in summary and not crashed else 1
+
+
+def _explain_checks(checks: dict) -> None:
+    """Print what the physics check left out, and what a missed unstable pole means."""
+    from maglev_ros.sysid.physics_check import RESONANCE_WIDTH
+
+    done = [c for c in checks.values() if hasattr(c, 'max_db')]
+    notches = sorted({f for c in done for f in c.notches})
+    left_out = sorted({b for c in done for b in c.uncertain})
+    if notches or left_out:
+        print(
+            'physics check without '
+            + ', '.join(
+                [f'+-{RESONANCE_WIDTH:g} Hz around the notch at {f:.2f} Hz' for f in notches]
+                + [f'{lo:.2f}-{hi:.2f} Hz' for lo, hi in left_out]
+            )
+            + ": where the feedthrough a pair leaves cancels the magnet's response, the "
+            'reference is less than half of either part, and any error of a part at least '
+            'doubles in the ratio'
+        )
+    missed = [c for c in done if c.misses_instability]
+    if missed:
+        rate = missed[0].unstable_reference[0]
+        print(
+            f'no unstable pole: the model has a stable pole where the magnet is unstable '
+            f'({rate:.0f} 1/s, time constant {1e3 / rate:.0f} ms): the same gain, the phase '
+            'up to 180 deg off; the bias of a direct fit to closed-loop data (use the IV on '
+            'the excitation or ARMAX, or a larger excitation)'
+        )
 
 
 def _true_excursion(truth: Path, started: float, ended: float):

@@ -72,21 +72,30 @@ class PairFeedthrough:
     offset: NDArray[np.float64]
     samples: int
 
-    def metadata(self) -> str:
-        """Return ``response`` as text for a bag's metadata: six numbers, T/A.
+    def metadata(self) -> dict[str, str]:
+        """Return the measurement as a bag's metadata: six numbers, T/A, for each key.
 
-        Row by row: Bx, By, Bz per ampere of the x pair and of the y pair.
+        ``board_feedthrough``: ``response``; ``board_feedthrough_std``: ``std``;
+        row by row: Bx, By, Bz per ampere of the x pair and of the y pair.
         """
-        return ' '.join(f'{float(v):.6e}' for v in np.asarray(self.response).ravel())
+
+        def text(values: NDArray[np.float64]) -> str:
+            return ' '.join(f'{float(v):.6e}' for v in np.asarray(values).ravel())
+
+        return {'board_feedthrough': text(self.response), 'board_feedthrough_std': text(self.std)}
 
     @staticmethod
-    def response_from(values: str | Sequence[float]) -> NDArray[np.float64]:
-        """Return the (3, 2) response of :meth:`metadata`'s text (or six numbers), T/A.
+    def response_from(
+        values: str | Sequence[float], name: str = 'board_feedthrough'
+    ) -> NDArray[np.float64]:
+        """Return the (3, 2) array of one of :meth:`metadata`'s texts (or six numbers), T/A.
 
         Parameters
         ----------
         values : str or sequence of float
             Six numbers, row by row, T/A (text: separated by spaces).
+        name : str
+            The key, for the error message.
 
         Raises
         ------
@@ -97,9 +106,9 @@ class PairFeedthrough:
         try:
             out = np.asarray([float(v) for v in items], dtype=float)
         except (TypeError, ValueError):
-            raise ValueError(f'board_feedthrough must be six numbers, got {values!r}') from None
+            raise ValueError(f'{name} must be six numbers, got {values!r}') from None
         if out.shape != (6,) or not np.all(np.isfinite(out)):
-            raise ValueError(f'board_feedthrough must be six finite numbers, got {values!r}')
+            raise ValueError(f'{name} must be six finite numbers, got {values!r}')
         return out.reshape(3, 2)
 
     def summary(self) -> str:

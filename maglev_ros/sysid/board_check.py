@@ -18,10 +18,20 @@ import numpy as np
 from ..physics.board_processing import BoardProcessing
 from .physics_check import PAIRS, LocalPlant, PhysicsCheckError
 
-__all__ = ['IDENTIFICATION_RATE', 'board_bag_channels', 'board_local_plant', 'check_board_bag']
+__all__ = [
+    'CANCELLATION',
+    'IDENTIFICATION_RATE',
+    'board_bag_channels',
+    'board_local_plant',
+    'cancellation_bands',
+    'check_board_bag',
+]
 
 #: Hz the loop's record is decimated to before identification (:func:`check_board_bag`).
 IDENTIFICATION_RATE = 100.0
+#: ``|G_true| / max(|part|)`` below which :func:`cancellation_bands` leaves a frequency out:
+#: there a relative error of a part is at least doubled in the compared ratio.
+CANCELLATION = 0.5
 
 
 def board_local_plant(
@@ -91,6 +101,48 @@ def board_local_plant(
     C2 = np.zeros(n + 1)
     C2[n] = 1.0
     return LocalPlant(A2, B2, C2, 0.0, float(Ts), 0, str(output), w)
+
+
+def cancellation_bands(
+    reference: LocalPlant,
+    motion: LocalPlant,
+    band: tuple[float, float],
+    ratio: float = CANCELLATION,
+    n: int = 2000,
+) -> list[tuple[float, float]]:
+    """Bands (Hz) where the reference is a near-cancellation of its two parts.
+
+    A board's reading of a pair is the magnet's motion (``motion``: the
+    reference with the feedthrough removed exactly) plus the direct term the
+    firmware's compensation leaves (``reference - motion``). Near the notch
+    where they cancel, a relative error of either part (the identified
+    model's, or the measured feedthrough's: 0.001-0.005 mT/A) is magnified
+    in ``G_id / G_true`` by ``max(|part|) / |G_true|``. Where that exceeds
+    ``1 / ratio`` the reference is not known well enough to compare with.
+
+    Parameters
+    ----------
+    reference : LocalPlant
+        :func:`board_local_plant` with the measured pair feedthrough.
+    motion : LocalPlant
+        The same with the firmware's compensation exact.
+    band : (float, float)
+        The frequencies looked at, Hz.
+    ratio : float
+        ``|G_true| / max(|motion|, |direct|)`` below which a frequency is left out.
+    n : int
+        Log-spaced frequencies looked at.
+
+    Returns
+    -------
+    list of (float, float)
+        Ascending, disjoint.
+    """
+    f = np.geomspace(band[0], band[1], n)
+    g, m = reference.freqresp(f), motion.freqresp(f)
+    low = np.abs(g) < ratio * np.maximum(np.abs(m), np.abs(g - m))
+    edges = np.flatnonzero(np.diff(np.r_[0, low.astype(int), 0]))
+    return [(float(f[a]), float(f[b - 1])) for a, b in zip(edges[::2], edges[1::2], strict=True)]
 
 
 def board_bag_channels(sensor: int = 0) -> tuple[list[str], list[str]]:
@@ -196,4 +248,13 @@ def check_board_bag(
     board = BoardProcessing.from_model(model, pairs=pairs)
     results = identify_groups(data, split)
     plants = {p: board_local_plant(linear, loop_ts, f'B{p}_0', p, board) for p in ('x', 'y')}
-    return data, results, physics_deviations(results, plants, band)
+    uncertain = {}
+    if pairs is not None:  # the direct term the firmware left: notches where it cancels
+        exact = BoardProcessing.from_model(model)
+        uncertain = {
+            p: cancellation_bands(
+                plants[p], board_local_plant(linear, loop_ts, f'B{p}_0', p, exact), band
+            )
+            for p in ('x', 'y')
+        }
+    return data, results, physics_deviations(results, plants, band, uncertain)

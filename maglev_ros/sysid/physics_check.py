@@ -24,11 +24,15 @@ closed-loop estimate converges to.
 
 :func:`compare_response` evaluates an identified model and the reference
 over a band and returns the deviation ``G_id / G_true`` in dB and degrees
-(max and RMS).
+(max and RMS), and the unstable modes of each: the magnet's x and y modes
+grow at about 30-50 1/s, and a closed-loop estimate that puts the mirrored,
+stable pole in their place matches the gain but not the phase (up to 180
+degrees at low frequency).
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -38,11 +42,14 @@ __all__ = [
     'PAIRS',
     'RESONANCE_DAMPING',
     'RESONANCE_WIDTH',
+    'UNSTABLE_RATE',
     'FrequencyDeviation',
     'LocalPlant',
     'PhysicsCheckError',
     'compare_response',
     'local_plant',
+    'showing',
+    'unstable_rates',
 ]
 
 #: Damping ratio below which an oscillatory pole of the reference is a resonance
@@ -50,6 +57,32 @@ __all__ = [
 RESONANCE_DAMPING = 0.01
 #: Half-width (Hz) of the band left out around each such resonance.
 RESONANCE_WIDTH = 1.0
+#: Growth rate (1/s) above which a pole counts as unstable (time constant under 1 s):
+#: an identified pole a hair outside the unit circle is no unstable mode.
+UNSTABLE_RATE = 1.0
+
+
+def unstable_rates(poles: np.ndarray, Ts: float) -> np.ndarray:
+    """Growth rates of the unstable poles of a discrete model, largest first.
+
+    Parameters
+    ----------
+    poles : array_like, shape (n,)
+        Poles in z.
+    Ts : float
+        Sample time, s.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+        ``ln|z| / Ts`` (1/s) of each pole growing faster than
+        :data:`UNSTABLE_RATE`; a complex pair counted once.
+    """
+    p = np.asarray(poles, dtype=complex).ravel()
+    p = p[p.imag >= 0]
+    rates = np.log(np.maximum(np.abs(p), 1e-300)) / float(Ts)
+    return np.sort(rates[rates > UNSTABLE_RATE])[::-1]
+
 
 #: Antisymmetric input pairs in the solenoid order x+, x-, y+, y- (as maglev-lab's
 #: ``u_x``: x+ = u, x- = -u).
@@ -157,6 +190,33 @@ class LocalPlant:
             zeros = eigvals(rosenbrock, pencil)
         hz, damping = _oscillations(zeros[np.isfinite(zeros)], self.Ts)
         return _once(hz[np.abs(damping) < max_damping])
+
+    def unstable_rates(self) -> np.ndarray:
+        """Growth rates (1/s) of the unstable modes that show in this input-output path.
+
+        A mode shows when the residue of its eigenspace, ``C P B`` (``P`` the
+        spectral projector), is not nil: the x mode seen from the y pair does
+        not. Repeated modes (the symmetric x and y tilts) count once.
+
+        Returns
+        -------
+        ndarray, shape (k,)
+            Largest first (:func:`unstable_rates`).
+        """
+        w, V = np.linalg.eig(self.A)
+        rates = unstable_rates(w, self.Ts)
+        if not rates.size or np.linalg.cond(V) > 1e10:
+            return _once(rates)[::-1]
+        Vinv = np.linalg.inv(V)
+        scale = np.linalg.norm(self.C) * np.linalg.norm(self.B)
+        shown = []
+        for rate in _once(rates):
+            mode = np.abs(np.log(np.maximum(np.abs(w), 1e-300)) / self.Ts - rate) <= 1e-6 * rate
+            mode &= w.imag >= -1e-12 * np.abs(w)
+            residue = self.C @ (V[:, mode] @ Vinv[mode, :]) @ self.B
+            if abs(residue) > 1e-9 * scale:
+                shown.append(rate)
+        return np.array(shown[::-1])
 
     def impulse(self, n: int) -> np.ndarray:
         """First ``n`` samples of the response to a unit pulse ``u[0] = 1``.
@@ -302,6 +362,13 @@ class FrequencyDeviation:
         Resonances (Hz) of the reference whose neighbourhood was left out.
     notches : tuple of float
         Anti-resonances (Hz) of the reference whose neighbourhood was left out.
+    uncertain : tuple of (float, float)
+        Bands (Hz) left out where the reference itself is not known well
+        enough (e.g. a notch that moves with a measured direct term).
+    unstable_reference, unstable_model : tuple of float or None
+        Growth rates (1/s) of the unstable modes of the reference (those that
+        show in its path) and of the model (:func:`unstable_rates`); None
+        where the system does not tell.
     """
 
     frequencies: np.ndarray
@@ -314,9 +381,32 @@ class FrequencyDeviation:
     band: tuple[float, float] = (0.0, 0.0)
     excluded: tuple[float, ...] = ()
     notches: tuple[float, ...] = ()
+    uncertain: tuple[tuple[float, float], ...] = ()
+    unstable_reference: tuple[float, ...] | None = None
+    unstable_model: tuple[float, ...] | None = None
+
+    @property
+    def misses_instability(self) -> bool:
+        """Whether the model has fewer unstable modes than the reference shows in the band.
+
+        A closed-loop estimate can put the mirrored, stable pole in place of
+        the magnet's unstable one: the same gain, up to 180 degrees of phase
+        below the mode's corner frequency ``rate / 2 pi``. Only the reference's
+        modes whose corner lies in the band or above it count (V2's x mode, 30
+        1/s or 4.8 Hz, does not for a 10-300 Hz check). More unstable poles than
+        the reference are not flagged: where the phase agrees, zeros outside the
+        unit circle cancel them. False where a system does not tell.
+        """
+        if self.unstable_reference is None or self.unstable_model is None:
+            return False
+        seen = [r for r in self.unstable_reference if r / (2 * np.pi) >= self.band[0]]
+        return len(self.unstable_model) < len(seen)
 
     def within(self, db: float, deg: float) -> bool:
         """Return whether the gain stays within ``db`` dB and the phase within ``deg`` degrees.
+
+        A model that misses an unstable mode of the reference
+        (:attr:`misses_instability`) is not within, whatever its deviation.
 
         Parameters
         ----------
@@ -329,7 +419,22 @@ class FrequencyDeviation:
         -------
         bool
         """
-        return self.max_db <= db and self.max_deg <= deg
+        return self.max_db <= db and self.max_deg <= deg and not self.misses_instability
+
+    def instability(self) -> str:
+        """Return the unstable modes, physics / model: ``'30 / 44 1/s'``, ``'30 / none 1/s'``."""
+        if self.unstable_reference is None or self.unstable_model is None:
+            return ''
+
+        def rates(values: tuple[float, ...]) -> str:
+            return ', '.join(f'{v:.0f}' for v in values) if values else 'none'
+
+        return f'{rates(self.unstable_reference)} / {rates(self.unstable_model)} 1/s'
+
+    def brief(self) -> str:
+        """Return the table cell: largest deviation, and a missed unstable mode if one is."""
+        text = f'{self.max_db:5.2f} dB {self.max_deg:5.1f} deg'
+        return text + (' (no unstable pole)' if self.misses_instability else '')
 
     def summary(self) -> str:
         """One line: band, max and RMS deviation."""
@@ -346,6 +451,12 @@ class FrequencyDeviation:
             text += ' (without +-{:g} Hz around the notch(es) at {} Hz)'.format(
                 RESONANCE_WIDTH, ', '.join(f'{f:.2f}' for f in self.notches)
             )
+        if self.uncertain:
+            text += ' (without {} Hz, where the reference is a near-cancellation)'.format(
+                ', '.join(f'{lo:.2f}-{hi:.2f}' for lo, hi in self.uncertain)
+            )
+        if self.misses_instability:
+            text += f'; the model misses an unstable mode (physics / model: {self.instability()})'
         return text
 
 
@@ -357,6 +468,7 @@ def compare_response(
     output: int = 0,
     input: int = 0,  # noqa: A002 - the toolbox's name
     resonance_width: float = RESONANCE_WIDTH,
+    uncertain: Sequence[tuple[float, float]] = (),
 ) -> FrequencyDeviation:
     """Compare the frequency response of ``model`` with ``reference`` over a band.
 
@@ -387,11 +499,16 @@ def compare_response(
         Channel of a MIMO model.
     resonance_width : float
         Half-width of the band left out around each resonance, Hz (0: none).
+    uncertain : sequence of (float, float)
+        Bands (Hz) where the reference is not known well enough to compare
+        (left out and listed; e.g.
+        :func:`~maglev_ros.sysid.board_check.cancellation_bands`).
 
     Returns
     -------
     FrequencyDeviation
-        Gain (dB) and phase (degrees) deviation, max and RMS.
+        Gain (dB) and phase (degrees) deviation, max and RMS, and the unstable
+        modes of both (:attr:`FrequencyDeviation.misses_instability`).
 
     Raises
     ------
@@ -408,23 +525,21 @@ def compare_response(
     excluded: list[float] = []
     notches: list[float] = []
     if resonance_width > 0:
-        # only those that show in this input-output path (not a mode or a zero cancelled)
-        for method, shows, listed in (
-            ('resonances', lambda close, apart: close.max() >= 2.0 * apart.max(), excluded),
-            ('antiresonances', lambda close, apart: close.min() <= 0.5 * apart.min(), notches),
-        ):
-            for fr in getattr(reference, method, lambda: ())():
-                close = np.abs(reference.freqresp(fr * np.array([1 - 1e-5, 1 + 1e-5])))
-                apart = np.abs(reference.freqresp(np.array([fr - 0.5, fr + 0.5])))
-                if not shows(close, apart):
-                    continue
-                if fr >= low - resonance_width and fr <= high + resonance_width:
-                    listed.append(float(fr))
+        for listed, method in ((excluded, 'resonances'), (notches, 'antiresonances')):
+            for fr in showing(reference, method):
+                if low - resonance_width <= fr <= high + resonance_width:
+                    listed.append(fr)
                 f = f[np.abs(f - fr) > resonance_width]
+    kept_out = []
+    for lo, hi in uncertain:
+        if hi >= low and lo <= high:
+            kept_out.append((float(lo), float(hi)))
+        f = f[(f < lo) | (f > hi)]
     if f.size < 2:
         raise PhysicsCheckError(
             f'band {band!r} lies within {resonance_width} Hz of resonances {excluded}'
             + (f' and notches {notches}' if notches else '')
+            + (f' and uncertain bands {kept_out}' if kept_out else '')
             + ': nothing left to compare'
         )
 
@@ -450,7 +565,52 @@ def compare_response(
         band=(low, high),
         excluded=tuple(excluded),
         notches=tuple(notches),
+        uncertain=tuple(kept_out),
+        unstable_reference=_unstable(reference),
+        unstable_model=_unstable(model),
     )
+
+
+def showing(reference: object, method: str = 'antiresonances') -> list[float]:
+    """Resonances or notches (Hz) of a reference that show in its input-output path.
+
+    A mode or a zero pair cancelled in this path (the y tilt seen from the x
+    pair) does not show: a resonance shows where the response near it is at
+    least twice its largest 0.5 Hz away, a notch where it is at most half the
+    smallest.
+
+    Parameters
+    ----------
+    reference : LocalPlant
+        Anything with ``freqresp`` and the method.
+    method : {'resonances', 'antiresonances'}
+        Which: the lightly damped poles or zeros (:meth:`LocalPlant.resonances`).
+
+    Returns
+    -------
+    list of float
+        Frequencies, Hz, ascending (empty for a reference without the method).
+    """
+    shows = {
+        'resonances': lambda close, apart: close.max() >= 2.0 * apart.max(),
+        'antiresonances': lambda close, apart: close.min() <= 0.5 * apart.min(),
+    }[method]
+    out = []
+    for fr in getattr(reference, method, lambda: ())():
+        close = np.abs(reference.freqresp(fr * np.array([1 - 1e-5, 1 + 1e-5])))
+        apart = np.abs(reference.freqresp(np.array([fr - 0.5, fr + 0.5])))
+        if shows(close, apart):
+            out.append(float(fr))
+    return out
+
+
+def _unstable(system: object) -> tuple[float, ...] | None:
+    """Growth rates (1/s) of a system's unstable modes, or None if it does not tell."""
+    if hasattr(system, 'unstable_rates'):
+        return tuple(float(r) for r in system.unstable_rates())
+    if hasattr(system, 'poles') and getattr(system, 'Ts', None):
+        return tuple(float(r) for r in unstable_rates(system.poles(), system.Ts))
+    return None
 
 
 def _oscillations(roots: np.ndarray, Ts: float) -> tuple[np.ndarray, np.ndarray]:

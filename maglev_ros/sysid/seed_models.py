@@ -204,6 +204,7 @@ def physics_deviations(
     results: Sequence[GroupResult],
     plants: dict,
     band: tuple[float, float],
+    uncertain: dict | None = None,
 ) -> dict[tuple[str, str], FrequencyDeviation | str]:
     """Compare each SISO model with the true local transfer function of its pair.
 
@@ -215,6 +216,9 @@ def physics_deviations(
         Pair name (``x``, ``y``) to its :class:`~.physics_check.LocalPlant`.
     band : (float, float)
         Frequencies compared, Hz (the excited band).
+    uncertain : dict, optional
+        Pair name to the bands (Hz) where its reference is uncertain
+        (:func:`~.physics_check.compare_response`'s ``uncertain``).
 
     Returns
     -------
@@ -233,7 +237,9 @@ def physics_deviations(
                 out[key] = f'no model ({row.status})'
                 continue
             try:
-                out[key] = compare_response(row.model, plants[pair], band)
+                out[key] = compare_response(
+                    row.model, plants[pair], band, uncertain=(uncertain or {}).get(pair, ())
+                )
             except PhysicsCheckError as err:
                 out[key] = str(err)
     return out

@@ -55,7 +55,12 @@ def test_what_each_pair_leaves_is_measured_within_its_std(seed):
     assert np.all(np.abs(ft.offset) < 1e-5) and ft.samples == 1200
     assert firmware.pwm.tolist() == [0, 0, 0, 0]  # the coils end at zero
     # the bag's metadata text gives the same numbers back
-    assert np.allclose(PairFeedthrough.response_from(ft.metadata()), ft.response, rtol=1e-6)
+    meta = ft.metadata()
+    assert np.allclose(
+        PairFeedthrough.response_from(meta['board_feedthrough']), ft.response, rtol=1e-6, atol=0
+    )
+    std = PairFeedthrough.response_from(meta['board_feedthrough_std'], 'board_feedthrough_std')
+    assert np.allclose(std, ft.std, rtol=1e-6, atol=0)
     assert 'x pair into Bx' in ft.summary()
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from maglev_ros.control.excitation import CommandExcitation
@@ -34,16 +35,19 @@ def bag(tmp_path_factory):
     meta = {
         'magnet': 'free',
         'firmware': 'v4x_pc',
-        'board_feedthrough': run.feedthrough.metadata(),
+        **run.feedthrough.metadata(),
     }
     write_sample_bag(path, run.log, (SETTINGS.sensor,), meta)
     return path
 
 
-def _x_checks(bag, rate):
+def _checks(bag, rate, axis='x'):
     data, results, checks = check_board_bag(bag, SETTINGS.params, SETTINGS.sensor, rate=rate)
-    x = {label: check for (group, label), check in checks.items() if group == 'x'}
-    return data, x
+    return data, {label: check for (group, label), check in checks.items() if group == axis}
+
+
+def _x_checks(bag, rate):
+    return _checks(bag, rate, 'x')
 
 
 def test_decimated_to_100_hz_the_x_models_agree_with_the_physics(bag):
@@ -64,3 +68,43 @@ def test_at_the_loops_1_khz_the_equation_error_fit_misses_the_band(bag):
 def test_a_rate_that_is_not_positive_is_refused(bag):
     with pytest.raises(ValueError, match='rate must be a positive number of Hz, got 0'):
         check_board_bag(bag, SETTINGS.params, SETTINGS.sensor, rate=0.0)
+
+
+def test_on_y_the_notch_is_left_out_and_the_arx_without_the_unstable_pole_is_named(bag):
+    """This board's y pair leaves +0.025 mT/A, which cancels the magnet's response near
+    10 Hz. Where the reference is less than half of either part the check does not
+    compare (7-10 Hz here). The direct fits to these closed-loop data (ARX, and the IV on
+    this record) put a stable pole where the magnet's y mode grows at 30 1/s: their
+    phase is 110-180 deg off, and the check names the missing pole. ARMAX, whose noise
+    model takes the feedback's share, keeps the pole and agrees."""
+    _, y = _checks(bag, 100.0, 'y')
+    armax = y['ARMAX 6 6 5 1']
+    [(low, high)] = armax.uncertain
+    assert 6.0 < low < 8.0 and high == pytest.approx(10.0)
+    assert np.all((armax.frequencies < low) | (armax.frequencies > high))
+    assert armax.unstable_reference == pytest.approx((30.0,), abs=3.0)
+    assert armax.within(5.0, 35.0), armax.summary()
+    for label in ('ARX 6 6 1', 'IV4 6 6 1'):
+        assert y[label].misses_instability and y[label].unstable_model == (), y[label].summary()
+        assert y[label].max_deg > 90.0 and not y[label].within(5.0, 35.0)
+        assert y[label].brief().endswith('(no unstable pole)')
+
+
+def test_the_cancellation_band_is_where_the_reference_is_under_half_of_a_part():
+    from maglev_ros.loop.v4x_pc_setup import board_model
+    from maglev_ros.physics import linearize
+    from maglev_ros.physics.board_processing import BoardProcessing
+    from maglev_ros.sysid.board_check import board_local_plant, cancellation_bands
+
+    model = board_model(SETTINGS.params, SETTINGS.sensor)
+    lin = linearize(model).reduced()
+    pairs = np.array([[0.0, 0.0], [0.0, 2.54e-5], [0.0, 0.0]])
+    board = BoardProcessing.from_model(model, pairs=pairs)
+    left = board_local_plant(lin, 1e-3, 'By_0', 'y', board)
+    motion = board_local_plant(lin, 1e-3, 'By_0', 'y', BoardProcessing.from_model(model))
+    [(low, high)] = cancellation_bands(left, motion, (1.0, 12.0))
+    assert 6.5 < low < 9.98 < high < 12.0  # around the notch
+    for f, inside in ((low * 1.01, True), (high * 0.99, True), (low * 0.95, False)):
+        g, m = left.freqresp([f])[0], motion.freqresp([f])[0]
+        assert (abs(g) < 0.5 * max(abs(m), abs(g - m))) == inside, f
+    assert cancellation_bands(motion, motion, (1.0, 12.0)) == []  # no direct term: no notch

@@ -144,3 +144,40 @@ def test_a_notch_where_a_direct_term_cancels_the_motion_is_left_out():
     assert f'without +-1 Hz around the notch(es) at {notch:.2f} Hz' in near.summary()
     exact = board_local_plant(lin, 1e-3, 'By_0', 'y', BoardProcessing.from_model(model))
     assert compare_response(exact, exact, (1.0, 12.0), n=300).notches == ()
+
+
+def test_the_unstable_mode_shows_once_and_a_mirrored_pole_is_named():
+    """An unstable first-order mode (30 1/s, as Maggy's x mode): a model that puts the
+    stable pole ``1/p`` in its place has the same gain but misses it, and the check says
+    so."""
+    linear = first_order(-30.0, [1.0, -1.0, 0.0, 0.0], 1.0, [0.0, 0.0, 0.0, 0.0])
+    plant = local_plant(linear, TS, 'Bx_0', 'x', 0)
+    np.testing.assert_allclose(plant.unstable_rates(), [30.0], rtol=1e-9)
+    p = np.exp(30.0 * TS)
+    g = 2.0 * (1 - p) / -30.0
+    right = compare_response(arx_of_first_order(p, g, 0.0, 0), plant, (1.0, 100.0))
+    assert right.unstable_model == pytest.approx((30.0,)) and not right.misses_instability
+    assert right.within(0.01, 0.01) and 'unstable' not in right.summary()
+    # the mirror image: pole 1/p, gain g/p: |G| the same on the whole unit circle, the
+    # phase 180 - 2 atan(2 pi f / 30) deg off (156 deg at 1 Hz)
+    mirrored = arx_of_first_order(1 / p, g / p, 0.0, 0)
+    check = compare_response(mirrored, plant, (1.0, 100.0))
+    assert check.max_db < 1e-6 and check.max_deg == pytest.approx(156.4, abs=0.5)
+    assert check.unstable_model == () and check.misses_instability
+    assert not check.within(1.0, 360.0)
+    assert check.brief().endswith('(no unstable pole)')
+    assert 'the model misses an unstable mode (physics / model: 30 / none 1/s)' in check.summary()
+    # a band above the mode's corner (4.8 Hz) does not see it: not flagged, the phase says it
+    above = compare_response(mirrored, plant, (10.0, 100.0))
+    assert not above.misses_instability and 40.0 < above.max_deg < 60.0
+
+
+def test_the_symmetric_tilt_modes_count_once_in_each_pair_path():
+    model = make_model('maggy_v2')
+    lin = linearize(model).reduced()
+    for pair in ('x', 'y'):
+        plant = local_plant(lin, TS, f'B{pair}_0', pair, 1)
+        rates = plant.unstable_rates()
+        assert rates.shape == (1,) and 20.0 < rates[0] < 60.0, rates
+        unstable = np.abs(np.linalg.eigvals(plant.A)) > 1 + 1e-9
+        assert np.count_nonzero(unstable) == 2  # x and y, the same rate
