@@ -108,7 +108,9 @@ class LabRun:
     settle_s : float
         Plant time before the recording, s.
     settle_rms : ndarray, shape (3,)
-        RMS of the position error over the settling's last 0.1 s, m.
+        RMS of the position error over the settling's last ``settle_window_s``, m.
+    settle_window_s : float
+        That window, s (:func:`~maglev_ros.loop.lab.settle_window`).
     settled : bool
         Below the bound on every axis.
     simulated_s : float
@@ -139,6 +141,7 @@ class LabRun:
     samples: int
     settle_s: float
     settle_rms: np.ndarray
+    settle_window_s: float
     settled: bool
     simulated_s: float
     wall_s: float
@@ -316,7 +319,7 @@ def run_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
     print(
         f'{"settled" if run.settled else "NOT settled"} after {run.settle_s:g} s: RMS of x, y, z '
         f'{"(estimated) " if run.positions is not None else ""}'
-        f'over the last 0.1 s {rms_um} um'
+        f'over the last {run.settle_window_s:g} s {rms_um} um'
     )
     rate = run.simulated_s / max(run.wall_s, 1e-9)
     drops = sum((run.dropped or {}).values())
@@ -385,7 +388,7 @@ def _session(settings, bag: Path, stop, progress, plant=None) -> LabRun | None:
         lab_plan,
         run_session,
     )
-    from maglev_ros.loop.lab import loop_metadata, simulator_metadata
+    from maglev_ros.loop.lab import loop_metadata, settle_window, simulator_metadata
 
     s = settings
     board = plant is not None
@@ -434,6 +437,7 @@ def _session(settings, bag: Path, stop, progress, plant=None) -> LabRun | None:
         samples=result.samples,
         settle_s=s.settle_samples / s.sample_rate,
         settle_rms=result.settle_rms,
+        settle_window_s=settle_window(s) / s.sample_rate,
         settled=result.settled,
         simulated_s=result.recorded_s,
         wall_s=result.wall_s,
@@ -513,7 +517,7 @@ def _check_text(check) -> str:
         return ''
     if isinstance(check, str):
         return f'n/a ({check})'
-    return f'{check.max_db:5.2f} dB {check.max_deg:5.1f} deg'
+    return check.brief()
 
 
 def _print_table(results, checks: dict, band) -> None:
@@ -660,6 +664,8 @@ def _summary(args, run, dataset, results, checks, band, excursion, rms) -> dict:
                         'rms_db': check.rms_db,
                         'rms_deg': check.rms_deg,
                         'excluded_hz': list(check.excluded),
+                        'unstable_physics_per_s': check.unstable_reference,
+                        'unstable_model_per_s': check.unstable_model,
                     }
                 )
             if entry['model'] is not None:

@@ -1,6 +1,6 @@
 """The main job: ``maglev-lab`` closed loop (the default), end to end in one process.
 
-A short record (2000 samples after 0.1 s of levitation) of the whole chain:
+A short record (2000 samples after 0.4 s of levitation) of the whole chain:
 simulator (lockstep, noise, quantisation, delay, coil dynamics), KF, LQR with
 its PRBS, identifier, recorder; then the seed's models, the physics check and
 the online identifier beside the batch ARX. The long record (25 000 samples)
@@ -21,20 +21,23 @@ from maglev_ros.control.excitation import CommandExcitation, ExcitationSchedule
 
 SAMPLES = 2000
 SEED = 2
+#: s of levitation before the record: past V2's settling time from an offset (0.34 s,
+#: docs/benchmarks.md), so the settling check judges the noise-driven motion only
+SETTLE = '0.4'
 
 
 def test_closed_loop_session_records_exact_samples_and_identifies_the_seed_models(
     domain, tmp_path, capfd
 ):
     out = tmp_path / 'lab'
-    argv = ['--duration', '0.4', '--settle', '0.2', '--seed', str(SEED), '--out', str(out)]
+    argv = ['--duration', '0.4', '--settle', SETTLE, '--seed', str(SEED), '--out', str(out)]
     status = lab.main([*argv, '--quiet'])
     printed = capfd.readouterr().out
     summary = json.loads((out / 'models.json').read_text())
     assert status == summary['exit_status'] and status in (0, 1), printed
     run = summary['run']
     # exactly the samples asked for, after settling, each with its command and excitation
-    assert f'recorded {SAMPLES} samples' in printed and 'settled after 0.2 s' in printed
+    assert f'recorded {SAMPLES} samples' in printed and f'settled after {SETTLE} s' in printed
     assert summary['data'] == {'N': SAMPLES, 'n_estimation': 1000, 'n_validation': 1000}
     assert run['timeouts'] == 0 and not run['crashed'] and run['settled']
     with Reader(out / 'bag') as reader:
@@ -108,7 +111,7 @@ def test_realtime_session_records_the_window_and_matches_its_online_arx(domain, 
     simulator's thread), so nothing here depends on keeping up with the clock.
     """
     out = tmp_path / 'lab'
-    argv = ['--realtime', '--duration', '0.4', '--settle', '0.2', '--seed', str(SEED)]
+    argv = ['--realtime', '--duration', '0.4', '--settle', SETTLE, '--seed', str(SEED)]
     status = lab.main([*argv, '--out', str(out), '--quiet', '--no-plots'])
     printed = capfd.readouterr().out
     summary = json.loads((out / 'models.json').read_text())
@@ -187,7 +190,7 @@ def test_the_online_comparison_survives_data_without_a_batch_arx(capsys):
     arx = OnlineArx([[2, 0], [0, 2]], [[2, 0], [0, 2]], 1, ny=2, nu=2)
     arx.update_many(rng.standard_normal((200, 2)), rng.standard_normal((200, 2)))
     online = OnlineEstimate(arx.model(2e-4), 200, 1.0, np.zeros(2), 1.0)
-    run = LabRun(200, 1.0, np.zeros(3), True, 1.0, 1.0, 0, True, 'lost', {}, online)
+    run = LabRun(200, 1.0, np.zeros(3), 0.5, True, 1.0, 1.0, 0, True, 'lost', {}, online)
     y, u = rng.standard_normal((200, 2)), np.zeros((200, 2))  # the coils at zero: no input
     _print_online(run, IdData(y, u, 2e-4, ['Bx_0', 'By_0'], ['u_x', 'u_y']))
     printed = capsys.readouterr().out
