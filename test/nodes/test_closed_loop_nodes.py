@@ -162,7 +162,14 @@ def test_nodes_levitate_and_estimate_as_the_ros_free_loop(ctx):
     # delay_commands: the command published for sample k is the one computed at k - 1
     commands = np.array(peer.commands[1:n])
     np.testing.assert_allclose(commands, ref.command[: n - 1], rtol=0, atol=1e-12)
-    assert est.lost_samples == 0 and sum(est.estimator.status().missing) == 0
+    # no message lost; a reading the freeze check dropped (a chance run of 4 identical
+    # quantised readings, about once in 10^5 samples a sensor) is dropped in the loop too
+    node_status, loop_status = est.estimator.status(), loop.estimator.status()
+    assert est.lost_samples == 0 and node_status.missing == loop_status.missing
+    assert node_status.freeze_events == loop_status.freeze_events
+    assert all(
+        e > 0 for m, e in zip(node_status.missing, node_status.freeze_events, strict=True) if m
+    ), node_status  # missing only where the check saw a run (the simulation has no NaN)
     # the estimate against the truth, with the covariance the message carries: inside
     # its own 3 sigma (the consistency test, 99 % over 60 s, runs on ClosedLoop;
     # its largest error is the estimator's, here up to 0.12 mm in y while settling)
