@@ -3,7 +3,6 @@ import re
 import signal
 import subprocess
 import sys
-import threading
 import time
 from collections import deque
 from functools import partial
@@ -12,10 +11,10 @@ import numpy as np
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import JointState, MagneticField
+from spinning import Spinning
 from std_srvs.srv import SetBool
 from waiting import wait_for
 
@@ -60,12 +59,7 @@ class Harness:
         )
         self.commands = self.peer.create_publisher(JointState, 'maglev/currents/command', 100)
         self.enable_client = self.peer.create_client(SetBool, 'maglev/enable')
-        self.executors = []
-        for node in (self.driver, self.peer):
-            executor = SingleThreadedExecutor(context=ctx)
-            executor.add_node(node)
-            threading.Thread(target=executor.spin, daemon=True).start()
-            self.executors.append(executor)
+        self.spinning = Spinning(ctx, (self.driver, self.peer))
         wait_for(lambda: self.commands.get_subscription_count() > 0, what='discovery')
 
     @staticmethod
@@ -97,8 +91,7 @@ class Harness:
         if self.closed:
             return
         self.closed = True
-        for executor in self.executors:
-            executor.shutdown(timeout_sec=2.0)
+        self.spinning.close()
         self.driver.destroy_node()
         self.peer.destroy_node()
 
