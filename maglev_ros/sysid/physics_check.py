@@ -48,7 +48,6 @@ __all__ = [
     'PhysicsCheckError',
     'compare_response',
     'local_plant',
-    'showing',
     'unstable_rates',
 ]
 
@@ -195,8 +194,10 @@ class LocalPlant:
         """Growth rates (1/s) of the unstable modes that show in this input-output path.
 
         A mode shows when the residue of its eigenspace, ``C P B`` (``P`` the
-        spectral projector), is not nil: the x mode seen from the y pair does
-        not. Repeated modes (the symmetric x and y tilts) count once.
+        spectral projector), is not nil. Modes of one growth rate (the
+        symmetric x and y tilts) form one eigenspace and count once. Where the
+        eigenvectors are too ill-conditioned to project on (condition number
+        above 1e10), every unstable mode counts.
 
         Returns
         -------
@@ -526,7 +527,7 @@ def compare_response(
     notches: list[float] = []
     if resonance_width > 0:
         for listed, method in ((excluded, 'resonances'), (notches, 'antiresonances')):
-            for fr in showing(reference, method):
+            for fr in _showing(reference, method):
                 if low - resonance_width <= fr <= high + resonance_width:
                     listed.append(fr)
                 f = f[np.abs(f - fr) > resonance_width]
@@ -571,7 +572,7 @@ def compare_response(
     )
 
 
-def showing(reference: object, method: str = 'antiresonances') -> list[float]:
+def _showing(reference: object, method: str) -> list[float]:
     """Resonances or notches (Hz) of a reference that show in its input-output path.
 
     A mode or a zero pair cancelled in this path (the y tilt seen from the x
