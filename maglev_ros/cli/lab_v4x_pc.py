@@ -212,7 +212,7 @@ def run_v4x_pc_session(args: argparse.Namespace, out: Path, bag: Path) -> int:
         if results:
             print(
                 f'identified on the record decimated to {1 / data.Ts:.0f} Hz '
-                '(the seed orders on the band the data carry)'
+                '(the seed orders and a high-order ARX, on the band the data carry)'
             )
             summary['identification_rate_hz'] = 1 / data.Ts
         print(f'{"model":<28} {"fit val. %":>10}  {"physics check (1-10 Hz)":<24} status')
@@ -268,8 +268,9 @@ def _explain_checks(checks: dict) -> None:
         print(
             f'no unstable pole: the model has a stable pole where the magnet is unstable '
             f'({rate:.0f} 1/s, time constant {1e3 / rate:.0f} ms): the same gain, the phase '
-            'up to 180 deg off; the bias of a direct fit to closed-loop data (use the IV on '
-            'the excitation or ARMAX, or a larger excitation)'
+            "up to 180 deg off: an ARX too short for the sensor noise's predictor prefers the "
+            "pole's stable mirror, and an IV on a weak excitation can land there "
+            '(docs/identify.md); read ARMAX or the high-order ARX'
         )
 
 

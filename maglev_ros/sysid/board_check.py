@@ -13,6 +13,9 @@ of sample k was read before it (what
 
 from __future__ import annotations
 
+import dataclasses
+import math
+
 import numpy as np
 
 from ..physics.board_processing import BoardProcessing
@@ -22,9 +25,11 @@ __all__ = [
     'CANCELLATION',
     'IDENTIFICATION_RATE',
     'board_bag_channels',
+    'board_groups',
     'board_local_plant',
     'cancellation_bands',
     'check_board_bag',
+    'high_order',
 ]
 
 #: Hz the loop's record is decimated to before identification (:func:`check_board_bag`).
@@ -32,6 +37,66 @@ IDENTIFICATION_RATE = 100.0
 #: ``|G_true| / max(|part|)`` below which :func:`cancellation_bands` leaves a frequency out:
 #: there a relative error of a part is at least doubled in the compared ratio.
 CANCELLATION = 0.5
+#: s: the slowest unstable (x, y) mode's time constant of a Maggy (20-35 ms).
+SLOWEST_UNSTABLE = 0.035
+#: What is left of the mirrored unstable pole's impulse response at the last lag of the
+#: high-order ARX (:func:`high_order`).
+MIRROR_RESIDUE = 1.0e-4
+
+
+def high_order(ts: float) -> int:
+    """Return the orders (``na = nb``) of the board check's high-order ARX at sample time ``ts``.
+
+    The field a board reports is the plant's response plus the Hall sensors'
+    noise, white at the output. For an unstable plant ``B/A`` (``A`` has the
+    magnet's pole ``p``, ``|p| > 1``) the one-step predictor of such a record
+    is ``A y = B u + A* e``, where ``A*`` has the pole mirrored into the unit
+    circle (``1/p``): the ARX form needs ``1/A*``, whose impulse response
+    decays as ``|1/p|^k``. The seed's ARX (6-9 lags) has no room for it, and
+    its least squares then prefer the stable mirror of the magnet's pole
+    itself: the equation error ``A e`` is ``|p|^2`` times smaller with it
+    (1.8 at 100 Hz), at the same gain and up to 180 deg of phase off. With
+    ``na = nb`` lags enough for ``|1/p|^k`` to fall to
+    :data:`MIRROR_RESIDUE` the ARX approximates the predictor and keeps the
+    pole (the high-order ARX of Ljung, *System Identification*, 2nd ed.,
+    section 10.4; direct closed-loop identification is consistent with a
+    noise model that fits, section 13.4).
+
+    Parameters
+    ----------
+    ts : float
+        Sample time of the identification, s.
+
+    Returns
+    -------
+    int
+        ``ceil(ln(1 / MIRROR_RESIDUE) * SLOWEST_UNSTABLE / ts)``: 33 at 100 Hz.
+    """
+    return math.ceil(math.log(1.0 / MIRROR_RESIDUE) * SLOWEST_UNSTABLE / ts)
+
+
+def board_groups(ts: float) -> tuple:
+    """Return the seed's models, with a high-order ARX (:func:`high_order`) per pair.
+
+    Parameters
+    ----------
+    ts : float
+        Sample time of the identification, s.
+
+    Returns
+    -------
+    tuple of ModelGroup
+        :data:`~maglev_ros.sysid.seed_models.SEED_GROUPS`, each SISO group with
+        ``ARX n n 1`` after the seed's models.
+    """
+    from .seed_models import SEED_GROUPS
+    from .workflow import ModelSpec
+
+    n = high_order(ts)
+    extra = ModelSpec('arx', {'na': n, 'nb': n, 'nk': 1})
+    return tuple(
+        dataclasses.replace(g, specs=(*g.specs, extra)) if g.pair else g for g in SEED_GROUPS
+    )
 
 
 def board_local_plant(
@@ -181,7 +246,7 @@ def check_board_bag(
     band: tuple[float, float] = (1.0, 10.0),
     rate: float | None = IDENTIFICATION_RATE,
 ):
-    """Identify the seed's models on a V4x PC-control loop's bag; check them against physics.
+    """Identify the seed's models and a high-order ARX on a V4x PC-control loop's bag; check them.
 
     The record is decimated to about ``rate`` first (:meth:`IdData.decimate`: the
     same zero-phase low-pass on inputs, outputs and instruments, which leaves
@@ -217,7 +282,8 @@ def check_board_bag(
     data : IdData
         The record (outputs ``Bx_0``, ``By_0``; inputs ``u_x``, ``u_y``, ``r_x``, ``r_y``).
     results : tuple of GroupResult
-        :func:`~maglev_ros.sysid.seed_models.identify_groups` (IV with the excitation).
+        :func:`~maglev_ros.sysid.seed_models.identify_groups` of :func:`board_groups`
+        (IV with the excitation).
     checks : dict
         :func:`~maglev_ros.sysid.seed_models.physics_deviations` against
         :func:`board_local_plant` of each pair (with the board's pair
@@ -246,7 +312,7 @@ def check_board_bag(
     recorded = dataset.metadata.get('board_feedthrough')
     pairs = None if recorded is None else PairFeedthrough.response_from(recorded)
     board = BoardProcessing.from_model(model, pairs=pairs)
-    results = identify_groups(data, split)
+    results = identify_groups(data, split, board_groups(data.Ts))
     plants = {p: board_local_plant(linear, loop_ts, f'B{p}_0', p, board) for p in ('x', 'y')}
     uncertain = {}
     if pairs is not None:  # the direct term the firmware left: notches where it cancels
