@@ -170,8 +170,9 @@ class Estimator:
         std = [c.initial_position] * 3 + [c.initial_angle] * 2
         std += [c.initial_velocity] * 3 + [c.initial_rate] * 2
         std += [c.initial_strength] * (self.bias_start - self.n_reduced)
-        std += [c.initial_bias] * (self.filter_start - self.bias_start)
-        std += [c.initial_bias] * (self.n_states - self.filter_start)  # board filter states
+        axis_std = (c.initial_bias_xy, c.initial_bias_xy, c.initial_bias)  # per sensor x y z
+        std += [axis_std[j % 3] for j in range(self.filter_start - self.bias_start)]
+        std += [c.initial_bias_xy] * (self.n_states - self.filter_start)  # board x/y filters
         return np.diag(np.square(std))
 
     def disturbance_matrix(self) -> np.ndarray:

@@ -95,7 +95,15 @@ class EstimatorConfig:
     bias_walk : float
         Random walk of the bias states, T rms per sample.
     initial_bias : float
-        Initial standard deviation of the bias states, T.
+        Initial standard deviation of the z bias states, T.
+    initial_bias_xy : float
+        Initial standard deviation of the x and y bias states (and of the
+        board's filter states, which hold x and y), T. A bias of 1 mT on x
+        or y reads as a displacement of about 5 mm (the field's gradient
+        under the magnet is about 0.22 mT/mm): at start-up the filter takes
+        the first readings' noise partly for such a bias and its position
+        estimate leaves the magnet's (``maglev_ros.loop.v4x_pc_setup`` starts
+        from 0.1 mT, where the board removes its own baseline).
     magnet_strength : bool
         Estimate the levitating magnet's strength (its polarisation relative to
         the parameter set's) as one state ``s``: the magnet's own field at the
@@ -172,7 +180,12 @@ class EstimatorConfig:
         1.0e-8, 'random walk of the bias states, T rms per sample', number(0)
     )
     initial_bias: float = setting(
-        1.0e-3, 'initial std of the bias states, T', number(0, above=True)
+        1.0e-3, 'initial std of the z bias states, T', number(0, above=True)
+    )
+    initial_bias_xy: float = setting(
+        1.0e-3,
+        "initial std of the x and y bias states (and the board's filter states), T",
+        number(0, above=True),
     )
     magnet_strength: bool = setting(False, "estimate the magnet's strength as one state (kf only)")
     initial_strength: float = setting(

@@ -60,6 +60,14 @@ class V4xPcLoopSettings:
     bias_states : bool
         Estimate a constant offset per axis (the baseline's error, a
         feedthrough slope's error).
+    initial_bias_xy : float
+        T: the x and y offsets' initial std (z: the estimator's 1 mT, where
+        a magnet 10 % off moves the field by a few mT). The board's baseline
+        is the mean of 1000 readings with the magnet absent, and the magnet
+        held over the centre adds no x or y field there; 0.1 mT still covers a
+        sensor 0.5 mm off the centre. At 1 mT the first readings' noise
+        passed partly for an offset and the estimate left the magnet by up
+        to 0.5 mm in its first 50 ms (the start peak of a 60 s hold).
     coil_dynamics : bool
         The coils' L/R lag in the LQR design.
     command_delay : int
@@ -94,6 +102,7 @@ class V4xPcLoopSettings:
     coil_resistance: float = 4.0
     current_limit: float = 1.7
     bias_states: bool = True
+    initial_bias_xy: float = 1.0e-4
     coil_dynamics: bool = False
     command_delay: int = 1
     sensor_noise: float = 1.0e-4
@@ -192,6 +201,7 @@ def build_v4x_pc_loop(
             sensor_noise=s.sensor_noise,
             angular_acceleration_noise=s.angular_acceleration_noise,
             bias_states=s.bias_states,
+            initial_bias_xy=s.initial_bias_xy,
             measurement='board',
         ),
         linear=linear,

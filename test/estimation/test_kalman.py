@@ -273,3 +273,21 @@ def test_a_measured_board_feedthrough_goes_into_the_same_packed_model():
     raw = make_estimator(model, EstimatorConfig(sample_rate=1000.0))
     with pytest.raises(ValueError, match="measurement is 'raw'"):
         raw.use_board(BoardProcessing.from_model(model))
+
+
+def test_the_x_and_y_offsets_start_from_their_own_std():
+    """initial_bias_xy: the x and y bias states and the board's x/y filter states;
+    initial_bias: the z bias states (a magnet 10 % off moves Bz by a few mT)."""
+    from maglev_ros.loop.v4x_pc_setup import board_model
+
+    config = EstimatorConfig(
+        sample_rate=1000.0,
+        measurement='board',
+        bias_states=True,
+        initial_bias=2e-3,
+        initial_bias_xy=1e-4,
+    )
+    est = make_estimator(board_model('maggy_v2', 0), config)
+    std = np.sqrt(np.diag(est.initial_covariance()))
+    assert std[est.bias_start : est.filter_start].tolist() == [1e-4, 1e-4, 2e-3]
+    assert std[est.filter_start :].tolist() == [1e-4, 1e-4]
