@@ -202,6 +202,7 @@ def compare_figure(
         name = data.output_names[i]
         axes = list(grid[panels * i : panels * (i + 1)])
         rows_full, close, error = axes[:nm], axes[nm], axes[-1]
+        shown = False  # any error spectrum above zero (an exact fit has none to draw)
         y = data.y[:, i] * scale
         close.plot(t[zs], y[zs], marker='o', ms=2.5, label='measured (samples)', **MEASURED)
         for k, (result, label) in enumerate(zip(results, labels, strict=True)):
@@ -222,7 +223,9 @@ def compare_figure(
             close.plot(t[zs], yhat[zs], color=color, lw=1.4, ls=dashes, label=text)
             freq, psd = welch(errors[k, :, i] * escale, fs=1.0 / data.Ts, nperseg=nseg)
             rms_text = f'{rms[k, i] * escale:#.3g} {eunit}'.rstrip()  # 3 digits, zeros kept
-            error.loglog(freq[1:], np.sqrt(psd[1:]), color=color, lw=1.0,
+            asd_k = np.sqrt(psd[1:])
+            shown |= bool(np.any(asd_k > 0))
+            error.loglog(freq[1:], np.where(asd_k > 0, asd_k, np.nan), color=color, lw=1.0,
                          label=f'{label} (rms {rms_text})')  # fmt: skip
         rows_full[0].set_title(
             f"{name}: measured (grey) and each model's {what} on validation data "
@@ -257,15 +260,21 @@ def compare_figure(
         asd = f'{eunit}/√Hz' if eunit else '1/√Hz'
         error.set_ylabel(f'error [{asd}]')
         error.set_xlabel('frequency [Hz]')
+        if not shown:  # log axes cannot show zero: say so instead of an empty panel
+            error.set_ylim(1e-3, 1e3)
+            error.text(0.5, 0.5, 'measured - model is 0 at every sample (an exact fit)',
+                       transform=error.transAxes, ha='center', va='center')  # fmt: skip
         error.set_xlim(freq[1], freq[-1])
         _outside_legend(error)
         for ax in axes:
             ax.grid(True, which='both' if ax is error else 'major', lw=0.3)
-        error_axes.append(error)
-    low = min(ax.get_ylim()[0] for ax in error_axes)
-    high = max(ax.get_ylim()[1] for ax in error_axes)
-    for ax in error_axes:  # one scale for every output's errors
-        ax.set_ylim(low, high)
+        if shown:
+            error_axes.append(error)
+    if error_axes:
+        low = min(ax.get_ylim()[0] for ax in error_axes)
+        high = max(ax.get_ylim()[1] for ax in error_axes)
+        for ax in error_axes:  # one scale for every output's errors
+            ax.set_ylim(low, high)
     names = ', '.join(model_title(m, lab) for m, lab in zip(models, labels, strict=True))
     head = (
         f'compare ({what}): {", ".join(data.output_names)} <- {", ".join(data.input_names)}'

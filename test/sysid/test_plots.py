@@ -101,3 +101,18 @@ def test_bode_skips_structural_zeros_and_resid_names_the_model():
     fig = resid_figure(resid(model, val), model_label='ARX 4 2 1')
     assert fig.get_suptitle().startswith('ARX 4 2 1: residuals on validation data')
     assert max(len(line) for line in fig.get_suptitle().splitlines()) <= fig.get_figwidth() * 11
+
+
+def test_an_exact_fit_says_so_in_its_error_panel(recwarn):
+    """Noise-free data a model describes exactly: measured - model is 0 everywhere, which
+    log axes cannot draw; the panel says so and draws no empty log scale (no warning)."""
+    from maglev_ros.sysid import compare_figure
+    from maglev_ros.sysid.dataset import IdData
+
+    u = np.random.default_rng(0).standard_normal((400, 1))
+    data = IdData(y=2.0 * u, u=u, Ts=1e-3)
+    model = arx(data, 0, 1, 0)
+    fig = compare_figure(data, [model], ['ARX 0 1 0'])
+    error = fig.axes[-1]
+    assert any('an exact fit' in t.get_text() for t in error.texts)
+    assert not [w for w in recwarn if 'log-scaled' in str(w.message)]
