@@ -59,6 +59,7 @@ __all__ = ['PARAMETERS', 'LoopNode', 'LoopParameterError', 'main']
 
 NODE_NAME = 'maglev_loop'
 PLANTS = ('simulator', 'board')
+FIRMWARES = ('v2x', 'v4x', 'v4x_pc')  # the driver's; the composed loop runs v2x
 SWITCH_INTERVAL_S = 0.0005  # s: the loop's thread gets the GIL back within this
 START_POLL_S = 0.02  # s between looks at the graph while the loop waits for its reader
 
@@ -75,6 +76,12 @@ PARAMETERS = ParameterTable(
             'simulator', 'the plant: simulator (real time) or board', check=choice(*PLANTS)
         ),
         'port': Param('/dev/ttyACM0', 'board: serial device'),
+        'firmware': Param(
+            'v2x',
+            'board: its firmware; the composed loop commands a V2x board (a V4x PC-control '
+            'board: maglev-lab --firmware v4x_pc)',
+            check=choice(*FIRMWARES),
+        ),
         'n_sensors': Param(3, 'board: sensors per record', check=integer(1)),
         'command_timeout': Param(
             0.1, 'board: s without a command before the coils go to zero', check=num(0, above=True)
@@ -139,6 +146,13 @@ class LoopNode(Node):
         reader = values.pop('start_reader')
         topics = tuple(self.resolve_topic_name(t) for t in values.pop('start_reader_topics'))
         plant = values.pop('plant')
+        firmware = values.pop('firmware')
+        if plant == 'board' and firmware != 'v2x':
+            raise LoopParameterError(
+                f'{NODE_NAME}: firmware {firmware!r}: the composed loop commands a V2x board; '
+                'run a V4x PC-control board with maglev-lab --firmware v4x_pc --board PORT '
+                '(docs/boards.md)'
+            )
         board = {k: values.pop(k) for k in ('port', 'n_sensors', 'command_timeout')}
         self.settings = s = SimulatedLoopSettings(**values)
         try:

@@ -108,6 +108,9 @@ def test_bad_loop_parameters_name_the_problem(ctx):
         LoopNode(context=ctx, parameter_overrides=[Parameter('control_rate', value=3000.0)])
     with pytest.raises(LoopParameterError, match=r'filter must be one of kf, ekf, ukf'):
         LoopNode(context=ctx, parameter_overrides=[Parameter('filter', value='pf')])
+    board = [Parameter('plant', value='board'), Parameter('firmware', value='v4x_pc')]
+    with pytest.raises(LoopParameterError, match=r'maglev-lab --firmware v4x_pc --board PORT'):
+        LoopNode(context=ctx, parameter_overrides=board)
 
 
 def test_the_loop_node_runs_on_a_board_and_leaves_its_coils_at_zero(ctx):

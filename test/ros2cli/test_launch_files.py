@@ -279,8 +279,10 @@ def test_separate_closed_loop_launch_levitates_and_stops_cleanly_on_ctrl_c(ros2,
     )
 
 
-def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp_path):
-    """Driver, estimator and controller on a virtual board (physics plant, 3 sensors).
+@pytest.mark.parametrize('separate', [True, False], ids=['separate', 'composed'])
+def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp_path, separate):
+    """Driver, estimator and controller, or the loop node, on a virtual board (physics
+    plant, 3 sensors), on the port the launch is given.
 
     The magnet is fixed (the board's physics plant): asserted are the wiring
     (estimates and commands published from the board's samples) and the clean
@@ -298,11 +300,14 @@ def test_closed_loop_board_launch_estimates_commands_and_stops_cleanly(ros2, tmp
         'maglev_ros',
         'closed_loop.launch.xml',
         'plant:=board',
-        'separate:=true',
+        f'separate:={str(separate).lower()}',
         f'port:={port}',
     )
-    launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
-    launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
+    if separate:
+        launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
+        launch.wait_for(r'\[maglev_controller\]: lqr on', START_TIMEOUT)
+    else:
+        launch.wait_for(rf'\[maglev_loop\]: .* on the board on {re.escape(port)} ', START_TIMEOUT)
     up = time.monotonic()
     assert 'pose' in first_message(heard(estimates)), estimates.output()
     a_command(commands)  # the board's samples drive the estimator and the controller
