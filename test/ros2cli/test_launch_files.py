@@ -127,17 +127,22 @@ def test_lab_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path, storage)
     assert abs(counts['/maglev/sensor_0/field'] - counts['/maglev/currents']) <= 1, counts
 
 
-def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path):
+@pytest.mark.parametrize('firmware', ['v2x', 'v4x_pc'])
+def test_lab_board_launch_records_and_stops_cleanly_on_ctrl_c(ros2, tmp_path, firmware):
+    """The README's command for a board, V2x (3 sensors) or V4x PC control (its one sensor:
+    the launch sets n_sensors for it)."""
+    board_args = ['--sensors', '3', '--plant', 'physics'] if firmware == 'v2x' else []
     board = ros2.start(
-        'run', 'maglev_ros', 'maglev-virtual-board', '--sensors', '3', '--plant', 'physics',
+        'run', 'maglev_ros', 'maglev-virtual-board', '--firmware', firmware, *board_args,
         '--magnet', 'fixed', '--link', str(tmp_path / 'ttyMAGGY'),
     )  # fmt: skip
     port = board.wait_for(r'^(/\S+)$', START_TIMEOUT)[1]
     bag = tmp_path / 'board_bag'
     currents = listen(ros2, '/maglev/currents', 'sensor_msgs/msg/JointState')
     launch = ros2.start(
-        'launch', 'maglev_ros', 'lab.launch.xml', 'plant:=board', f'port:={port}', f'bag:={bag}'
-    )
+        'launch', 'maglev_ros', 'lab.launch.xml', 'plant:=board', f'port:={port}',
+        f'firmware:={firmware}', f'bag:={bag}',
+    )  # fmt: skip
     launch.wait_for(r'\[maglev_recorder\]: recording', START_TIMEOUT)
     launch.wait_for(r'\[maglev_driver\]: connected to', START_TIMEOUT)
     up = time.monotonic()
