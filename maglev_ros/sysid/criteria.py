@@ -18,7 +18,8 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
     Returns
     -------
     ndarray, shape (ny,)
-        Fit in percent per output (``-inf`` if an output is constant).
+        Fit in percent per output (``-inf`` if an output is constant, or the
+        model's output diverges).
     """
     y = np.asarray(y, dtype=float)
     yhat = np.asarray(yhat, dtype=float)
@@ -30,9 +31,10 @@ def fit_percent(y: np.ndarray, yhat: np.ndarray) -> np.ndarray:
         raise ValueError(f'y has shape {y.shape} but yhat has shape {yhat.shape}')
     r = y - yhat
     c = y - np.ones(y.shape[0]) @ y / y.shape[0]
-    num = np.sqrt(np.diag(r.T @ r))  # column norms through BLAS, fast in any memory order
-    den = np.sqrt(np.diag(c.T @ c))
-    with np.errstate(divide='ignore', invalid='ignore'):
+    # a diverging simulation (an unstable model) overflows to inf: its fit is -inf
+    with np.errstate(divide='ignore', invalid='ignore', over='ignore'):
+        num = np.sqrt(np.diag(r.T @ r))  # column norms through BLAS, fast in any memory order
+        den = np.sqrt(np.diag(c.T @ c))
         return 100.0 * (1.0 - num / den)
 
 

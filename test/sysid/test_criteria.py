@@ -33,3 +33,14 @@ def test_fpe_aic_mdl_definitions():
     assert aic(e, 10) == pytest.approx(1000 * np.log(V) + 20 + 1000 * (np.log(2 * np.pi) + 1))
     assert mdl(e, 10) == pytest.approx(V * (1 + 10 * np.log(1000) / 1000))
     assert fpe(e, 1000) == float('inf')
+
+
+def test_a_diverging_output_fits_minus_infinity_without_a_warning():
+    """An unstable model's simulation grows past float range: its fit is -inf, quietly."""
+    import warnings
+
+    y = np.sin(np.arange(100.0))
+    yhat = 1e200 * 1.5 ** np.arange(100.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        assert fit_percent(y, yhat).tolist() == [-np.inf]
