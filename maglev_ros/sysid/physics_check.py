@@ -205,15 +205,16 @@ class LocalPlant:
             Largest first (:func:`unstable_rates`).
         """
         w, V = np.linalg.eig(self.A)
-        rates = unstable_rates(w, self.Ts)
+        rates = _once(unstable_rates(w, self.Ts))
         if not rates.size or np.linalg.cond(V) > 1e10:
-            return _once(rates)[::-1]
+            return rates[::-1]
         Vinv = np.linalg.inv(V)
         scale = np.linalg.norm(self.C) * np.linalg.norm(self.B)
+        growth = np.log(np.maximum(np.abs(w), 1e-300)) / self.Ts  # of every eigenvalue, 1/s
+        upper = w.imag >= -1e-12 * np.abs(w)  # real, or the upper one of a complex pair
         shown = []
-        for rate in _once(rates):
-            mode = np.abs(np.log(np.maximum(np.abs(w), 1e-300)) / self.Ts - rate) <= 1e-6 * rate
-            mode &= w.imag >= -1e-12 * np.abs(w)
+        for rate in rates:
+            mode = (np.abs(growth - rate) <= 1e-6 * rate) & upper
             residue = self.C @ (V[:, mode] @ Vinv[mode, :]) @ self.B
             if abs(residue) > 1e-9 * scale:
                 shown.append(rate)
